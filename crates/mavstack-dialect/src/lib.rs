@@ -1,0 +1,63 @@
+//! # mavstack-dialect
+//!
+//! MAVLink message definitions ("dialects") from XML to a validated model, and a run-time
+//! codec over that model.
+//!
+//! ```text
+//!  XML file ──xml──► declarations ──loader──► includes resolved, merged ──layout──► Dialect
+//!  (+ includes)      (positioned)             (duplicates, cycles checked)          │
+//!                                                     wire order, CRC_EXTRA, lengths┘
+//!                          Dialect ──codec──► decode / encode payloads of any message
+//!                          Dialect ──mavstack-codegen──► Rust source
+//! ```
+//!
+//! - [`Loader`] reads a root file and its include closure (relative to the including file)
+//!   from the file system or from the definitions built into this crate, and returns a
+//!   [`Dialect`]: messages sorted by id with fields in wire order, CRC_EXTRA, minimum and
+//!   maximum payload lengths, target offsets; enums with entries merged across files.
+//! - Every [`Error`] names the file, line and column and what is wrong.
+//! - [`codec`] decodes a payload into [`codec::Value`]s and encodes values into a payload,
+//!   for any message of a dialect loaded at run time.
+//!
+//! ```
+//! let dialect = mavstack_dialect::load("ardupilotmega")?;
+//! let m = dialect.message_by_name("COMMAND_ACK").expect("defined in common.xml");
+//! assert_eq!((m.id, m.crc_extra, m.min_len, m.max_len), (77, 143, 3, 10));
+//! # Ok::<(), mavstack_dialect::Error>(())
+//! ```
+//!
+//! MSRV: Rust 1.95.
+#![forbid(unsafe_code)]
+
+pub mod builtin;
+pub mod codec;
+mod error;
+pub mod layout;
+mod loader;
+pub mod model;
+mod xml;
+
+pub use error::{Error, ErrorKind, Location};
+pub use loader::{Builtin, FileSystem, Loader, PROTOCOL_VERSION_SUPPLEMENT, Source};
+pub use model::{Deprecation, Dialect, Entry, EntryParam, Enum, Field, FieldType, FileInfo, Message, PrimitiveType};
+pub use xml::MAX_MESSAGE_ID;
+
+/// Loads a dialect by built-in name (`"common"`, `"ardupilotmega"`, ...) or, when `name` is
+/// not one, as a path to an XML file (includes resolved relative to it).
+///
+/// # Errors
+/// An unknown name that is no readable file, or any problem in the definitions.
+pub fn load(name: &str) -> Result<Dialect, Error> {
+    let builtin = builtin::dialect_names();
+    if builtin.contains(&name) {
+        return Loader::builtin().load(format!("{name}.xml"));
+    }
+    let path = std::path::Path::new(name);
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xml")) || path.exists() {
+        return Loader::filesystem().load(path);
+    }
+    Err(Error::new(
+        Location { file: path.to_path_buf(), line: 1, column: 1 },
+        ErrorKind::UnknownDialect { name: name.to_owned(), known: builtin.join(", ") },
+    ))
+}
