@@ -1,7 +1,7 @@
 //! Embeds the vendored definitions (`definitions/*.xml`, and our own `definitions/extras/`) so
 //! that every built-in dialect can be loaded without touching the file system.
 
-use std::fmt::Write as _;
+use core::fmt::Write as _;
 use std::path::Path;
 use std::{env, fs};
 
@@ -22,17 +22,25 @@ fn main() {
     let extras = defs.join("extras");
     println!("cargo:rerun-if-changed={}", defs.display());
     println!("cargo:rerun-if-changed={}", extras.display());
-    let mut out = String::from("/// The vendored definition files: (path relative to `definitions/`, text).\n");
+    let mut out = String::from(
+        "/// The vendored definition files: (path relative to `definitions/`, text).\n",
+    );
     out.push_str("pub(crate) static FILES: &[(&str, &str)] = &[\n");
     for (prefix, dir) in [("", &defs), ("extras/", &extras)] {
         for name in xml_files(dir) {
             let path = dir.join(&name);
             println!("cargo:rerun-if-changed={}", path.display());
-            writeln!(out, "    ({:?}, include_str!({:?})),", format!("{prefix}{name}"), path.display().to_string())
-                .expect("writing to a String cannot fail");
+            writeln!(
+                out,
+                "    ({:?}, include_str!({:?})),",
+                format!("{prefix}{name}"),
+                path.display().to_string()
+            )
+            .expect("writing to a String cannot fail");
         }
     }
     out.push_str("];\n");
-    let dest = Path::new(&env::var("OUT_DIR").expect("cargo sets OUT_DIR")).join("builtin_files.rs");
+    let dest =
+        Path::new(&env::var("OUT_DIR").expect("cargo sets OUT_DIR")).join("builtin_files.rs");
     fs::write(&dest, out).unwrap_or_else(|e| panic!("cannot write {}: {e}", dest.display()));
 }

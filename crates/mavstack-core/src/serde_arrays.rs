@@ -35,7 +35,9 @@ where
 {
     struct ArrayVisitor<T, const N: usize>(PhantomData<T>);
 
-    impl<'de, T: Deserialize<'de> + Default + Copy, const N: usize> Visitor<'de> for ArrayVisitor<T, N> {
+    impl<'de, T: Deserialize<'de> + Default + Copy, const N: usize> Visitor<'de>
+        for ArrayVisitor<T, N>
+    {
         type Value = [T; N];
 
         fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -45,7 +47,9 @@ where
         fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<[T; N], A::Error> {
             let mut out = [T::default(); N];
             for (i, slot) in out.iter_mut().enumerate() {
-                *slot = seq.next_element()?.ok_or_else(|| A::Error::invalid_length(i, &self))?;
+                *slot = seq
+                    .next_element()?
+                    .ok_or_else(|| A::Error::invalid_length(i, &self))?;
             }
             if seq.next_element::<T>()?.is_some() {
                 return Err(A::Error::invalid_length(N + 1, &self));

@@ -142,7 +142,11 @@ pub fn decode(message: &Message, payload: &[u8]) -> Vec<Value> {
     let mut buf = [0u8; MAX_PAYLOAD_LEN];
     let n = payload.len().min(message.max_len);
     buf[..n].copy_from_slice(&payload[..n]);
-    message.fields.iter().map(|f| decode_field(f, &buf)).collect()
+    message
+        .fields
+        .iter()
+        .map(|f| decode_field(f, &buf))
+        .collect()
 }
 
 /// Decodes one field from a zero-extended payload buffer.
@@ -156,7 +160,11 @@ pub fn decode_field(field: &Field, buf: &[u8; MAX_PAYLOAD_LEN]) -> Value {
     }
     match field.ty.array_len {
         None => read_scalar(p, buf, field.offset),
-        Some(_) => Value::Array((0..count).map(|i| read_scalar(p, buf, field.offset + i * p.size())).collect()),
+        Some(_) => Value::Array(
+            (0..count)
+                .map(|i| read_scalar(p, buf, field.offset + i * p.size()))
+                .collect(),
+        ),
     }
 }
 
@@ -167,10 +175,19 @@ fn type_error(field: &Field, found: &Value) -> EncodeError {
     };
     let found = format!("{found:?}");
     let found = found.split('(').next().unwrap_or_default().to_owned();
-    EncodeError::Type { field: field.name.clone(), expected, found }
+    EncodeError::Type {
+        field: field.name.clone(),
+        expected,
+        found,
+    }
 }
 
-fn write_scalar(field: &Field, value: &Value, buf: &mut [u8], at: usize) -> Result<(), EncodeError> {
+fn write_scalar(
+    field: &Field,
+    value: &Value,
+    buf: &mut [u8],
+    at: usize,
+) -> Result<(), EncodeError> {
     match (field.ty.primitive, value) {
         (PrimitiveType::U8, Value::U8(v)) => put(buf, at, &v.to_le_bytes()),
         (PrimitiveType::I8, Value::I8(v)) => put(buf, at, &v.to_le_bytes()),
@@ -191,9 +208,17 @@ fn write_scalar(field: &Field, value: &Value, buf: &mut [u8], at: usize) -> Resu
 ///
 /// # Errors
 /// The value does not match the field's type or length.
-pub fn encode_field(field: &Field, value: &Value, buf: &mut [u8; MAX_PAYLOAD_LEN]) -> Result<(), EncodeError> {
+pub fn encode_field(
+    field: &Field,
+    value: &Value,
+    buf: &mut [u8; MAX_PAYLOAD_LEN],
+) -> Result<(), EncodeError> {
     let count = usize::from(field.ty.array_len.unwrap_or(1));
-    let length_error = |found| EncodeError::Length { field: field.name.clone(), max: count, found };
+    let length_error = |found| EncodeError::Length {
+        field: field.name.clone(),
+        max: count,
+        found,
+    };
     match (field.ty.primitive, value, field.ty.array_len) {
         (PrimitiveType::Char, Value::Text(bytes), _) => {
             if bytes.len() > count {
@@ -224,7 +249,11 @@ pub fn encode_field(field: &Field, value: &Value, buf: &mut [u8; MAX_PAYLOAD_LEN
 ///
 /// # Errors
 /// The wrong number of values, or a value that does not match its field.
-pub fn encode(message: &Message, values: &[Value], out: &mut [u8; MAX_PAYLOAD_LEN]) -> Result<usize, EncodeError> {
+pub fn encode(
+    message: &Message,
+    values: &[Value],
+    out: &mut [u8; MAX_PAYLOAD_LEN],
+) -> Result<usize, EncodeError> {
     if values.len() != message.fields.len() {
         return Err(EncodeError::FieldCount {
             message: message.name.clone(),

@@ -64,6 +64,9 @@ pub enum ErrorKind {
         /// Why reading failed.
         reason: String,
     },
+    /// An `<include>` element without a file name.
+    #[error("<include> names no file")]
+    EmptyInclude,
     /// A file includes itself, directly or through others.
     #[error("include cycle: {}", chain.join(" -> "))]
     IncludeCycle {
@@ -147,7 +150,9 @@ pub enum ErrorKind {
         field: String,
     },
     /// Two entries of one enum with one name but different values.
-    #[error("enum {enum_name}: entry {entry} has value {value} here and {other_value} at {other_location}")]
+    #[error(
+        "enum {enum_name}: entry {entry} has value {value} here and {other_value} at {other_location}"
+    )]
     ConflictingEntry {
         /// The enum.
         enum_name: String,

@@ -56,31 +56,55 @@ pub(crate) fn wire_order(mut fields: Vec<Field>) -> Vec<Field> {
 pub(crate) fn layout(decl: MessageDecl, file: &Path) -> Result<Message, Error> {
     let err = |kind| Error::new(decl.location.clone(), kind);
     if decl.fields.is_empty() {
-        return Err(err(ErrorKind::NoFields { message: decl.name.clone() }));
+        return Err(err(ErrorKind::NoFields {
+            message: decl.name.clone(),
+        }));
     }
     let mut seen = HashSet::new();
     for f in &decl.fields {
         if !seen.insert(f.name.as_str()) {
             return Err(Error::new(
                 f.location.clone(),
-                ErrorKind::DuplicateField { message: decl.name.clone(), field: f.name.clone() },
+                ErrorKind::DuplicateField {
+                    message: decl.name.clone(),
+                    field: f.name.clone(),
+                },
             ));
         }
     }
     if decl.fields.len() > MAX_FIELDS {
-        return Err(err(ErrorKind::TooManyFields { message: decl.name.clone(), count: decl.fields.len() }));
+        return Err(err(ErrorKind::TooManyFields {
+            message: decl.name.clone(),
+            count: decl.fields.len(),
+        }));
     }
     let fields = wire_order(decl.fields);
     let max_len: usize = fields.iter().map(|f| f.ty.wire_size()).sum();
     if max_len > mavstack_core::MAX_PAYLOAD_LEN {
-        return Err(err(ErrorKind::PayloadTooLarge { message: decl.name.clone(), len: max_len }));
+        return Err(err(ErrorKind::PayloadTooLarge {
+            message: decl.name.clone(),
+            len: max_len,
+        }));
     }
-    let min_len = fields.iter().filter(|f| !f.extension).map(|f| f.ty.wire_size()).sum();
+    let min_len = fields
+        .iter()
+        .filter(|f| !f.extension)
+        .map(|f| f.ty.wire_size())
+        .sum();
     let offset_of = |name: &str| fields.iter().find(|f| f.name == name).map(|f| f.offset);
+    // MANUAL_CONTROL names its target system field `target`; pymavlink and the C library's
+    // routing tables treat it as the target system, and so do we.
+    let target_system_offset = offset_of("target_system").or_else(|| {
+        if decl.name == "MANUAL_CONTROL" {
+            offset_of("target")
+        } else {
+            None
+        }
+    });
     Ok(Message {
         id: decl.id,
         crc_extra: crc_extra(&decl.name, &fields),
-        target_system_offset: offset_of("target_system"),
+        target_system_offset,
         target_component_offset: offset_of("target_component"),
         name: decl.name,
         description: decl.description,

@@ -28,6 +28,9 @@
 //!
 //! MSRV: Rust 1.95.
 #![forbid(unsafe_code)]
+// `Error` carries its location and, for duplicates, the other location: it is large, and
+// rare (one per failed load), so it is not boxed.
+#![allow(clippy::result_large_err)]
 
 pub mod builtin;
 pub mod codec;
@@ -39,7 +42,10 @@ mod xml;
 
 pub use error::{Error, ErrorKind, Location};
 pub use loader::{Builtin, FileSystem, Loader, PROTOCOL_VERSION_SUPPLEMENT, Source};
-pub use model::{Deprecation, Dialect, Entry, EntryParam, Enum, Field, FieldType, FileInfo, Message, PrimitiveType};
+pub use model::{
+    Deprecation, Dialect, Entry, EntryParam, Enum, Field, FieldType, FileInfo, Message,
+    PrimitiveType,
+};
 pub use xml::MAX_MESSAGE_ID;
 
 /// Loads a dialect by built-in name (`"common"`, `"ardupilotmega"`, ...) or, when `name` is
@@ -53,11 +59,22 @@ pub fn load(name: &str) -> Result<Dialect, Error> {
         return Loader::builtin().load(format!("{name}.xml"));
     }
     let path = std::path::Path::new(name);
-    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xml")) || path.exists() {
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("xml"))
+        || path.exists()
+    {
         return Loader::filesystem().load(path);
     }
     Err(Error::new(
-        Location { file: path.to_path_buf(), line: 1, column: 1 },
-        ErrorKind::UnknownDialect { name: name.to_owned(), known: builtin.join(", ") },
+        Location {
+            file: path.to_path_buf(),
+            line: 1,
+            column: 1,
+        },
+        ErrorKind::UnknownDialect {
+            name: name.to_owned(),
+            known: builtin.join(", "),
+        },
     ))
 }

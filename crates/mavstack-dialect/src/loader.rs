@@ -49,7 +49,10 @@ impl Source for Builtin {
     fn read(&self, path: &Path) -> std::io::Result<String> {
         let key = path.to_string_lossy();
         builtin::file(&key).map(str::to_owned).ok_or_else(|| {
-            std::io::Error::new(std::io::ErrorKind::NotFound, "no built-in definition file of that name")
+            std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                "no built-in definition file of that name",
+            )
         })
     }
 }
@@ -100,7 +103,11 @@ impl Loader<FileSystem> {
 impl<S: Source> Loader<S> {
     /// A loader over `source` with no supplements.
     pub fn new(source: S) -> Self {
-        Self { source, supplements: Vec::new(), cache: HashMap::new() }
+        Self {
+            source,
+            supplements: Vec::new(),
+            cache: HashMap::new(),
+        }
     }
 
     fn with_standard_supplements(mut self) -> Self {
@@ -109,7 +116,10 @@ impl<S: Source> Loader<S> {
         // The built-in supplement is ours and covered by tests; a parse failure here would be
         // a bug in this crate, so it is dropped rather than failing every load.
         if let Ok(decls) = xml::parse_file(&path, text) {
-            self.supplements.push(Supplement { target: "common.xml".into(), decls: Arc::new(decls) });
+            self.supplements.push(Supplement {
+                target: "common.xml".into(),
+                decls: Arc::new(decls),
+            });
         }
         self
     }
@@ -119,10 +129,18 @@ impl<S: Source> Loader<S> {
     ///
     /// # Errors
     /// The supplement itself does not parse.
-    pub fn supplement(&mut self, target: &str, path: impl Into<PathBuf>, text: &str) -> Result<&mut Self, Error> {
+    pub fn supplement(
+        &mut self,
+        target: &str,
+        path: impl Into<PathBuf>,
+        text: &str,
+    ) -> Result<&mut Self, Error> {
         let path = path.into();
         let decls = xml::parse_file(&path, text)?;
-        self.supplements.push(Supplement { target: target.to_owned(), decls: Arc::new(decls) });
+        self.supplements.push(Supplement {
+            target: target.to_owned(),
+            decls: Arc::new(decls),
+        });
         Ok(self)
     }
 
@@ -144,18 +162,33 @@ impl<S: Source> Loader<S> {
         self.merge(&root, &order)
     }
 
-    fn read_decls(&mut self, path: &Path, included_at: Option<&(String, Location)>) -> Result<Arc<FileDecls>, Error> {
+    fn read_decls(
+        &mut self,
+        path: &Path,
+        included_at: Option<&(String, Location)>,
+    ) -> Result<Arc<FileDecls>, Error> {
         if let Some(d) = self.cache.get(path) {
             return Ok(Arc::clone(d));
         }
         let text = self.source.read(path).map_err(|e| match included_at {
             Some((name, loc)) => Error::new(
                 loc.clone(),
-                ErrorKind::MissingInclude { include: name.clone(), path: path.to_path_buf(), reason: e.to_string() },
+                ErrorKind::MissingInclude {
+                    include: name.clone(),
+                    path: path.to_path_buf(),
+                    reason: e.to_string(),
+                },
             ),
             None => Error::new(
-                Location { file: path.to_path_buf(), line: 1, column: 1 },
-                ErrorKind::Read { path: path.to_path_buf(), reason: e.to_string() },
+                Location {
+                    file: path.to_path_buf(),
+                    line: 1,
+                    column: 1,
+                },
+                ErrorKind::Read {
+                    path: path.to_path_buf(),
+                    reason: e.to_string(),
+                },
             ),
         })?;
         let decls = Arc::new(xml::parse_file(path, &text)?);
@@ -172,9 +205,16 @@ impl<S: Source> Loader<S> {
         order: &mut Vec<(PathBuf, Arc<FileDecls>)>,
     ) -> Result<(), Error> {
         if let Some(start) = stack.iter().position(|p| p == path) {
-            let mut chain: Vec<String> = stack[start..].iter().map(|p| p.display().to_string()).collect();
+            let mut chain: Vec<String> = stack[start..]
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect();
             chain.push(path.display().to_string());
-            let loc = included_at.map(|(_, l)| l.clone()).unwrap_or(Location { file: path.to_path_buf(), line: 1, column: 1 });
+            let loc = included_at.map(|(_, l)| l.clone()).unwrap_or(Location {
+                file: path.to_path_buf(),
+                line: 1,
+                column: 1,
+            });
             return Err(Error::new(loc, ErrorKind::IncludeCycle { chain }));
         }
         if order.iter().any(|(p, _)| p == path) {
@@ -193,16 +233,26 @@ impl<S: Source> Loader<S> {
     }
 
     fn merge(&self, root: &Path, order: &[(PathBuf, Arc<FileDecls>)]) -> Result<Dialect, Error> {
-        let defined_ids: HashSet<u32> = order.iter().flat_map(|(_, d)| d.messages.iter().map(|m| m.id)).collect();
-        let defined_names: HashSet<&str> =
-            order.iter().flat_map(|(_, d)| d.messages.iter().map(|m| m.name.as_str())).collect();
+        let defined_ids: HashSet<u32> = order
+            .iter()
+            .flat_map(|(_, d)| d.messages.iter().map(|m| m.id))
+            .collect();
+        let defined_names: HashSet<&str> = order
+            .iter()
+            .flat_map(|(_, d)| d.messages.iter().map(|m| m.name.as_str()))
+            .collect();
         let mut merger = Merger::default();
         let mut files = Vec::new();
         for (path, decls) in order {
             merger.add(path, decls)?;
-            let file_name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+            let file_name = path
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
             for s in &self.supplements {
-                let lacks_all = s.decls.messages.iter().all(|m| !defined_ids.contains(&m.id) && !defined_names.contains(m.name.as_str()));
+                let lacks_all = s.decls.messages.iter().all(|m| {
+                    !defined_ids.contains(&m.id) && !defined_names.contains(m.name.as_str())
+                });
                 if s.target == file_name && lacks_all {
                     // The supplement's items belong to the file they are merged into, so that
                     // generated code puts them beside that file's own; locations keep the
@@ -215,14 +265,45 @@ impl<S: Source> Loader<S> {
                 path: path.clone(),
                 version: decls.version,
                 dialect: decls.dialect,
-                includes: decls.includes.iter().map(|(name, _)| normalize(&dir.join(name))).collect(),
+                includes: decls
+                    .includes
+                    .iter()
+                    .map(|(name, _)| normalize(&dir.join(name)))
+                    .collect(),
             });
         }
         let version = files.iter().rev().find_map(|f| f.version);
-        let Merger { mut messages, mut enums, .. } = merger;
+        let Merger {
+            mut messages,
+            mut enums,
+            enum_index,
+            ..
+        } = merger;
+        for m in &messages {
+            for f in &m.fields {
+                if let Some(e) = &f.enum_name {
+                    if !enum_index.contains_key(e) {
+                        return Err(Error::new(
+                            f.location.clone(),
+                            ErrorKind::UnknownEnum {
+                                message: m.name.clone(),
+                                field: f.name.clone(),
+                                enum_name: e.clone(),
+                            },
+                        ));
+                    }
+                }
+            }
+        }
         messages.sort_by_key(|m| m.id);
         enums.sort_by(|a, b| a.name.cmp(&b.name));
-        Ok(Dialect { name: crate::model::file_stem(root), files, version, messages, enums })
+        Ok(Dialect {
+            name: crate::model::file_stem(root),
+            files,
+            version,
+            messages,
+            enums,
+        })
     }
 }
 
@@ -268,22 +349,26 @@ impl Merger {
                 ));
             }
             self.by_id.insert(message.id, self.messages.len());
-            self.by_name.insert(message.name.clone(), self.messages.len());
+            self.by_name
+                .insert(message.name.clone(), self.messages.len());
             self.messages.push(message);
         }
         Ok(())
     }
 
     fn add_enum(&mut self, owner: &Path, decl: &Enum) -> Result<(), Error> {
-        let Some(&i) = self.enum_index.get(&decl.name) else {
-            let mut e = decl.clone();
-            e.file = owner.to_path_buf();
-            for entry in &mut e.entries {
-                entry.file = owner.to_path_buf();
+        let i = match self.enum_index.get(&decl.name) {
+            Some(&i) => i,
+            None => {
+                // The first declaration: an empty enum that its entries are merged into, so
+                // entries repeated within one file are checked like those across files.
+                let mut e = decl.clone();
+                e.file = owner.to_path_buf();
+                e.entries.clear();
+                self.enum_index.insert(e.name.clone(), self.enums.len());
+                self.enums.push(e);
+                self.enums.len() - 1
             }
-            self.enum_index.insert(e.name.clone(), self.enums.len());
-            self.enums.push(e);
-            return Ok(());
         };
         let target = &mut self.enums[i];
         target.bitmask |= decl.bitmask;

@@ -191,7 +191,7 @@ pub struct Message {
     pub min_len: usize,
     /// Payload length with extensions.
     pub max_len: usize,
-    /// Offset of `target_system`, if the message has that field.
+    /// Offset of `target_system` (MANUAL_CONTROL: `target`), if the message has that field.
     pub target_system_offset: Option<usize>,
     /// Offset of `target_component`, if the message has that field.
     pub target_component_offset: Option<usize>,
@@ -308,7 +308,9 @@ impl FileInfo {
 /// The file name of `path` without directory and `.xml` suffix.
 #[must_use]
 pub fn file_stem(path: &std::path::Path) -> String {
-    path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()
+    path.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default()
 }
 
 /// A resolved dialect: a root file with everything it includes, merged and validated.
@@ -331,7 +333,10 @@ impl Dialect {
     /// The message with id `id`.
     #[must_use]
     pub fn message(&self, id: u32) -> Option<&Message> {
-        self.messages.binary_search_by_key(&id, |m| m.id).ok().map(|i| &self.messages[i])
+        self.messages
+            .binary_search_by_key(&id, |m| m.id)
+            .ok()
+            .map(|i| &self.messages[i])
     }
 
     /// The message called `name`.
@@ -343,7 +348,10 @@ impl Dialect {
     /// The enum called `name`.
     #[must_use]
     pub fn enum_by_name(&self, name: &str) -> Option<&Enum> {
-        self.enums.binary_search_by(|e| e.name.as_str().cmp(name)).ok().map(|i| &self.enums[i])
+        self.enums
+            .binary_search_by(|e| e.name.as_str().cmp(name))
+            .ok()
+            .map(|i| &self.enums[i])
     }
 
     /// The root file.

@@ -47,23 +47,63 @@ impl Reader<'_> {
         let offset = node.range().start;
         let line = self.line_starts.partition_point(|&s| s <= offset).max(1);
         let start = self.line_starts[line - 1];
-        let column = self.text.get(start..offset).map_or(1, |t| t.chars().count() + 1);
-        Location { file: self.path.to_path_buf(), line: to_u32(line), column: to_u32(column) }
+        let column = self
+            .text
+            .get(start..offset)
+            .map_or(1, |t| t.chars().count() + 1);
+        Location {
+            file: self.path.to_path_buf(),
+            line: to_u32(line),
+            column: to_u32(column),
+        }
     }
 
     fn error(&self, node: Node<'_, '_>, kind: ErrorKind) -> Error {
         Error::new(self.location(node), kind)
     }
 
-    fn required<'n>(&self, node: Node<'n, '_>, element: &'static str, attribute: &'static str) -> Result<&'n str, Error> {
+    fn required<'n>(
+        &self,
+        node: Node<'n, '_>,
+        element: &'static str,
+        attribute: &'static str,
+    ) -> Result<&'n str, Error> {
         node.attribute(attribute)
             .ok_or_else(|| self.error(node, ErrorKind::MissingAttribute { element, attribute }))
     }
 
-    fn number(&self, node: Node<'_, '_>, what: String, text: &str, max: u64, range: &'static str) -> Result<u64, Error> {
-        parse_number(text)
-            .filter(|&v| v <= max)
-            .ok_or_else(|| self.error(node, ErrorKind::BadNumber { what, value: text.to_owned(), range }))
+    fn number(
+        &self,
+        node: Node<'_, '_>,
+        what: String,
+        text: &str,
+        max: u64,
+        range: &'static str,
+    ) -> Result<u64, Error> {
+        parse_number(text).filter(|&v| v <= max).ok_or_else(|| {
+            self.error(
+                node,
+                ErrorKind::BadNumber {
+                    what,
+                    value: text.to_owned(),
+                    range,
+                },
+            )
+        })
+    }
+}
+
+/// roxmltree ends its messages with " at LINE:COLUMN", which our location already says.
+fn strip_position(message: &str) -> String {
+    match message.rsplit_once(" at ") {
+        Some((head, tail))
+            if tail
+                .split(':')
+                .all(|p| !p.is_empty() && p.bytes().all(|b| b.is_ascii_digit())) =>
+        {
+            head.to_owned()
+        }
+        _ => message.to_owned(),
     }
 }
 
@@ -91,7 +131,9 @@ fn child<'a, 'i>(node: Node<'a, 'i>, tag: &str) -> Option<Node<'a, 'i>> {
 }
 
 fn text_of(node: Option<Node<'_, '_>>) -> String {
-    node.and_then(|n| n.text()).map(normalize_space).unwrap_or_default()
+    node.and_then(|n| n.text())
+        .map(normalize_space)
+        .unwrap_or_default()
 }
 
 /// Collapses runs of white space (XML descriptions are wrapped and indented).
@@ -127,13 +169,25 @@ fn parse_type(text: &str) -> Result<FieldType, bool> {
         None => (text.trim(), None),
     };
     if base == "uint8_t_mavlink_version" && array_len.is_none() {
-        return Ok(FieldType { primitive: PrimitiveType::U8, array_len, mavlink_version: true });
+        return Ok(FieldType {
+            primitive: PrimitiveType::U8,
+            array_len,
+            mavlink_version: true,
+        });
     }
     if base == "array" && array_len.is_some() {
-        return Ok(FieldType { primitive: PrimitiveType::I8, array_len, mavlink_version: false });
+        return Ok(FieldType {
+            primitive: PrimitiveType::I8,
+            array_len,
+            mavlink_version: false,
+        });
     }
     let primitive = PrimitiveType::from_c_name(base).ok_or(false)?;
-    Ok(FieldType { primitive, array_len, mavlink_version: false })
+    Ok(FieldType {
+        primitive,
+        array_len,
+        mavlink_version: false,
+    })
 }
 
 /// Reads one file's text.
@@ -141,30 +195,56 @@ pub(crate) fn parse_file(path: &Path, text: &str) -> Result<FileDecls, Error> {
     let doc = Document::parse(text).map_err(|e| {
         let pos = e.pos();
         Error::new(
-            Location { file: path.to_path_buf(), line: pos.row, column: pos.col },
-            ErrorKind::Xml(e.to_string()),
+            Location {
+                file: path.to_path_buf(),
+                line: pos.row,
+                column: pos.col,
+            },
+            ErrorKind::Xml(strip_position(&e.to_string())),
         )
     })?;
-    let line_starts = core::iter::once(0).chain(text.match_indices('\n').map(|(i, _)| i + 1)).collect();
-    let r = Reader { text, line_starts, path };
+    let line_starts = core::iter::once(0)
+        .chain(text.match_indices('\n').map(|(i, _)| i + 1))
+        .collect();
+    let r = Reader {
+        text,
+        line_starts,
+        path,
+    };
     let root = doc.root_element();
     if !root.has_tag_name("mavlink") {
-        return Err(r.error(root, ErrorKind::NotMavlink { found: root.tag_name().name().to_owned() }));
+        return Err(r.error(
+            root,
+            ErrorKind::NotMavlink {
+                found: root.tag_name().name().to_owned(),
+            },
+        ));
     }
-    let mut decls = FileDecls { includes: Vec::new(), version: None, dialect: None, enums: Vec::new(), messages: Vec::new() };
+    let mut decls = FileDecls {
+        includes: Vec::new(),
+        version: None,
+        dialect: None,
+        enums: Vec::new(),
+        messages: Vec::new(),
+    };
     for node in root.children().filter(Node::is_element) {
         match node.tag_name().name() {
             "include" => {
                 let name = node.text().unwrap_or_default().trim().to_owned();
+                if name.is_empty() {
+                    return Err(r.error(node, ErrorKind::EmptyInclude));
+                }
                 decls.includes.push((name, r.location(node)));
             }
             "version" => {
                 let v = node.text().unwrap_or_default();
-                decls.version = Some(r.number(node, "version".into(), v, 255, " from 0 to 255")? as u8);
+                decls.version =
+                    Some(r.number(node, "version".into(), v, 255, " from 0 to 255")? as u8);
             }
             "dialect" => {
                 let v = node.text().unwrap_or_default();
-                decls.dialect = Some(r.number(node, "dialect".into(), v, 255, " from 0 to 255")? as u8);
+                decls.dialect =
+                    Some(r.number(node, "dialect".into(), v, 255, " from 0 to 255")? as u8);
             }
             "enums" => {
                 for e in node.children().filter(|c| c.has_tag_name("enum")) {
@@ -185,13 +265,16 @@ pub(crate) fn parse_file(path: &Path, text: &str) -> Result<FileDecls, Error> {
 fn parse_enum(r: &Reader<'_>, node: Node<'_, '_>) -> Result<Enum, Error> {
     let name = r.required(node, "enum", "name")?.to_owned();
     let mut entries: Vec<Entry> = Vec::new();
+    // An entry without a value gets one more than the highest value so far (starting from
+    // 0, so a first entry without a value is 1), as pymavlink's parser does.
+    let mut highest = 0u64;
     for e in node.children().filter(|c| c.has_tag_name("entry")) {
         let entry_name = r.required(e, "entry", "name")?.to_owned();
         let value = match e.attribute("value") {
             Some(v) => r.number(e, format!("value of {entry_name}"), v, u64::MAX, "")?,
-            // No value: one more than the previous entry, as pymavlink's parser does.
-            None => entries.last().map_or(0, |p| p.value.saturating_add(1)),
+            None => highest.saturating_add(1),
         };
+        highest = highest.max(value);
         let params = e
             .children()
             .filter(|c| c.has_tag_name("param"))
@@ -220,7 +303,9 @@ fn parse_enum(r: &Reader<'_>, node: Node<'_, '_>) -> Result<Enum, Error> {
     Ok(Enum {
         name,
         description: text_of(child(node, "description")),
-        bitmask: node.attribute("bitmask").is_some_and(|b| b.trim() == "true"),
+        bitmask: node
+            .attribute("bitmask")
+            .is_some_and(|b| b.trim() == "true"),
         entries,
         deprecation: deprecation(node),
         file: r.path.to_path_buf(),
@@ -231,8 +316,13 @@ fn parse_enum(r: &Reader<'_>, node: Node<'_, '_>) -> Result<Enum, Error> {
 fn parse_message(r: &Reader<'_>, node: Node<'_, '_>) -> Result<MessageDecl, Error> {
     let name = r.required(node, "message", "name")?.to_owned();
     let id_text = r.required(node, "message", "id")?;
-    let id = r.number(node, format!("id of message {name}"), id_text, u64::from(MAX_MESSAGE_ID), " from 0 to 16777215")?
-        as u32;
+    let id = r.number(
+        node,
+        format!("id of message {name}"),
+        id_text,
+        u64::from(MAX_MESSAGE_ID),
+        " from 0 to 16777215",
+    )? as u32;
     let mut fields = Vec::new();
     let mut extension = false;
     for f in node.children().filter(Node::is_element) {
@@ -242,7 +332,8 @@ fn parse_message(r: &Reader<'_>, node: Node<'_, '_>) -> Result<MessageDecl, Erro
                 let ty_text = r.required(f, "field", "type")?;
                 let field_name = r.required(f, "field", "name")?.to_owned();
                 let ty = parse_type(ty_text).map_err(|bad_len| {
-                    let (message, field, ty) = (name.clone(), field_name.clone(), ty_text.to_owned());
+                    let (message, field, ty) =
+                        (name.clone(), field_name.clone(), ty_text.to_owned());
                     r.error(
                         f,
                         if bad_len {

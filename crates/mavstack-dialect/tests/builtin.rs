@@ -8,7 +8,10 @@ fn every_builtin_dialect_loads() {
     assert!(names.len() >= 19, "{names:?}");
     for name in names {
         let d = load(name).unwrap_or_else(|e| panic!("{name}: {e}"));
-        assert!(!d.messages.is_empty() || name == "minimal", "{name} has no messages");
+        assert!(
+            !d.messages.is_empty() || name == "minimal",
+            "{name} has no messages"
+        );
         assert_eq!(d.root().stem(), name);
     }
 }
@@ -58,7 +61,9 @@ fn crc_extra_anchors_for_common() {
         ("PROTOCOL_VERSION", 300, 217, 22),
     ];
     for &(name, id, crc, min) in anchors {
-        let m = common.message_by_name(name).unwrap_or_else(|| panic!("{name} missing"));
+        let m = common
+            .message_by_name(name)
+            .unwrap_or_else(|| panic!("{name} missing"));
         assert_eq!((m.id, m.crc_extra, m.min_len), (id, crc, min), "{name}");
     }
 }
@@ -68,10 +73,18 @@ fn wire_order_of_worked_layouts() {
     let common = load("common").expect("common loads");
     let offsets = |name: &str| -> Vec<(String, usize, bool)> {
         let m = common.message_by_name(name).expect("message exists");
-        m.fields.iter().map(|f| (f.name.clone(), f.offset, f.extension)).collect()
+        m.fields
+            .iter()
+            .map(|f| (f.name.clone(), f.offset, f.extension))
+            .collect()
     };
     let mission_count = offsets("MISSION_COUNT");
-    let expected = [("count", 0, false), ("target_system", 2, false), ("target_component", 3, false), ("mission_type", 4, true)];
+    let expected = [
+        ("count", 0, false),
+        ("target_system", 2, false),
+        ("target_component", 3, false),
+        ("mission_type", 4, true),
+    ];
     assert_eq!(mission_count.len(), expected.len());
     for (got, want) in mission_count.iter().zip(expected) {
         assert_eq!((got.0.as_str(), got.1, got.2), want);
@@ -79,17 +92,28 @@ fn wire_order_of_worked_layouts() {
     let hb = common.message(0).expect("HEARTBEAT");
     assert_eq!(hb.fields[0].name, "custom_mode");
     assert!(hb.fields.iter().any(|f| f.ty.mavlink_version));
-    let cmd = common.message_by_name("COMMAND_LONG").expect("COMMAND_LONG");
-    assert_eq!((cmd.target_system_offset, cmd.target_component_offset), (Some(30), Some(31)));
+    let cmd = common
+        .message_by_name("COMMAND_LONG")
+        .expect("COMMAND_LONG");
+    assert_eq!(
+        (cmd.target_system_offset, cmd.target_component_offset),
+        (Some(30), Some(31))
+    );
 }
 
 #[test]
 fn protocol_version_reaches_every_dialect_that_includes_common() {
     for name in ["common", "ardupilotmega", "all", "development", "storm32"] {
         let d = load(name).expect("loads");
-        let pv = d.message(300).unwrap_or_else(|| panic!("{name} lacks PROTOCOL_VERSION"));
+        let pv = d
+            .message(300)
+            .unwrap_or_else(|| panic!("{name} lacks PROTOCOL_VERSION"));
         assert_eq!((pv.name.as_str(), pv.crc_extra), ("PROTOCOL_VERSION", 217));
-        assert!(pv.file.ends_with("common.xml"), "{name}: belongs to {:?}", pv.file);
+        assert!(
+            pv.file.ends_with("common.xml"),
+            "{name}: belongs to {:?}",
+            pv.file
+        );
         assert!(pv.location.file.ends_with("protocol_version.xml"));
     }
     assert!(load("minimal").expect("loads").message(300).is_none());
@@ -99,9 +123,20 @@ fn protocol_version_reaches_every_dialect_that_includes_common() {
 fn enums_merge_across_files() {
     let apm = load("ardupilotmega").expect("loads");
     let cmd = apm.enum_by_name("MAV_CMD").expect("MAV_CMD");
-    let from_common = cmd.entries.iter().filter(|e| e.file.ends_with("common.xml")).count();
-    let from_apm = cmd.entries.iter().filter(|e| e.file.ends_with("ardupilotmega.xml")).count();
-    assert!(from_common > 100 && from_apm > 10, "{from_common} {from_apm}");
+    let from_common = cmd
+        .entries
+        .iter()
+        .filter(|e| e.file.ends_with("common.xml"))
+        .count();
+    let from_apm = cmd
+        .entries
+        .iter()
+        .filter(|e| e.file.ends_with("ardupilotmega.xml"))
+        .count();
+    assert!(
+        from_common > 100 && from_apm > 10,
+        "{from_common} {from_apm}"
+    );
     assert!(cmd.file.ends_with("common.xml"));
 }
 

@@ -1,0 +1,45 @@
+//! # mavstack-dialects
+//!
+//! Every official MAVLink dialect as typed Rust, generated at build time by
+//! `mavstack-codegen` from the XML vendored in `definitions/` (see its `PROVENANCE.md`).
+//! `no_std`, no allocation.
+//!
+//! Each definition file is a module behind a cargo feature of the same name, in lower case
+//! (`common`, `ardupilotmega`, `uavionix`, ...); a feature enables the files its XML includes,
+//! and `all` enables every one. The default is `ardupilotmega`.
+//!
+//! A module holds the messages and enums its file defines, re-exports those of the files it
+//! includes, and has `MavMessage`, the enum of every message of the dialect. Types are shared,
+//! never duplicated: `ardupilotmega::Heartbeat` *is* `minimal::Heartbeat`, and the `MAV_CMD`
+//! entries that `ardupilotmega.xml` adds are constants of `common::MavCmd` when the
+//! `ardupilotmega` feature is on.
+//!
+//! Enums are open: `MavType(pub u8)` with a constant per entry, so unknown values survive a
+//! round trip; bitmasks keep unknown bits.
+//!
+//! ```
+//! use mavstack_core::{Message, MessageSet};
+//! use mavstack_dialects::common::{Heartbeat, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType};
+//!
+//! let hb = Heartbeat {
+//!     r#type: MavType::QUADROTOR,
+//!     autopilot: MavAutopilot::PX4,
+//!     base_mode: MavModeFlag::CUSTOM_MODE_ENABLED | MavModeFlag::STABILIZE_ENABLED | MavModeFlag::MANUAL_INPUT_ENABLED,
+//!     system_status: MavState::ACTIVE,
+//!     ..Heartbeat::default()
+//! };
+//! let mut payload = [0u8; mavstack_core::MAX_PAYLOAD_LEN];
+//! let len = hb.encode(&mut payload);
+//! assert_eq!(&payload[..len], &[0, 0, 0, 0, 2, 12, 0x51, 4, 3]);
+//! assert_eq!(MavMessage::decode(Heartbeat::ID, &payload[..len]), Ok(MavMessage::Heartbeat(hb)));
+//! ```
+//!
+//! ## Features
+//! - one per dialect (see above), `all`;
+//! - `serde`: `Serialize`/`Deserialize` for every message and enum.
+//!
+//! MSRV: Rust 1.95.
+#![no_std]
+#![forbid(unsafe_code)]
+
+include!(concat!(env!("OUT_DIR"), "/mod.rs"));
