@@ -48,15 +48,16 @@ pub use model::{
 };
 pub use xml::MAX_MESSAGE_ID;
 
-/// Loads a dialect by built-in name (`"common"`, `"ardupilotmega"`, ...) or, when `name` is
-/// not one, as a path to an XML file (includes resolved relative to it).
+/// Loads a dialect by built-in name (`"common"`, `"ardupilotmega"`, ...; case does not
+/// matter, so `"uavionix"` is `uAvionix`) or, when `name` is not one, as a path to an XML file
+/// (includes resolved relative to it).
 ///
 /// # Errors
 /// An unknown name that is no readable file, or any problem in the definitions.
 pub fn load(name: &str) -> Result<Dialect, Error> {
     let builtin = builtin::dialect_names();
-    if builtin.contains(&name) {
-        return Loader::builtin().load(format!("{name}.xml"));
+    if let Some(found) = builtin.iter().find(|b| b.eq_ignore_ascii_case(name)) {
+        return Loader::builtin().load(format!("{found}.xml"));
     }
     let path = std::path::Path::new(name);
     if path

@@ -1,0 +1,80 @@
+//! `mavstack`: the command-line face of the mavstack MAVLink stack.
+//!
+//! Errors are one line on stderr starting with `error:`; the exit code is 0 on success, 1 on
+//! failure and 2 on bad usage or bad input (shared/DESIGN.md, "Command line").
+
+mod dialect_cmd;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// mavstack: a complete MAVLink stack.
+#[derive(Debug, Parser)]
+#[command(name = "mavstack", version, about, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// List the built-in dialects, or show one dialect's messages and enums.
+    Dialect {
+        #[command(subcommand)]
+        action: dialect_cmd::DialectAction,
+    },
+    /// Generate Rust code for a dialect XML file (and every file it includes).
+    Codegen(dialect_cmd::CodegenArgs),
+}
+
+/// A failure with the exit code it maps to.
+#[derive(Debug)]
+pub(crate) enum Failure {
+    /// Bad input (a malformed dialect, an unknown name): exit code 2.
+    Input(anyhow::Error),
+    /// Anything else: exit code 1.
+    Other(anyhow::Error),
+}
+
+impl From<anyhow::Error> for Failure {
+    fn from(e: anyhow::Error) -> Self {
+        Self::Other(e)
+    }
+}
+
+fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+            || c.downcast_ref::<serde_json::Error>()
+                .is_some_and(|j| j.io_error_kind() == Some(std::io::ErrorKind::BrokenPipe))
+    })
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Dialect { action } => dialect_cmd::run(action),
+        Command::Codegen(args) => dialect_cmd::codegen(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(failure) => {
+            let (e, code) = match failure {
+                // The reader went away (`| head`): not an error worth a message.
+                Failure::Other(e) if is_broken_pipe(&e) => return ExitCode::SUCCESS,
+                Failure::Input(e) => (e, 2),
+                Failure::Other(e) => (e, 1),
+            };
+            // One line: the chain of causes joined.
+            let message = e
+                .chain()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join(": ");
+            eprintln!("error: {}", message.replace('\n', " "));
+            ExitCode::from(code)
+        }
+    }
+}
