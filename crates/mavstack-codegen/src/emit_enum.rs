@@ -50,13 +50,11 @@ pub(crate) fn emit(plan: &EnumPlan, opts: &Options) -> TokenStream {
                     let mut first = true;
                     for bit in 0..#repr::BITS {
                         let flag = 1 << bit;
-                        if rest & flag != 0 {
-                            if let Some(n) = Self(flag).name() {
-                                f.write_str(if first { "" } else { " | " })?;
-                                f.write_str(n)?;
-                                rest &= !flag;
-                                first = false;
-                            }
+                        if rest & flag != 0 && let Some(n) = Self(flag).name() {
+                            f.write_str(if first { "" } else { " | " })?;
+                            f.write_str(n)?;
+                            rest &= !flag;
+                            first = false;
                         }
                     }
                     if rest != 0 || first {

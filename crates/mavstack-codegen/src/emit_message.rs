@@ -37,6 +37,18 @@ fn usize_lit(n: usize) -> Literal {
     Literal::usize_unsuffixed(n)
 }
 
+/// The offset of element `i` of an array at `offset` with elements of `size` bytes, written
+/// without operations that do nothing (`0 + i * 1`).
+fn element_offset(offset: usize, size: usize) -> TokenStream {
+    let (off, sz) = (usize_lit(offset), usize_lit(size));
+    match (offset, size) {
+        (0, 1) => quote!(i),
+        (0, _) => quote!(i * #sz),
+        (_, 1) => quote!(#off + i),
+        _ => quote!(#off + i * #sz),
+    }
+}
+
 /// Path to an enum type from a sibling module.
 fn enum_path(plan: &EnumPlan) -> TokenStream {
     let module = ident(&plan.owner);
@@ -59,7 +71,6 @@ fn rust_type(f: &Field, repr: &Repr<'_>) -> TokenStream {
 fn decode_expr(f: &Field, repr: &Repr<'_>) -> TokenStream {
     let p = f.ty.primitive;
     let elem = ident(p.rust_name());
-    let size = usize_lit(p.size());
     let off = usize_lit(f.offset);
     match (repr, f.ty.array_len) {
         (_, Some(n)) if p.size() == 1 && matches!(p, PrimitiveType::U8 | PrimitiveType::Char) => {
@@ -67,7 +78,8 @@ fn decode_expr(f: &Field, repr: &Repr<'_>) -> TokenStream {
             quote!(get::<#n>(&buf, #off))
         }
         (_, Some(_)) => {
-            quote!(::core::array::from_fn(|i| #elem::from_le_bytes(get(&buf, #off + i * #size))))
+            let at = element_offset(f.offset, p.size());
+            quote!(::core::array::from_fn(|i| #elem::from_le_bytes(get(&buf, #at))))
         }
         (Repr::Enum(plan), None) => {
             let path = enum_path(plan);
@@ -86,17 +98,19 @@ fn decode_expr(f: &Field, repr: &Repr<'_>) -> TokenStream {
 fn encode_stmt(f: &Field, repr: &Repr<'_>) -> TokenStream {
     let p = f.ty.primitive;
     let name = field_ident(&f.name);
-    let size = usize_lit(p.size());
     let off = usize_lit(f.offset);
     match (repr, f.ty.array_len) {
         (_, Some(_)) if p.size() == 1 && matches!(p, PrimitiveType::U8 | PrimitiveType::Char) => {
             quote!(put(out, #off, &self.#name);)
         }
-        (_, Some(_)) => quote! {
-            for (i, v) in self.#name.iter().enumerate() {
-                put(out, #off + i * #size, &v.to_le_bytes());
+        (_, Some(_)) => {
+            let at = element_offset(f.offset, p.size());
+            quote! {
+                for (i, v) in self.#name.iter().enumerate() {
+                    put(out, #at, &v.to_le_bytes());
+                }
             }
-        },
+        }
         (Repr::Enum(plan), None) => {
             if plan.repr.rust_name() == p.rust_name() {
                 quote!(put(out, #off, &self.#name.0.to_le_bytes());)
@@ -199,19 +213,33 @@ pub(crate) fn emit(m: &Message, unit: &Unit, plan: &Plan, opts: &Options) -> Tok
     let min = usize_lit(m.min_len);
     let max = usize_lit(m.max_len);
     let info = info_literal(m, &core);
+    // `Default` is derived unless a field defaults to something else than zero (the
+    // dialect's version) or is an array too long for the standard library's impls.
+    let derivable = m
+        .fields
+        .iter()
+        .all(|f| !f.ty.mavlink_version && f.ty.array_len.is_none_or(|n| n <= 32));
+    let (derive_default, default_impl) = if derivable {
+        (quote!(Default,), TokenStream::new())
+    } else {
+        let default_impl = quote! {
+            impl ::core::default::Default for #name {
+                fn default() -> Self {
+                    Self { #(#defaults)* }
+                }
+            }
+        };
+        (TokenStream::new(), default_impl)
+    };
     quote! {
         #doc
-        #[derive(Clone, Copy, Debug, PartialEq)]
+        #[derive(Clone, Copy, Debug, #derive_default PartialEq)]
         #serde
         pub struct #name {
             #(#fields)*
         }
 
-        impl ::core::default::Default for #name {
-            fn default() -> Self {
-                Self { #(#defaults)* }
-            }
-        }
+        #default_impl
 
         impl #core::Message for #name {
             const ID: u32 = #id;

@@ -41,7 +41,7 @@ mod emit_set;
 mod names;
 mod plan;
 
-use std::fmt::Write as _;
+use core::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use proc_macro2::TokenStream;

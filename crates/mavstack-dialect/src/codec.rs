@@ -49,7 +49,7 @@ pub enum Value {
     /// `char` or `char[N]`: the bytes up to the first NUL.
     Text(Vec<u8>),
     /// Any other array, all `N` elements.
-    Array(Vec<Value>),
+    Array(Vec<Self>),
 }
 
 impl Value {

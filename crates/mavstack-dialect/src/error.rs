@@ -29,13 +29,16 @@ pub struct Error {
     /// Where the problem is. For a file that cannot be read, the include that names it (or
     /// line 1 of the file itself when it is the root).
     pub location: Location,
-    /// What is wrong.
-    pub kind: ErrorKind,
+    /// What is wrong (boxed: errors are rare, and a small `Result` keeps the happy path lean).
+    pub kind: Box<ErrorKind>,
 }
 
 impl Error {
     pub(crate) fn new(location: Location, kind: ErrorKind) -> Self {
-        Self { location, kind }
+        Self {
+            location,
+            kind: Box::new(kind),
+        }
     }
 }
 

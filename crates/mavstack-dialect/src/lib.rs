@@ -28,9 +28,6 @@
 //!
 //! MSRV: Rust 1.95.
 #![forbid(unsafe_code)]
-// `Error` carries its location and, for duplicates, the other location: it is large, and
-// rare (one per failed load), so it is not boxed.
-#![allow(clippy::result_large_err)]
 
 pub mod builtin;
 pub mod codec;

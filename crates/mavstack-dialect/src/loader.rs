@@ -281,17 +281,19 @@ impl<S: Source> Loader<S> {
         } = merger;
         for m in &messages {
             for f in &m.fields {
-                if let Some(e) = &f.enum_name {
-                    if !enum_index.contains_key(e) {
-                        return Err(Error::new(
-                            f.location.clone(),
-                            ErrorKind::UnknownEnum {
-                                message: m.name.clone(),
-                                field: f.name.clone(),
-                                enum_name: e.clone(),
-                            },
-                        ));
-                    }
+                if let Some(e) = f
+                    .enum_name
+                    .as_ref()
+                    .filter(|e| !enum_index.contains_key(*e))
+                {
+                    return Err(Error::new(
+                        f.location.clone(),
+                        ErrorKind::UnknownEnum {
+                            message: m.name.clone(),
+                            field: f.name.clone(),
+                            enum_name: e.clone(),
+                        },
+                    ));
                 }
             }
         }

@@ -147,10 +147,10 @@ fn every_field_enum_is_defined() {
         let d = load(name).expect("loads");
         for m in &d.messages {
             for f in &m.fields {
-                if let Some(e) = &f.enum_name {
-                    if d.enum_by_name(e).is_none() {
-                        undefined.push(format!("{name}: {}.{} -> {e}", m.name, f.name));
-                    }
+                if let Some(e) = &f.enum_name
+                    && d.enum_by_name(e).is_none()
+                {
+                    undefined.push(format!("{name}: {}.{} -> {e}", m.name, f.name));
                 }
             }
         }

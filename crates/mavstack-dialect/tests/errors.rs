@@ -34,7 +34,7 @@ fn expect_error(name: &str, file: &str, rest: &str) -> ErrorKind {
     let e = load_error(name);
     assert_eq!(e.to_string(), format!("{}:{rest}", path(file)), "{name}");
     assert_eq!(e.location.file, dir().join(file), "{name}");
-    e.kind
+    *e.kind
 }
 
 #[test]
@@ -451,7 +451,7 @@ fn unknown_builtin_dialect_name() {
         e.to_string(),
         format!(r#"nosuchdialect:1:1: unknown dialect "nosuchdialect" (known: {known})"#)
     );
-    assert!(matches!(&e.kind, ErrorKind::UnknownDialect { name, .. } if name == "nosuchdialect"));
+    assert!(matches!(&*e.kind, ErrorKind::UnknownDialect { name, .. } if name == "nosuchdialect"));
 }
 
 #[test]
@@ -465,7 +465,7 @@ fn unknown_xml_path() {
         e.to_string(),
         format!("nosuchdialect.xml:1:1: cannot read nosuchdialect.xml: {reason}")
     );
-    assert!(matches!(e.kind, ErrorKind::Read { .. }));
+    assert!(matches!(*e.kind, ErrorKind::Read { .. }));
 }
 
 #[test]
@@ -477,7 +477,7 @@ fn unknown_builtin_file() {
         e.to_string(),
         "nosuchdialect.xml:1:1: cannot read nosuchdialect.xml: no built-in definition file of that name"
     );
-    assert!(matches!(e.kind, ErrorKind::Read { .. }));
+    assert!(matches!(*e.kind, ErrorKind::Read { .. }));
 }
 
 #[test]
