@@ -1,23 +1,28 @@
 //! Running pymavlink (the reference implementation) from tests.
 //!
-//! The python comes from `MAVSTACK_PYTHON` (default `/tmp/peers-venv/bin/python`) and needs
-//! pymavlink 2.4.50. A missing python or pymavlink fails the test: it is never skipped.
+//! The python comes from `MAVSTACK_PYTHON` (default: the workspace's `.venv/bin/python`, which
+//! `scripts/test.sh` creates) and needs pymavlink 2.4.50. A missing python or pymavlink fails
+//! the test: it is never skipped.
 
 use std::process::Command;
 
-/// The default interpreter, a virtualenv with pymavlink installed.
-const DEFAULT_PYTHON: &str = "/tmp/peers-venv/bin/python";
+/// The default interpreter, relative to the workspace root: the virtualenv that
+/// `scripts/test.sh` sets up with pymavlink.
+const DEFAULT_PYTHON: &str = ".venv/bin/python";
 
 /// How to get a python that can run these tests.
-const INSTALL: &str = "python3 -m venv /tmp/peers-venv && /tmp/peers-venv/bin/pip install pymavlink==2.4.50 \
-                       (or set MAVSTACK_PYTHON to a python that has pymavlink 2.4.50)";
+const INSTALL: &str = "run scripts/setup-peers.sh (creates .venv with pymavlink==2.4.50), \
+                       or set MAVSTACK_PYTHON to a python that has pymavlink 2.4.50";
 
 /// Status with which scripts/pymavlink_definitions.py reports that pymavlink is missing.
 const EXIT_NO_PYMAVLINK: i32 = 3;
 
 /// The python interpreter to run.
 pub(crate) fn python() -> String {
-    std::env::var("MAVSTACK_PYTHON").unwrap_or_else(|_| DEFAULT_PYTHON.to_owned())
+    std::env::var("MAVSTACK_PYTHON").unwrap_or_else(|_| {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        root.join(DEFAULT_PYTHON).display().to_string()
+    })
 }
 
 /// Runs python with `args` and returns its standard output; panics with install instructions
