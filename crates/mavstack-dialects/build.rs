@@ -22,6 +22,7 @@ fn main() {
         config.dialect(root);
     }
     println!("cargo:rerun-if-changed={}", defs.join("extras").display());
+    println!("cargo:rerun-if-env-changed=MAVSTACK_FORMAT_GENERATED");
     let format = env::var_os("MAVSTACK_FORMAT_GENERATED").is_some();
     config
         .layout(mavstack_codegen::Layout::OutDir)

@@ -1,0 +1,63 @@
+//! Replays the checked-in seed corpus of the `dialect_xml` fuzz target (fuzz/corpus/) and a
+//! property over arbitrary input, on stable Rust: nothing may panic.
+
+use std::path::Path;
+
+use proptest::prelude::*;
+
+#[test]
+fn seed_corpus_never_panics() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/dialect_xml");
+    let mut count = 0;
+    for entry in std::fs::read_dir(&dir).expect("corpus folder exists") {
+        let path = entry.expect("readable entry").path();
+        let data = std::fs::read(&path).expect("readable file");
+        mavstack_dialect::fuzz_dialect_xml(&data);
+        count += 1;
+    }
+    assert!(count >= 20, "only {count} seeds in {}", dir.display());
+}
+
+/// XML-shaped fragments glued together at random: deeper than random bytes get.
+fn xmlish() -> impl Strategy<Value = String> {
+    let pieces = prop_oneof![
+        Just("<mavlink>".to_owned()),
+        Just("</mavlink>".to_owned()),
+        Just("<messages>".to_owned()),
+        Just("</messages>".to_owned()),
+        Just("<enums><enum name=\"E\">".to_owned()),
+        Just("</enum></enums>".to_owned()),
+        Just("<include>fuzz.xml</include>".to_owned()),
+        Just("<include>other.xml</include>".to_owned()),
+        (0u32..20_000_000, "[A-Z]{1,3}")
+            .prop_map(|(id, n)| format!("<message id=\"{id}\" name=\"{n}\">")),
+        Just("</message>".to_owned()),
+        Just("<extensions/>".to_owned()),
+        (
+            "(u?int(8|16|32|64)_t|float|double|char|array)(\\[[0-9]{1,3}\\])?",
+            "[a-z]{1,2}",
+            "[A-Z]?"
+        )
+            .prop_map(|(t, n, e)| if e.is_empty() {
+                format!("<field type=\"{t}\" name=\"{n}\">d</field>")
+            } else {
+                format!("<field type=\"{t}\" name=\"{n}\" enum=\"{e}\">d</field>")
+            }),
+        ("[A-Z_]{1,4}", "(0x)?[0-9]{0,5}")
+            .prop_map(|(n, v)| format!("<entry name=\"E_{n}\" value=\"{v}\"/>")),
+        any::<String>(),
+    ];
+    proptest::collection::vec(pieces, 0..40).prop_map(|v| v.concat())
+}
+
+proptest! {
+    #[test]
+    fn arbitrary_bytes_never_panic(data in proptest::collection::vec(any::<u8>(), 0..512)) {
+        mavstack_dialect::fuzz_dialect_xml(&data);
+    }
+
+    #[test]
+    fn xml_shaped_input_never_panics(text in xmlish()) {
+        mavstack_dialect::fuzz_dialect_xml(text.as_bytes());
+    }
+}
