@@ -35,10 +35,13 @@ extern crate std;
 
 pub mod crc;
 pub mod message;
+pub mod parse;
 pub mod payload;
 #[cfg(feature = "serde")]
 pub mod serde_arrays;
+pub mod signing;
 pub mod text;
+pub mod wire;
 
 pub use crc::Crc16;
 pub use message::{MAX_PAYLOAD_LEN, Message, MessageInfo, MessageSet, UnknownMessage};
