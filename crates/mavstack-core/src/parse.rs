@@ -13,8 +13,9 @@
 //!
 //! A frame whose message id the dialect does not know cannot have its checksum checked. It
 //! is reported as [`Item::Unknown`] when it is followed by a start marker (or the end of the
-//! input), the evidence that it really is a frame; otherwise its start marker is taken for
-//! noise, as after a bad checksum.
+//! input) and no valid frame of a known message starts inside it; otherwise its start marker
+//! is taken for noise, as after a bad checksum. So an unknown-id candidate never swallows a
+//! valid frame.
 //!
 //! ```
 //! use mavstack_core::parse::{Item, SliceParser};
@@ -29,7 +30,9 @@
 //! assert_eq!((parser.stats().frames, parser.stats().skipped_bytes), (1, 3));
 //! ```
 
-use crate::wire::{CHECKSUM_LEN, Frame, INCOMPAT_SIGNED, MAX_FRAME_LEN, SIGNATURE_LEN, STX_V1, STX_V2, Version};
+use crate::wire::{
+    CHECKSUM_LEN, Frame, INCOMPAT_SIGNED, MAX_FRAME_LEN, SIGNATURE_LEN, STX_V1, STX_V2, Version,
+};
 
 /// Where the parser gets each message's CRC_EXTRA: `None` for an id the dialect does not
 /// define. Implemented for closures `Fn(u32) -> Option<u8>`.
@@ -76,17 +79,72 @@ fn is_magic(b: u8) -> bool {
     b == STX_V2 || b == STX_V1
 }
 
+/// Whether a frame of a known message with a good checksum starts anywhere inside
+/// `candidate` (after its first byte); `rest` is everything from the candidate's start.
+/// `None`: one might, but its bytes have not all arrived yet.
+fn known_frame_inside(
+    candidate: &[u8],
+    rest: &[u8],
+    at_end: bool,
+    lookup: &impl CrcExtra,
+) -> Option<bool> {
+    for (j, _) in candidate
+        .iter()
+        .enumerate()
+        .skip(1)
+        .filter(|&(_, &b)| is_magic(b))
+    {
+        let inner = &rest[j..];
+        let version = if inner[0] == STX_V2 {
+            Version::V2
+        } else {
+            Version::V1
+        };
+        if inner.len() < version.header_len() {
+            return if at_end { Some(false) } else { None };
+        }
+        let frame = Frame::new_unchecked(inner);
+        if version == Version::V2 && frame.incompat_flags() & !INCOMPAT_SIGNED != 0 {
+            continue;
+        }
+        let Some(extra) = lookup.crc_extra(frame.msg_id()) else {
+            continue;
+        };
+        let len = version.header_len() + frame.payload_len() + CHECKSUM_LEN;
+        if inner.len() < len {
+            if at_end {
+                continue;
+            }
+            return None;
+        }
+        if frame.check_crc(extra) {
+            return Some(true);
+        }
+    }
+    Some(false)
+}
+
 /// The outcome of one scan.
 enum Step {
     /// An item at `start` of `len` bytes; scanning continues after it.
-    Found { start: usize, len: usize, known: bool },
+    Found {
+        start: usize,
+        len: usize,
+        known: bool,
+    },
     /// Nothing more can be decided without more bytes; keep everything from `keep`.
     NeedMore { keep: usize },
 }
 
 /// Scans `buf` from `pos`. With `at_end`, no more bytes will come: a candidate that runs past
 /// the end is noise.
-fn scan(buf: &[u8], mut pos: usize, at_end: bool, lookup: &impl CrcExtra, stats: &mut Stats) -> Step {
+fn scan(
+    buf: &[u8],
+    mut pos: usize,
+    at_end: bool,
+    lookup: &impl CrcExtra,
+    stats: &mut Stats,
+) -> Step {
     loop {
         let Some(offset) = buf[pos..].iter().position(|&b| is_magic(b)) else {
             stats.skipped_bytes += (buf.len() - pos) as u64;
@@ -95,7 +153,11 @@ fn scan(buf: &[u8], mut pos: usize, at_end: bool, lookup: &impl CrcExtra, stats:
         stats.skipped_bytes += offset as u64;
         let start = pos + offset;
         let rest = &buf[start..];
-        let version = if rest[0] == STX_V2 { Version::V2 } else { Version::V1 };
+        let version = if rest[0] == STX_V2 {
+            Version::V2
+        } else {
+            Version::V1
+        };
         let header = version.header_len();
         if rest.len() < header {
             if at_end {
@@ -111,7 +173,8 @@ fn scan(buf: &[u8], mut pos: usize, at_end: bool, lookup: &impl CrcExtra, stats:
             continue;
         }
         let signed = version == Version::V2 && rest[2] & INCOMPAT_SIGNED != 0;
-        let len = header + usize::from(rest[1]) + CHECKSUM_LEN + if signed { SIGNATURE_LEN } else { 0 };
+        let len =
+            header + usize::from(rest[1]) + CHECKSUM_LEN + if signed { SIGNATURE_LEN } else { 0 };
         if rest.len() < len {
             if at_end {
                 // Runs past the end: a false start or a cut frame. Frames may hide inside.
@@ -125,20 +188,33 @@ fn scan(buf: &[u8], mut pos: usize, at_end: bool, lookup: &impl CrcExtra, stats:
         match lookup.crc_extra(frame.msg_id()) {
             Some(extra) if frame.check_crc(extra) => {
                 stats.frames += 1;
-                return Step::Found { start, len, known: true };
+                return Step::Found {
+                    start,
+                    len,
+                    known: true,
+                };
             }
             Some(_) => stats.bad_crc += 1,
-            None => {
-                let followed = rest.get(len).map_or(at_end, |&b| is_magic(b));
-                if followed {
-                    stats.unknown_id += 1;
-                    return Step::Found { start, len, known: false };
+            None => match known_frame_inside(&rest[..len], rest, at_end, lookup) {
+                // A valid frame starts inside the candidate: the candidate is noise.
+                Some(true) => {}
+                Some(false) => {
+                    let followed = rest.get(len).map_or(at_end, |&b| is_magic(b));
+                    if followed {
+                        stats.unknown_id += 1;
+                        return Step::Found {
+                            start,
+                            len,
+                            known: false,
+                        };
+                    }
+                    if rest.len() == len && !at_end {
+                        // The next byte decides; wait for it.
+                        return Step::NeedMore { keep: start };
+                    }
                 }
-                if rest.len() == len && !at_end {
-                    // The next byte decides; wait for it.
-                    return Step::NeedMore { keep: start };
-                }
-            }
+                None => return Step::NeedMore { keep: start },
+            },
         }
         stats.skipped_bytes += 1;
         pos = start + 1;
@@ -157,7 +233,15 @@ pub struct SliceParser<'a, L> {
 impl<'a, L: CrcExtra> SliceParser<'a, L> {
     /// A parser over `buf` with CRC_EXTRA from `lookup`.
     pub fn new(buf: &'a [u8], lookup: L) -> Self {
-        Self { buf, pos: 0, lookup, stats: Stats { bytes: buf.len() as u64, ..Stats::default() } }
+        Self {
+            buf,
+            pos: 0,
+            lookup,
+            stats: Stats {
+                bytes: buf.len() as u64,
+                ..Stats::default()
+            },
+        }
     }
 
     /// The counts so far.
@@ -184,7 +268,11 @@ impl<'a, L: CrcExtra> Iterator for SliceParser<'a, L> {
             Step::Found { start, len, known } => {
                 self.pos = start + len;
                 let frame = Frame::new_unchecked(&self.buf[start..start + len]);
-                Some(if known { Item::Frame(frame) } else { Item::Unknown(frame) })
+                Some(if known {
+                    Item::Frame(frame)
+                } else {
+                    Item::Unknown(frame)
+                })
             }
             Step::NeedMore { .. } => {
                 self.pos = self.buf.len();
@@ -240,7 +328,14 @@ impl Deframer {
             buf: [0; DEFRAMER_CAPACITY],
             start: 0,
             end: 0,
-            stats: Stats { frames: 0, bytes: 0, bad_crc: 0, unknown_id: 0, bad_incompat: 0, skipped_bytes: 0 },
+            stats: Stats {
+                frames: 0,
+                bytes: 0,
+                bad_crc: 0,
+                unknown_id: 0,
+                bad_incompat: 0,
+                skipped_bytes: 0,
+            },
         }
     }
 
@@ -267,7 +362,11 @@ impl Deframer {
                 let from = self.start + start;
                 self.start = from + len;
                 let frame = Frame::new_unchecked(&self.buf[from..from + len]);
-                Some(if known { Item::Frame(frame) } else { Item::Unknown(frame) })
+                Some(if known {
+                    Item::Frame(frame)
+                } else {
+                    Item::Unknown(frame)
+                })
             }
             Step::NeedMore { keep } => {
                 self.start += keep;
@@ -289,7 +388,11 @@ impl Deframer {
                 let from = self.start + start;
                 self.start = from + len;
                 let frame = Frame::new_unchecked(&self.buf[from..from + len]);
-                Some(if known { Item::Frame(frame) } else { Item::Unknown(frame) })
+                Some(if known {
+                    Item::Frame(frame)
+                } else {
+                    Item::Unknown(frame)
+                })
             }
             Step::NeedMore { .. } => {
                 self.start = 0;

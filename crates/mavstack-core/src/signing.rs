@@ -40,7 +40,11 @@ pub const MAX_TIMESTAMP: u64 = (1 << 48) - 1;
 #[must_use]
 pub const fn timestamp_from_unix_micros(micros: u64) -> u64 {
     let since = micros.saturating_sub(EPOCH_UNIX_SECS * 1_000_000) / 10;
-    if since > MAX_TIMESTAMP { MAX_TIMESTAMP } else { since }
+    if since > MAX_TIMESTAMP {
+        MAX_TIMESTAMP
+    } else {
+        since
+    }
 }
 
 /// A 32-byte signing key. Wiped from memory on drop; `Debug` does not show it.
@@ -117,8 +121,13 @@ pub enum KeyError {
 impl core::fmt::Display for KeyError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            Self::Length { digits } => write!(f, "a signing key is 64 hex digits, got {digits} characters"),
-            Self::NotHex { position } => write!(f, "a signing key is 64 hex digits: not a hex digit at position {position}"),
+            Self::Length { digits } => {
+                write!(f, "a signing key is 64 hex digits, got {digits} characters")
+            }
+            Self::NotHex { position } => write!(
+                f,
+                "a signing key is 64 hex digits: not a hex digit at position {position}"
+            ),
         }
     }
 }
@@ -174,14 +183,18 @@ pub fn append_signature(
 ) -> Result<usize, crate::wire::EmitError> {
     let needed = frame_len + SIGNATURE_LEN;
     if buf.len() < needed || frame_len < HEADER_LEN_V2 + CHECKSUM_LEN {
-        return Err(crate::wire::EmitError::BufferTooSmall { needed, available: buf.len() });
+        return Err(crate::wire::EmitError::BufferTooSmall {
+            needed,
+            available: buf.len(),
+        });
     }
     let frame = Frame::new_unchecked(&buf[..]);
     if frame.version() != Version::V2 || !frame.is_signed() {
         return Err(crate::wire::EmitError::SignedV1);
     }
     buf[frame_len] = link_id;
-    buf[frame_len + 1..frame_len + 7].copy_from_slice(&timestamp.min(MAX_TIMESTAMP).to_le_bytes()[..6]);
+    buf[frame_len + 1..frame_len + 7]
+        .copy_from_slice(&timestamp.min(MAX_TIMESTAMP).to_le_bytes()[..6]);
     let value = compute(key, &buf[..frame_len + 7]);
     buf[frame_len + 7..needed].copy_from_slice(&value);
     Ok(needed)
@@ -196,7 +209,11 @@ pub fn verify<T: AsRef<[u8]>>(frame: &Frame<T>, key: &SecretKey) -> Result<(), S
         return Err(SignatureError::Unsigned);
     };
     let expected = compute(key, signed);
-    if bool::from(expected.ct_eq(&sig.value)) { Ok(()) } else { Err(SignatureError::BadSignature) }
+    if bool::from(expected.ct_eq(&sig.value)) {
+        Ok(())
+    } else {
+        Err(SignatureError::BadSignature)
+    }
 }
 
 #[cfg(test)]
@@ -205,16 +222,27 @@ mod tests {
 
     #[test]
     fn keys_from_hex() {
-        let k = SecretKey::from_hex("000102030405060708090a0b0c0d0e0f101112131415161718191A1B1C1D1E1F").unwrap();
+        let k =
+            SecretKey::from_hex("000102030405060708090a0b0c0d0e0f101112131415161718191A1B1C1D1E1F")
+                .unwrap();
         assert_eq!(k.as_bytes()[31], 0x1f);
-        assert!(matches!(SecretKey::from_hex("00"), Err(KeyError::Length { digits: 2 })));
-        assert!(matches!(SecretKey::from_hex(&"zz".repeat(32)), Err(KeyError::NotHex { position: 0 })));
+        assert!(matches!(
+            SecretKey::from_hex("00"),
+            Err(KeyError::Length { digits: 2 })
+        ));
+        assert!(matches!(
+            SecretKey::from_hex(&"zz".repeat(32)),
+            Err(KeyError::NotHex { position: 0 })
+        ));
         assert_eq!(std::format!("{k:?}"), "SecretKey(..)");
     }
 
     #[test]
     fn timestamps() {
-        assert_eq!(timestamp_from_unix_micros(EPOCH_UNIX_SECS * 1_000_000 + 25), 2);
+        assert_eq!(
+            timestamp_from_unix_micros(EPOCH_UNIX_SECS * 1_000_000 + 25),
+            2
+        );
         assert_eq!(timestamp_from_unix_micros(0), 0);
         assert_eq!(timestamp_from_unix_micros(u64::MAX), MAX_TIMESTAMP);
     }

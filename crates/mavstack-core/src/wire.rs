@@ -149,9 +149,14 @@ impl core::fmt::Display for Error {
         match self {
             Self::NotAFrame { byte } => write!(f, "byte {byte:#04x} is not a start marker"),
             Self::Truncated { needed, available } => {
-                write!(f, "truncated frame: {needed} bytes needed, {available} available")
+                write!(
+                    f,
+                    "truncated frame: {needed} bytes needed, {available} available"
+                )
             }
-            Self::UnknownIncompatFlags { flags } => write!(f, "unknown incompatibility flags {flags:#04x}"),
+            Self::UnknownIncompatFlags { flags } => {
+                write!(f, "unknown incompatibility flags {flags:#04x}")
+            }
         }
     }
 }
@@ -189,15 +194,23 @@ impl<T: AsRef<[u8]>> Frame<T> {
         let b = self.buffer.as_ref();
         let available = b.len();
         let Some(&magic) = b.first() else {
-            return Err(Error::Truncated { needed: 1, available });
+            return Err(Error::Truncated {
+                needed: 1,
+                available,
+            });
         };
         let version = Version::from_magic(magic).ok_or(Error::NotAFrame { byte: magic })?;
         let header = version.header_len();
         if available < header {
-            return Err(Error::Truncated { needed: header, available });
+            return Err(Error::Truncated {
+                needed: header,
+                available,
+            });
         }
         if version == Version::V2 && b[field::V2_INCOMPAT] & !INCOMPAT_SIGNED != 0 {
-            return Err(Error::UnknownIncompatFlags { flags: b[field::V2_INCOMPAT] });
+            return Err(Error::UnknownIncompatFlags {
+                flags: b[field::V2_INCOMPAT],
+            });
         }
         let needed = self.frame_len();
         if available < needed {
@@ -214,7 +227,11 @@ impl<T: AsRef<[u8]>> Frame<T> {
     /// The protocol version.
     #[must_use]
     pub fn version(&self) -> Version {
-        if self.buffer.as_ref()[field::MAGIC] == STX_V2 { Version::V2 } else { Version::V1 }
+        if self.buffer.as_ref()[field::MAGIC] == STX_V2 {
+            Version::V2
+        } else {
+            Version::V1
+        }
     }
 
     /// The payload length as transmitted (after MAVLink 2 truncation).
@@ -336,7 +353,11 @@ impl<T: AsRef<[u8]>> Frame<T> {
         ts[..6].copy_from_slice(&s[1..7]);
         let mut value = [0u8; 6];
         value.copy_from_slice(&s[7..13]);
-        Some(Signature { link_id: s[0], timestamp: u64::from_le_bytes(ts), value })
+        Some(Signature {
+            link_id: s[0],
+            timestamp: u64::from_le_bytes(ts),
+            value,
+        })
     }
 
     /// The frame's bytes, signature included (the buffer may hold more after it).
@@ -349,7 +370,8 @@ impl<T: AsRef<[u8]>> Frame<T> {
     /// the checksum, then the link id and timestamp.
     #[must_use]
     pub fn signed_bytes(&self) -> Option<&[u8]> {
-        self.is_signed().then(|| &self.buffer.as_ref()[..HEADER_LEN_V2 + self.payload_len() + CHECKSUM_LEN + 7])
+        self.is_signed()
+            .then(|| &self.buffer.as_ref()[..HEADER_LEN_V2 + self.payload_len() + CHECKSUM_LEN + 7])
     }
 }
 
@@ -428,12 +450,21 @@ pub enum EmitError {
 impl core::fmt::Display for EmitError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            Self::IdTooLargeForV1 { id } => write!(f, "message id {id} cannot be sent as MAVLink 1 (ids above 255 are MAVLink 2 only)"),
+            Self::IdTooLargeForV1 { id } => write!(
+                f,
+                "message id {id} cannot be sent as MAVLink 1 (ids above 255 are MAVLink 2 only)"
+            ),
             Self::SignedV1 => f.write_str("MAVLink 1 frames cannot be signed"),
             Self::BufferTooSmall { needed, available } => {
-                write!(f, "output buffer too small: {needed} bytes needed, {available} available")
+                write!(
+                    f,
+                    "output buffer too small: {needed} bytes needed, {available} available"
+                )
             }
-            Self::PayloadTooLong { len, max } => write!(f, "payload of {len} bytes is longer than the message's {max}"),
+            Self::PayloadTooLong { len, max } => write!(
+                f,
+                "payload of {len} bytes is longer than the message's {max}"
+            ),
         }
     }
 }
@@ -451,10 +482,18 @@ impl core::error::Error for EmitError {}
 /// # Errors
 /// [`EmitError`]: an id over 255 or a signature in MAVLink 1, a short buffer, a payload
 /// longer than the message.
-pub fn emit(header: &FrameHeader, info: &MessageInfo, payload: &[u8], out: &mut [u8]) -> Result<usize, EmitError> {
+pub fn emit(
+    header: &FrameHeader,
+    info: &MessageInfo,
+    payload: &[u8],
+    out: &mut [u8],
+) -> Result<usize, EmitError> {
     let max = usize::from(info.max_len);
     if payload.len() > max.max(usize::from(info.min_len)) {
-        return Err(EmitError::PayloadTooLong { len: payload.len(), max });
+        return Err(EmitError::PayloadTooLong {
+            len: payload.len(),
+            max,
+        });
     }
     let (len, header_len) = match header.version {
         Version::V1 => {
@@ -471,7 +510,10 @@ pub fn emit(header: &FrameHeader, info: &MessageInfo, payload: &[u8], out: &mut 
     let sig = if header.signed { SIGNATURE_LEN } else { 0 };
     let needed = header_len + len + CHECKSUM_LEN + sig;
     if out.len() < needed {
-        return Err(EmitError::BufferTooSmall { needed, available: out.len() });
+        return Err(EmitError::BufferTooSmall {
+            needed,
+            available: out.len(),
+        });
     }
     // The length fits a byte: it is at most the message's length, which is at most 255.
     let len_byte = u8::try_from(len).unwrap_or(u8::MAX);
@@ -500,7 +542,8 @@ pub fn emit(header: &FrameHeader, info: &MessageInfo, payload: &[u8], out: &mut 
     let mut crc = Crc16::new();
     crc.update(&out[1..header_len + len]);
     crc.update_byte(info.crc_extra);
-    out[header_len + len..header_len + len + CHECKSUM_LEN].copy_from_slice(&crc.value().to_le_bytes());
+    out[header_len + len..header_len + len + CHECKSUM_LEN]
+        .copy_from_slice(&crc.value().to_le_bytes());
     Ok(header_len + len + CHECKSUM_LEN)
 }
 
@@ -508,7 +551,11 @@ pub fn emit(header: &FrameHeader, info: &MessageInfo, payload: &[u8], out: &mut 
 ///
 /// # Errors
 /// As [`emit`].
-pub fn emit_message<M: crate::Message>(header: &FrameHeader, message: &M, out: &mut [u8]) -> Result<usize, EmitError> {
+pub fn emit_message<M: crate::Message>(
+    header: &FrameHeader,
+    message: &M,
+    out: &mut [u8],
+) -> Result<usize, EmitError> {
     let mut payload = [0u8; MAX_PAYLOAD_LEN];
     let len = message.encode(&mut payload);
     emit(header, &M::INFO, &payload[..len], out)
