@@ -3,7 +3,9 @@
 //! Errors are one line on stderr starting with `error:`; the exit code is 0 on success, 1 on
 //! failure and 2 on bad usage or bad input (shared/DESIGN.md, "Command line").
 
+mod codec_cmd;
 mod dialect_cmd;
+mod json_frames;
 
 use std::process::ExitCode;
 
@@ -26,6 +28,10 @@ enum Command {
     },
     /// Generate Rust code for a dialect XML file (and every file it includes).
     Codegen(dialect_cmd::CodegenArgs),
+    /// Decode a raw MAVLink stream or a tlog into JSON lines, one frame per line.
+    Decode(codec_cmd::DecodeArgs),
+    /// Encode JSON lines (as `decode` prints them) into raw MAVLink frames.
+    Encode(codec_cmd::EncodeArgs),
 }
 
 /// A failure with the exit code it maps to.
@@ -57,6 +63,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Dialect { action } => dialect_cmd::run(action),
         Command::Codegen(args) => dialect_cmd::codegen(&args),
+        Command::Decode(args) => codec_cmd::decode(&args),
+        Command::Encode(args) => codec_cmd::encode(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
