@@ -218,6 +218,8 @@ def text_from_json(s, n, what="value"):
         raise ValueError("%s: %r has characters above U+00FF" % (what, s))
     if len(b) > max(1, n):
         raise ValueError("%s: %d bytes do not fit char[%d]" % (what, len(b), n))
+    if n == 0:  # a scalar `char`: struct wants exactly one byte
+        b = b.ljust(1, b"\x00")
     return b
 
 
@@ -486,7 +488,7 @@ def describe_payload_diff(lay, exp, act, limit=6):
     if e[lay.full_len :] != a[lay.full_len :]:
         out.append("bytes beyond the message's %d-byte payload differ" % lay.full_len)
     if not out:
-        out.append("payload bytes differ only in trailing zeros (truncation): the values are equal")
+        out.append("the payloads differ only in trailing zero bytes: every field value is equal")
     if len(out) > limit:
         out = out[:limit] + ["... and %d more fields" % (len(out) - limit)]
     return out

@@ -73,17 +73,22 @@ fn read_input(file: Option<&Path>) -> Result<Vec<u8>, Failure> {
     let mut data = Vec::new();
     match file {
         Some(path) => {
-            data = std::fs::read(path).map_err(|e| Failure::Input(anyhow!("cannot read {}: {e}", path.display())))?;
+            data = std::fs::read(path)
+                .map_err(|e| Failure::Input(anyhow!("cannot read {}: {e}", path.display())))?;
         }
         None => {
-            io::stdin().lock().read_to_end(&mut data).context("reading stdin")?;
+            io::stdin()
+                .lock()
+                .read_to_end(&mut data)
+                .context("reading stdin")?;
         }
     }
     Ok(data)
 }
 
 fn parse_key(key: Option<&str>) -> Result<Option<SecretKey>, Failure> {
-    key.map(|k| SecretKey::from_hex(k).map_err(|e| Failure::Input(anyhow!("--key: {e}")))).transpose()
+    key.map(|k| SecretKey::from_hex(k).map_err(|e| Failure::Input(anyhow!("--key: {e}"))))
+        .transpose()
 }
 
 /// Decoding counts (the JSON of `--count` and `--stats`).
@@ -101,11 +106,6 @@ impl Counts {
             s.frames, s.bytes, s.bad_crc, s.unknown_id, self.bad_signature, s.skipped_bytes
         )
     }
-}
-
-/// Message lookup by id over a dialect (messages are sorted by id).
-fn message<'d>(dialect: &'d Dialect, id: u32) -> Option<&'d Message> {
-    dialect.message(id)
 }
 
 /// A frame as one JSON line, or `None` for an unknown id without `--keep-unknown`.
@@ -210,7 +210,11 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
     let key = parse_key(args.key.as_deref())?;
     let data = read_input(args.file.as_deref())?;
     let is_tlog = args.tlog
-        || (!args.raw && args.file.as_ref().is_some_and(|f| f.extension().is_some_and(|e| e.eq_ignore_ascii_case("tlog"))));
+        || (!args.raw
+            && args.file.as_ref().is_some_and(|f| {
+                f.extension()
+                    .is_some_and(|e| e.eq_ignore_ascii_case("tlog"))
+            }));
     let lookup = |id: u32| dialect.message(id).map(|m| m.crc_extra);
     let stdout = io::stdout();
     let mut sink = io::BufWriter::with_capacity(1 << 16, stdout.lock());
@@ -223,13 +227,13 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
             Item::Unknown(f) => (f, false),
         };
         if args.count {
-            if let Some(m) = known.then(|| message(&dialect, frame.msg_id())).flatten() {
-                std::hint::black_box(codec::decode(m, frame.payload()));
+            if let Some(m) = known.then(|| dialect.message(frame.msg_id())).flatten() {
+                core::hint::black_box(codec::decode(m, frame.payload()));
             }
-            if let (Some(k), true) = (key.as_ref(), frame.is_signed()) {
-                if signing::verify(&frame, k).is_err() {
-                    counts.bad_signature += 1;
-                }
+            if let Some(k) = key.as_ref().filter(|_| frame.is_signed())
+                && signing::verify(&frame, k).is_err()
+            {
+                counts.bad_signature += 1;
             }
             return;
         }
@@ -237,16 +241,25 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
             return;
         }
         line.clear();
-        frame_line(&mut line, &frame, message(&dialect, frame.msg_id()).filter(|_| known), ts, key.as_ref(), counts);
-        if write_err.is_none() {
-            if let Err(e) = sink.write_all(line.as_bytes()) {
-                write_err = Some(e);
-            }
+        frame_line(
+            &mut line,
+            &frame,
+            dialect.message(frame.msg_id()).filter(|_| known),
+            ts,
+            key.as_ref(),
+            counts,
+        );
+        if write_err.is_none()
+            && let Err(e) = sink.write_all(line.as_bytes())
+        {
+            write_err = Some(e);
         }
     };
     if is_tlog {
         let mut stats = Stats::default();
-        tlog_frames(&data, &lookup, &mut stats, |item, ts| handle(item, Some(ts), &mut counts));
+        tlog_frames(&data, &lookup, &mut stats, |item, ts| {
+            handle(item, Some(ts), &mut counts)
+        });
         counts.parse = stats;
     } else {
         let mut parser = SliceParser::new(&data, lookup);
@@ -256,7 +269,9 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
         counts.parse = *parser.stats();
     }
     if let Some(e) = write_err {
-        return Err(Failure::Other(anyhow::Error::new(e).context("writing output")));
+        return Err(Failure::Other(
+            anyhow::Error::new(e).context("writing output"),
+        ));
     }
     if args.count {
         writeln!(sink, "{}", counts.json()).context("writing output")?;
@@ -275,7 +290,11 @@ fn field_of<'o>(obj: &'o serde_json::Map<String, Json>, key: &str) -> Option<&'o
 fn small(obj: &serde_json::Map<String, Json>, key: &str, max: u64) -> Result<Option<u64>, String> {
     match field_of(obj, key) {
         None => Ok(None),
-        Some(v) => v.as_u64().filter(|&n| n <= max).map(Some).ok_or_else(|| format!("{key}: {v} is not a number from 0 to {max}")),
+        Some(v) => v
+            .as_u64()
+            .filter(|&n| n <= max)
+            .map(Some)
+            .ok_or_else(|| format!("{key}: {v} is not a number from 0 to {max}")),
     }
 }
 
@@ -290,12 +309,17 @@ fn encode_object(
 ) -> Result<usize, String> {
     let message = match (field_of(obj, "msgid"), field_of(obj, "name")) {
         (Some(id), _) => {
-            let id = id.as_u64().and_then(|i| u32::try_from(i).ok()).ok_or_else(|| format!("msgid: {id} is not a message id"))?;
-            dialect.message(id).ok_or_else(|| format!("message id {id} is not in dialect {}", dialect.name))?
+            let id = id
+                .as_u64()
+                .and_then(|i| u32::try_from(i).ok())
+                .ok_or_else(|| format!("msgid: {id} is not a message id"))?;
+            dialect
+                .message(id)
+                .ok_or_else(|| format!("message id {id} is not in dialect {}", dialect.name))?
         }
-        (None, Some(Json::String(name))) => {
-            dialect.message_by_name(name).ok_or_else(|| format!("message {name} is not in dialect {}", dialect.name))?
-        }
+        (None, Some(Json::String(name))) => dialect
+            .message_by_name(name)
+            .ok_or_else(|| format!("message {name} is not in dialect {}", dialect.name))?,
         _ => return Err("no \"msgid\" or \"name\"".to_owned()),
     };
     let version = match small(obj, "version", 2)? {
@@ -314,7 +338,11 @@ fn encode_object(
     let values: Vec<Value> = message
         .fields
         .iter()
-        .map(|f| fields.get(&f.name).map_or_else(|| Ok(Value::zero(&f.ty)), |j| value_from_json(f, j)))
+        .map(|f| {
+            fields
+                .get(&f.name)
+                .map_or_else(|| Ok(Value::zero(&f.ty)), |j| value_from_json(f, j))
+        })
         .collect::<Result<_, _>>()?;
     let mut payload = [0u8; MAX_PAYLOAD_LEN];
     let len = codec::encode(message, &values, &mut payload).map_err(|e| e.to_string())?;
@@ -327,7 +355,8 @@ fn encode_object(
         version,
         seq: this_seq,
         sysid: small(obj, "sysid", 255)?.map_or(args.sysid, |v| u8::try_from(v).unwrap_or(u8::MAX)),
-        compid: small(obj, "compid", 255)?.map_or(args.compid, |v| u8::try_from(v).unwrap_or(u8::MAX)),
+        compid: small(obj, "compid", 255)?
+            .map_or(args.compid, |v| u8::try_from(v).unwrap_or(u8::MAX)),
         signed: key.is_some() && version == Version::V2,
     };
     let info = mavstack_core::MessageInfo {
@@ -348,7 +377,11 @@ fn encode_object(
                 Some(l) => u8::try_from(l).unwrap_or(u8::MAX),
                 None => args.link_id,
             };
-            let timestamp = match sig.map(|s| small(s, "timestamp", signing::MAX_TIMESTAMP)).transpose()?.flatten() {
+            let timestamp = match sig
+                .map(|s| small(s, "timestamp", signing::MAX_TIMESTAMP))
+                .transpose()?
+                .flatten()
+            {
                 Some(t) => t,
                 None => {
                     let now = std::time::SystemTime::now()
@@ -357,7 +390,8 @@ fn encode_object(
                     signing::timestamp_from_unix_micros(now)
                 }
             };
-            signing::append_signature(buf, frame_len, link_id, timestamp, k).map_err(|e| e.to_string())
+            signing::append_signature(buf, frame_len, link_id, timestamp, k)
+                .map_err(|e| e.to_string())
         }
     }
 }
@@ -367,17 +401,21 @@ pub(crate) fn encode(args: &EncodeArgs) -> Result<(), Failure> {
     let key = parse_key(args.key.as_deref())?;
     let input: Box<dyn BufRead> = match &args.file {
         Some(path) => Box::new(io::BufReader::new(
-            std::fs::File::open(path).map_err(|e| Failure::Input(anyhow!("cannot read {}: {e}", path.display())))?,
+            std::fs::File::open(path)
+                .map_err(|e| Failure::Input(anyhow!("cannot read {}: {e}", path.display())))?,
         )),
         None => Box::new(io::stdin().lock()),
     };
     let mut sink: Box<dyn Write> = match &args.output {
-        Some(path) => Box::new(io::BufWriter::new(
-            std::fs::File::create(path).map_err(|e| Failure::Other(anyhow!("cannot create {}: {e}", path.display())))?,
-        )),
+        Some(path) => Box::new(io::BufWriter::new(std::fs::File::create(path).map_err(
+            |e| Failure::Other(anyhow!("cannot create {}: {e}", path.display())),
+        )?)),
         None => Box::new(io::BufWriter::new(io::stdout().lock())),
     };
-    let name = args.file.as_ref().map_or_else(|| "stdin".to_owned(), |p| p.display().to_string());
+    let name = args
+        .file
+        .as_ref()
+        .map_or_else(|| "stdin".to_owned(), |p| p.display().to_string());
     let mut seq = 0u8;
     let mut buf = [0u8; MAX_FRAME_LEN];
     for (n, line) in input.lines().enumerate() {
@@ -386,8 +424,10 @@ pub(crate) fn encode(args: &EncodeArgs) -> Result<(), Failure> {
             continue;
         }
         let at = |e: String| Failure::Input(anyhow!("{name}:{}: {e}", n + 1));
-        let obj: serde_json::Map<String, Json> = serde_json::from_str(&line).map_err(|e| at(format!("not a JSON object: {e}")))?;
-        let len = encode_object(&obj, &dialect, args, key.as_ref(), &mut seq, &mut buf).map_err(at)?;
+        let obj: serde_json::Map<String, Json> =
+            serde_json::from_str(&line).map_err(|e| at(format!("not a JSON object: {e}")))?;
+        let len =
+            encode_object(&obj, &dialect, args, key.as_ref(), &mut seq, &mut buf).map_err(at)?;
         sink.write_all(&buf[..len]).context("writing output")?;
     }
     sink.flush().context("writing output")?;

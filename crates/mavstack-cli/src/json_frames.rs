@@ -88,7 +88,12 @@ fn push_int(out: &mut String, v: impl core::fmt::Display) {
 pub(crate) fn push_fields(out: &mut String, message: &Message, values: &[Value]) {
     out.push_str("\"fields\":{");
     let mut order: Vec<usize> = (0..message.fields.len()).collect();
-    order.sort_by_key(|&i| (message.fields[i].location.line, message.fields[i].location.column));
+    order.sort_by_key(|&i| {
+        (
+            message.fields[i].location.line,
+            message.fields[i].location.column,
+        )
+    });
     for (n, &i) in order.iter().enumerate() {
         if n > 0 {
             out.push(',');
@@ -113,29 +118,51 @@ pub(crate) fn value_from_json(field: &Field, json: &Json) -> Result<Value, Strin
     let p = field.ty.primitive;
     if p == PrimitiveType::Char {
         let Json::String(s) = json else {
-            return Err(format!("field {}: expected a string, got {json}", field.name));
+            return Err(format!(
+                "field {}: expected a string, got {json}",
+                field.name
+            ));
         };
         let mut bytes = Vec::with_capacity(s.len());
         for c in s.chars() {
-            let b = u8::try_from(u32::from(c))
-                .map_err(|_| format!("field {}: character {c:?} is not one byte (U+0000 to U+00FF)", field.name))?;
+            let b = u8::try_from(u32::from(c)).map_err(|_| {
+                format!(
+                    "field {}: character {c:?} is not one byte (U+0000 to U+00FF)",
+                    field.name
+                )
+            })?;
             bytes.push(b);
         }
         let max = usize::from(field.ty.array_len.unwrap_or(1));
         if bytes.len() > max {
-            return Err(format!("field {}: text of {} bytes is longer than {max}", field.name, bytes.len()));
+            return Err(format!(
+                "field {}: text of {} bytes is longer than {max}",
+                field.name,
+                bytes.len()
+            ));
         }
         return Ok(Value::Text(bytes));
     }
     match field.ty.array_len {
         Some(n) => {
             let Json::Array(items) = json else {
-                return Err(format!("field {}: expected an array, got {json}", field.name));
+                return Err(format!(
+                    "field {}: expected an array, got {json}",
+                    field.name
+                ));
             };
             if items.len() > usize::from(n) {
-                return Err(format!("field {}: {} elements, at most {n}", field.name, items.len()));
+                return Err(format!(
+                    "field {}: {} elements, at most {n}",
+                    field.name,
+                    items.len()
+                ));
             }
-            items.iter().map(|j| scalar_from_json(field, p, j)).collect::<Result<Vec<_>, _>>().map(Value::Array)
+            items
+                .iter()
+                .map(|j| scalar_from_json(field, p, j))
+                .collect::<Result<Vec<_>, _>>()
+                .map(Value::Array)
         }
         None => scalar_from_json(field, p, json),
     }
@@ -159,8 +186,14 @@ fn scalar_from_json(field: &Field, p: PrimitiveType, json: &Json) -> Result<Valu
             Value::F64(v)
         });
     }
-    let Json::Number(n) = json else { return Err(bad()) };
-    let v = n.as_i64().map(i128::from).or_else(|| n.as_u64().map(i128::from)).ok_or_else(bad)?;
+    let Json::Number(n) = json else {
+        return Err(bad());
+    };
+    let v = n
+        .as_i64()
+        .map(i128::from)
+        .or_else(|| n.as_u64().map(i128::from))
+        .ok_or_else(bad)?;
     let out = match p {
         PrimitiveType::U8 => u8::try_from(v).ok().map(Value::U8),
         PrimitiveType::I8 => i8::try_from(v).ok().map(Value::I8),

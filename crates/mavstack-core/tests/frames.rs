@@ -68,8 +68,10 @@ fn emitted(h: &FrameHeader, i: &MessageInfo, payload: &[u8]) -> Vec<u8> {
     buf[..len].to_vec()
 }
 
-/// (name, golden bytes, header, message, full payload)
-fn golden() -> Vec<(&'static str, Vec<u8>, FrameHeader, MessageInfo, Vec<u8>)> {
+/// One golden vector: name, bytes, header, message, full payload.
+type Golden = (&'static str, Vec<u8>, FrameHeader, MessageInfo, Vec<u8>);
+
+fn golden() -> Vec<Golden> {
     let mut cmd = vec![0x00, 0x00, 0x96, 0x43];
     cmd.extend([0u8; 24]);
     cmd.extend([0x00, 0x02, 0x01, 0x01, 0x00]);
