@@ -206,7 +206,6 @@ fn tlog_frames<'a>(
 }
 
 pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
-    let dialect = crate::dialect_cmd::load(&args.dialect)?;
     let key = parse_key(args.key.as_deref())?;
     let data = read_input(args.file.as_deref())?;
     let is_tlog = args.tlog
@@ -215,6 +214,23 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
                 f.extension()
                     .is_some_and(|e| e.eq_ignore_ascii_case("tlog"))
             }));
+    // Counting a raw stream of a built-in dialect goes through the generated, typed code.
+    if args.count
+        && !is_tlog
+        && let Some((parse, bad_signature)) =
+            crate::fast_count::count_builtin(&args.dialect, &data, key.as_ref())
+    {
+        let counts = Counts {
+            parse,
+            bad_signature,
+        };
+        println!("{}", counts.json());
+        if args.stats {
+            eprintln!("{}", counts.json());
+        }
+        return Ok(());
+    }
+    let dialect = crate::dialect_cmd::load(&args.dialect)?;
     let lookup = |id: u32| dialect.message(id).map(|m| m.crc_extra);
     let stdout = io::stdout();
     let mut sink = io::BufWriter::with_capacity(1 << 16, stdout.lock());
@@ -359,11 +375,19 @@ fn encode_object(
             .map_or(args.compid, |v| u8::try_from(v).unwrap_or(u8::MAX)),
         signed: key.is_some() && version == Version::V2,
     };
+    // MAVLink 1 carries the base fields only (as the C library sends them). An object whose
+    // extension fields are not all zero cannot be said that way: it goes out with the whole
+    // payload, as pymavlink sends it, so that decode(encode(x)) == x still holds.
+    let v1_len = if payload[message.min_len..len].iter().any(|&b| b != 0) {
+        message.max_len
+    } else {
+        message.min_len
+    };
     let info = mavstack_core::MessageInfo {
         id: message.id,
         name: "",
         crc_extra: message.crc_extra,
-        min_len: u8::try_from(message.min_len).unwrap_or(u8::MAX),
+        min_len: u8::try_from(v1_len).unwrap_or(u8::MAX),
         max_len: u8::try_from(message.max_len).unwrap_or(u8::MAX),
         target_system_offset: None,
         target_component_offset: None,

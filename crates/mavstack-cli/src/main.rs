@@ -5,6 +5,7 @@
 
 mod codec_cmd;
 mod dialect_cmd;
+mod fast_count;
 mod json_frames;
 
 use std::process::ExitCode;

@@ -45,3 +45,78 @@ pub mod wire;
 
 pub use crc::Crc16;
 pub use message::{MAX_PAYLOAD_LEN, Message, MessageInfo, MessageSet, UnknownMessage};
+
+/// Fuzzing entry point for the parsers: runs `data` through the slice parser and, split at
+/// every byte boundary the data itself chooses, through the streaming deframer, and checks
+/// that both find the same frames. Never panics unless they disagree (a bug).
+#[doc(hidden)]
+pub fn fuzz_deframer(data: &[u8]) {
+    // A small fixed dialect: HEARTBEAT, COMMAND_LONG and one id above 255.
+    let lookup = |id: u32| match id {
+        0 => Some(50u8),
+        76 => Some(152),
+        300 => Some(217),
+        _ => None,
+    };
+    let mut from_slice = [(0usize, 0u32); 64];
+    let mut n_slice = 0;
+    for item in parse::SliceParser::new(data, lookup).take(64) {
+        let (parse::Item::Frame(f) | parse::Item::Unknown(f)) = item;
+        from_slice[n_slice] = (f.frame_len(), f.msg_id());
+        n_slice += 1;
+    }
+    let chunk = usize::from(data.first().copied().unwrap_or(1)).max(1);
+    let mut deframer = parse::Deframer::new();
+    let mut n_stream = 0;
+    let mut record = |item: parse::Item<'_>| {
+        let (parse::Item::Frame(f) | parse::Item::Unknown(f)) = item;
+        if n_stream < n_slice {
+            assert_eq!(
+                from_slice[n_stream],
+                (f.frame_len(), f.msg_id()),
+                "deframer and slice parser disagree"
+            );
+        }
+        n_stream += 1;
+    };
+    for piece in data.chunks(chunk) {
+        let mut rest = piece;
+        while !rest.is_empty() {
+            let taken = deframer.push(rest);
+            rest = &rest[taken..];
+            while let Some(item) = deframer.next_item(&lookup) {
+                record(item);
+            }
+        }
+    }
+    while let Some(item) = deframer.finish(&lookup) {
+        record(item);
+    }
+    assert!(
+        n_stream >= n_slice.min(64),
+        "deframer found fewer frames than the slice parser"
+    );
+}
+
+/// Fuzzing entry point for frame views: every accessor of a checked frame, and signature
+/// verification, on arbitrary bytes. Never panics.
+#[doc(hidden)]
+pub fn fuzz_frame(data: &[u8]) {
+    if let Ok(frame) = wire::Frame::new_checked(data) {
+        let _ = (
+            frame.version(),
+            frame.seq(),
+            frame.sysid(),
+            frame.compid(),
+            frame.msg_id(),
+        );
+        let _ = (
+            frame.payload(),
+            frame.checksum(),
+            frame.compute_checksum(0),
+            frame.signature(),
+        );
+        let _ = (frame.as_bytes(), frame.signed_bytes(), frame.compat_flags());
+        let _ = signing::verify(&frame, &signing::SecretKey::new([0; 32]));
+    }
+}

@@ -146,7 +146,7 @@ fn scan(
     stats: &mut Stats,
 ) -> Step {
     loop {
-        let Some(offset) = buf[pos..].iter().position(|&b| is_magic(b)) else {
+        let Some(offset) = memchr::memchr2(STX_V2, STX_V1, &buf[pos..]) else {
             stats.skipped_bytes += (buf.len() - pos) as u64;
             return Step::NeedMore { keep: buf.len() };
         };
