@@ -43,6 +43,10 @@ pub(crate) struct DecodeArgs {
     /// Read the input as a raw stream even if its name ends in `.tlog`.
     #[arg(long)]
     raw: bool,
+    /// With `--count`: also print `frames=N bytes=B seconds=S` for the parse loop alone to
+    /// stderr, the line the peer benchmarks of shared/peers print (file reading excluded).
+    #[arg(long, requires = "count")]
+    time: bool,
 }
 
 #[derive(Debug, Args)]
@@ -215,11 +219,19 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
                     .is_some_and(|e| e.eq_ignore_ascii_case("tlog"))
             }));
     // Counting a raw stream of a built-in dialect goes through the generated, typed code.
+    let started = std::time::Instant::now();
     if args.count
         && !is_tlog
         && let Some((parse, bad_signature)) =
             crate::fast_count::count_builtin(&args.dialect, &data, key.as_ref())
     {
+        let seconds = started.elapsed().as_secs_f64();
+        if args.time {
+            eprintln!(
+                "frames={} bytes={} seconds={seconds:.6}",
+                parse.frames, parse.bytes
+            );
+        }
         let counts = Counts {
             parse,
             bad_signature,

@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# Side-by-side parse throughput on one corpus, in one run: mavstack, the MAVLink C library
+# (mavlink_parse_char + generated decode, gcc -O2) and rust-mavlink 0.21 (typed decode),
+# all on pymavlink's 50 MB mixed corpus (ardupilotmega; v1, v2, signed, noise).
+# Needs ../shared/peers (set up here: pymavlink, C library, rust-mavlink bench; minutes the
+# first time). Prints each peer's line and the ratios. Never part of the test suite.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+peers="$root/../shared/peers"
+[ -d "$peers" ] || { echo "bench-peers: $peers not found" >&2; exit 1; }
+corpus="${CORPUS:-/tmp/mavstack-bench/mixed50}"
+runs="${RUNS:-5}"
+"$peers/setup.sh" >/dev/null
+# shellcheck disable=SC1091
+source "${PEERS_BUILD:-/tmp/peers-build}/env.sh"
+mkdir -p "$(dirname "$corpus")"
+if [ ! -f "$corpus.bin" ]; then
+    "$PEERS_PY" "$peers/gen_corpus.py" --frames 100000000 --max-bytes 52428800 --seed 1 --no-json --out "$corpus" >/dev/null
+fi
+(cd "$root" && cargo build --release --locked -q -p mavstack-cli)
+ours="$root/target/release/mavstack"
+
+best() { # best (lowest) seconds of $runs runs of a command printing "... seconds=S" on stdout or stderr
+    local s b=""
+    for _ in $(seq "$runs"); do
+        s=$("$@" 2>&1 >/dev/null | grep -o 'seconds=[0-9.]*' | tail -1 | cut -d= -f2)
+        [ -z "$s" ] && s=$("$@" 2>/dev/null | grep -o 'seconds=[0-9.]*' | tail -1 | cut -d= -f2)
+        if [ -z "$b" ] || awk "BEGIN{exit !($s < $b)}"; then b=$s; fi
+    done
+    echo "$b"
+}
+frames=$("$ours" decode --count --dialect ardupilotmega "$corpus.bin" | sed 's/.*"frames":\([0-9]*\).*/\1/')
+t_ours=$(best "$ours" decode --count --time --dialect ardupilotmega "$corpus.bin")
+t_c=$(best "$PEERS_C_BENCH" "$corpus.bin" --decode)
+t_rust=$(best "$PEERS_RUST_BENCH" "$corpus.bin")
+key=000102030405060708090a0b0c0d0e0f101112131415161718191a1b1c1d1e1f
+t_ours_key=$(best "$ours" decode --count --time --key "$key" --dialect ardupilotmega "$corpus.bin")
+t_c_key=$(best "$PEERS_C_BENCH" "$corpus.bin" --decode --key "$key" --accept-unsigned)
+awk -v f="$frames" -v o="$t_ours" -v c="$t_c" -v r="$t_rust" -v ok="$t_ours_key" -v ck="$t_c_key" 'BEGIN {
+    printf "corpus: %d frames (best of '"$runs"' runs, parse loop only)\n", f
+    printf "%-44s %8.4f s %7.2f M frames/s\n", "mavstack (parse+validate+typed decode)", o, f/o/1e6
+    printf "%-44s %8.4f s %7.2f M frames/s\n", "C library (mavlink_parse_char + decode)", c, f/c/1e6
+    printf "%-44s %8.4f s %7.2f M frames/s\n", "rust-mavlink 0.21 (read_any_message)", r, f/r/1e6
+    printf "%-44s %8.4f s\n", "mavstack with --key (verify signed frames)", ok
+    printf "%-44s %8.4f s\n", "C library with --key", ck
+    printf "ratios: mavstack/C %.2fx, mavstack/rust-mavlink %.2fx, with signing mavstack/C %.2fx\n", c/o, r/o, ck/ok
+}'
