@@ -9,7 +9,18 @@ use mavstack_dialects as d;
 /// Parses, validates and decodes every frame of `data` as dialect `M`; returns the parser's
 /// counts and the number of frames whose signature does not match `key`.
 pub(crate) fn count<M: MessageSet>(data: &[u8], key: Option<&SecretKey>) -> (Stats, u64) {
-    let lookup = |id: u32| M::info(id).map(|i| i.crc_extra);
+    // CRC_EXTRA of ids below 65536 from a dense table (0: unknown, else 0x100 | crc), the
+    // rest through the dialect's lookup.
+    let mut dense = vec![0u16; 1 << 16];
+    for info in M::all() {
+        if let Some(slot) = usize::try_from(info.id).ok().and_then(|i| dense.get_mut(i)) {
+            *slot = 0x100 | u16::from(info.crc_extra);
+        }
+    }
+    let lookup = |id: u32| match usize::try_from(id).ok().and_then(|i| dense.get(i)) {
+        Some(&v) => (v != 0).then_some(v.to_le_bytes()[0]),
+        None => M::info(id).map(|i| i.crc_extra),
+    };
     let mut parser = SliceParser::new(data, lookup);
     let mut bad_signature = 0;
     for item in parser.by_ref() {

@@ -75,15 +75,15 @@ fn decode_expr(f: &Field, repr: &Repr<'_>) -> TokenStream {
     match (repr, f.ty.array_len) {
         (_, Some(n)) if p.size() == 1 && matches!(p, PrimitiveType::U8 | PrimitiveType::Char) => {
             let n = usize_lit(usize::from(n));
-            quote!(get::<#n>(&buf, #off))
+            quote!(get::<#n>(buf, #off))
         }
         (_, Some(_)) => {
             let at = element_offset(f.offset, p.size());
-            quote!(::core::array::from_fn(|i| #elem::from_le_bytes(get(&buf, #at))))
+            quote!(::core::array::from_fn(|i| #elem::from_le_bytes(get(buf, #at))))
         }
         (Repr::Enum(plan), None) => {
             let path = enum_path(plan);
-            let raw = quote!(#elem::from_le_bytes(get(&buf, #off)));
+            let raw = quote!(#elem::from_le_bytes(get(buf, #off)));
             if plan.repr.rust_name() == p.rust_name() {
                 quote!(#path(#raw))
             } else {
@@ -91,7 +91,7 @@ fn decode_expr(f: &Field, repr: &Repr<'_>) -> TokenStream {
                 quote!(#path(#raw as #target))
             }
         }
-        (Repr::Plain, None) => quote!(#elem::from_le_bytes(get(&buf, #off))),
+        (Repr::Plain, None) => quote!(#elem::from_le_bytes(get(buf, #off))),
     }
 }
 
@@ -251,7 +251,15 @@ pub(crate) fn emit(m: &Message, unit: &Unit, plan: &Plan, opts: &Options) -> Tok
 
             #[inline]
             fn decode(payload: &[u8]) -> Self {
-                let buf: [u8; #max] = #core::payload::zero_extended(payload);
+                // A full payload is read in place; a truncated one from a zero-extended copy.
+                let extended: [u8; #max];
+                let buf: &[u8; #max] = match payload.first_chunk::<#max>() {
+                    Some(full) => full,
+                    None => {
+                        extended = #core::payload::zero_extended(payload);
+                        &extended
+                    }
+                };
                 Self { #(#decodes)* }
             }
 

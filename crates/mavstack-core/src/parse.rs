@@ -79,6 +79,15 @@ fn is_magic(b: u8) -> bool {
     b == STX_V2 || b == STX_V1
 }
 
+/// Whether the checksum after `end` (header + payload) is right for `crc_extra`.
+#[inline(always)]
+fn crc_ok(frame: &[u8], end: usize, crc_extra: u8) -> bool {
+    let mut crc = crate::Crc16::new();
+    crc.update(&frame[1..end]);
+    crc.update_byte(crc_extra);
+    crc.value().to_le_bytes() == [frame[end], frame[end + 1]]
+}
+
 /// Whether a frame of a known message with a good checksum starts anywhere inside
 /// `candidate` (after its first byte); `rest` is everything from the candidate's start.
 /// `None`: one might, but its bytes have not all arrived yet.
@@ -146,7 +155,13 @@ fn scan(
     stats: &mut Stats,
 ) -> Step {
     loop {
-        let Some(offset) = memchr::memchr2(STX_V2, STX_V1, &buf[pos..]) else {
+        // Frames usually follow each other directly: look at the next byte before searching.
+        let next = if buf.get(pos).is_some_and(|&b| is_magic(b)) {
+            Some(0)
+        } else {
+            memchr::memchr2(STX_V2, STX_V1, &buf[pos..])
+        };
+        let Some(offset) = next else {
             stats.skipped_bytes += (buf.len() - pos) as u64;
             return Step::NeedMore { keep: buf.len() };
         };
@@ -186,7 +201,7 @@ fn scan(
         }
         let frame = Frame::new_unchecked(&rest[..len]);
         match lookup.crc_extra(frame.msg_id()) {
-            Some(extra) if frame.check_crc(extra) => {
+            Some(extra) if crc_ok(rest, header + usize::from(rest[1]), extra) => {
                 stats.frames += 1;
                 return Step::Found {
                     start,

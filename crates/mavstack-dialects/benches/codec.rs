@@ -67,7 +67,7 @@ fn stream(bytes: usize, key: &SecretKey) -> (Vec<u8>, usize) {
             len = append_signature(&mut buf, len, 0, frames as u64 + 1, key).expect("signs");
         }
         out.extend_from_slice(&buf[..len]);
-        if roll % 50 == 0 {
+        if roll.is_multiple_of(50) {
             out.extend_from_slice(&[0x11, 0x22, 0x33]);
         }
         frames += 1;
@@ -191,7 +191,7 @@ fn benches(c: &mut Criterion) {
 
 criterion_group! {
     name = codec;
-    config = Criterion::default().sample_size(20).warm_up_time(std::time::Duration::from_secs(1)).measurement_time(std::time::Duration::from_secs(3));
+    config = Criterion::default().sample_size(20).warm_up_time(core::time::Duration::from_secs(1)).measurement_time(core::time::Duration::from_secs(3));
     targets = benches
 }
 criterion_main!(codec);
