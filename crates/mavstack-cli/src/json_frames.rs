@@ -32,24 +32,15 @@ pub(crate) fn text_of(bytes: &[u8]) -> String {
     bytes.iter().map(|&b| char::from(b)).collect()
 }
 
-fn push_f32(out: &mut String, v: f32) {
-    if v.is_nan() {
-        out.push_str("\"NaN\"");
-    } else if v.is_infinite() {
-        out.push_str(if v > 0.0 { "\"inf\"" } else { "\"-inf\"" });
-    } else {
-        // `Debug` is the shortest decimal that reads back to the same f32.
-        let _ = write!(out, "{v:?}");
-    }
-}
-
-fn push_f64(out: &mut String, v: f64) {
-    if v.is_nan() {
-        out.push_str("\"NaN\"");
-    } else if v.is_infinite() {
-        out.push_str(if v > 0.0 { "\"inf\"" } else { "\"-inf\"" });
-    } else {
-        let _ = write!(out, "{v:?}");
+/// A float as the shortest decimal that reads back to the same value of its type (`Debug`
+/// prints exactly that), with NaN and the infinities as the strings of the contract.
+fn push_float(out: &mut String, v: impl core::fmt::Debug, nan: bool, infinite: Option<bool>) {
+    match (nan, infinite) {
+        (true, _) => out.push_str("\"NaN\""),
+        (false, Some(positive)) => out.push_str(if positive { "\"inf\"" } else { "\"-inf\"" }),
+        (false, None) => {
+            let _ = write!(out, "{v:?}");
+        }
     }
 }
 
@@ -64,8 +55,8 @@ pub(crate) fn push_value(out: &mut String, v: &Value) {
         Value::I32(x) => push_int(out, *x),
         Value::U64(x) => push_int(out, *x),
         Value::I64(x) => push_int(out, *x),
-        Value::F32(x) => push_f32(out, *x),
-        Value::F64(x) => push_f64(out, *x),
+        Value::F32(x) => push_float(out, x, x.is_nan(), x.is_infinite().then_some(*x > 0.0)),
+        Value::F64(x) => push_float(out, x, x.is_nan(), x.is_infinite().then_some(*x > 0.0)),
         Value::Text(bytes) => push_str(out, &text_of(bytes)),
         Value::Array(items) => {
             out.push('[');

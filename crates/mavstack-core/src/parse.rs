@@ -371,8 +371,18 @@ impl Deframer {
 
     /// The next frame in the bytes pushed so far, or `None` if more bytes are needed.
     pub fn next_item(&mut self, lookup: &impl CrcExtra) -> Option<Item<'_>> {
+        self.step(lookup, false)
+    }
+
+    /// Ends the stream: a frame still incomplete is counted as skipped bytes, and any frame
+    /// found behind it is returned by further calls until `None`.
+    pub fn finish(&mut self, lookup: &impl CrcExtra) -> Option<Item<'_>> {
+        self.step(lookup, true)
+    }
+
+    fn step(&mut self, lookup: &impl CrcExtra, at_end: bool) -> Option<Item<'_>> {
         let window = &self.buf[self.start..self.end];
-        match scan(window, 0, false, lookup, &mut self.stats) {
+        match scan(window, 0, at_end, lookup, &mut self.stats) {
             Step::Found { start, len, known } => {
                 let from = self.start + start;
                 self.start = from + len;
@@ -384,34 +394,12 @@ impl Deframer {
                 })
             }
             Step::NeedMore { keep } => {
-                self.start += keep;
+                // At the end nothing is kept: what could not be a frame was counted as skipped.
+                self.start = if at_end { self.end } else { self.start + keep };
                 if self.start == self.end {
                     self.start = 0;
                     self.end = 0;
                 }
-                None
-            }
-        }
-    }
-
-    /// Ends the stream: a frame still incomplete is counted as skipped bytes, and any frame
-    /// found behind it is returned by further calls until `None`.
-    pub fn finish(&mut self, lookup: &impl CrcExtra) -> Option<Item<'_>> {
-        let window = &self.buf[self.start..self.end];
-        match scan(window, 0, true, lookup, &mut self.stats) {
-            Step::Found { start, len, known } => {
-                let from = self.start + start;
-                self.start = from + len;
-                let frame = Frame::new_unchecked(&self.buf[from..from + len]);
-                Some(if known {
-                    Item::Frame(frame)
-                } else {
-                    Item::Unknown(frame)
-                })
-            }
-            Step::NeedMore { .. } => {
-                self.start = 0;
-                self.end = 0;
                 None
             }
         }
