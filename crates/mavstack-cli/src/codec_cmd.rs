@@ -291,9 +291,12 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
         counts.parse = stats;
     } else {
         let mut parser = SliceParser::new(&data, lookup);
-        for item in parser.by_ref() {
+        let mut progress = Progress::new(data.len());
+        while let Some(item) = parser.next() {
             handle(item, None, &mut counts);
+            progress.update(parser.position());
         }
+        progress.finish();
         counts.parse = *parser.stats();
     }
     if let Some(e) = write_err {
@@ -309,6 +312,49 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
         eprintln!("{}", counts.json());
     }
     Ok(())
+}
+
+/// A one-line progress report on stderr for inputs of 16 MB or more, only when stderr is a
+/// terminal (never when piped or in tests).
+struct Progress {
+    total: usize,
+    shown: Option<std::time::Instant>,
+    started: std::time::Instant,
+}
+
+impl Progress {
+    fn new(total: usize) -> Self {
+        use std::io::IsTerminal as _;
+        let on = total >= 16 << 20 && io::stderr().is_terminal();
+        let now = std::time::Instant::now();
+        Self {
+            total,
+            shown: on.then_some(now),
+            started: now,
+        }
+    }
+
+    fn update(&mut self, done: usize) {
+        let Some(last) = self.shown else { return };
+        if last.elapsed() < core::time::Duration::from_millis(200) {
+            return;
+        }
+        self.shown = Some(std::time::Instant::now());
+        let mb = |n: usize| n as f64 / 1e6;
+        let rate = mb(done) / self.started.elapsed().as_secs_f64().max(1e-9);
+        eprint!(
+            "\rdecoding: {:>3}% ({:.1} of {:.1} MB, {rate:.0} MB/s)",
+            done * 100 / self.total.max(1),
+            mb(done),
+            mb(self.total)
+        );
+    }
+
+    fn finish(&self) {
+        if self.shown.is_some() {
+            eprint!("\r\x1b[2K");
+        }
+    }
 }
 
 fn field_of<'o>(obj: &'o serde_json::Map<String, Json>, key: &str) -> Option<&'o Json> {
