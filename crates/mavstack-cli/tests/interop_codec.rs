@@ -209,13 +209,13 @@ impl Corpus {
         args
     }
 
-    /// `mavstack decode` of the corpus (from the file or from stdin), compared with `expected`.
-    fn check_decode(&self, with_key: bool, via_stdin: bool, expected: &Path) {
-        let mut args = self.common_args("decode", with_key);
+    /// Runs `mavstack ARGS` on `input`, given as a file argument or on stdin; it must succeed.
+    /// Returns its output and the command as shown in messages.
+    fn run(&self, mut args: Vec<OsString>, input: &Path, via_stdin: bool) -> (Output, String) {
         let stdin = if via_stdin {
-            Some(std::fs::read(self.bin()).expect("corpus"))
+            Some(std::fs::read(input).expect("input file"))
         } else {
-            args.push(self.bin().into());
+            args.push(input.into());
             None
         };
         let out = mavstack(&os(&args), stdin);
@@ -226,6 +226,12 @@ impl Corpus {
             out.status,
             text(&out.stderr)
         );
+        (out, shown)
+    }
+
+    /// `mavstack decode` of the corpus (from the file or from stdin), compared with `expected`.
+    fn check_decode(&self, with_key: bool, via_stdin: bool, expected: &Path) {
+        let (out, shown) = self.run(self.common_args("decode", with_key), &self.bin(), via_stdin);
         let actual = self.file(&format!(
             "decoded{}{}.jsonl",
             if with_key { "-key" } else { "" },
@@ -261,20 +267,10 @@ impl Corpus {
         self_check.extend(check_args.iter().cloned());
         run_script("check_encode.py", &os(&self_check));
 
-        let mut args = self.common_args("encode", with_key);
-        let stdin = if via_stdin {
-            Some(std::fs::read(self.expected()).expect("expected JSON"))
-        } else {
-            args.push(self.expected().into());
-            None
-        };
-        let out = mavstack(&os(&args), stdin);
-        let shown = show(&args, via_stdin);
-        assert!(
-            out.status.success(),
-            "{shown} failed ({}): {}",
-            out.status,
-            text(&out.stderr)
+        let (out, shown) = self.run(
+            self.common_args("encode", with_key),
+            &self.expected(),
+            via_stdin,
         );
         let actual = self.file(if via_stdin {
             "encoded-stdin.bin"

@@ -58,6 +58,18 @@ pub enum Item<'a> {
     Unknown(Frame<&'a [u8]>),
 }
 
+impl<'a> Item<'a> {
+    /// The item for the frame in `bytes`: checked and known, or of an unknown id.
+    fn new(bytes: &'a [u8], known: bool) -> Self {
+        let frame = Frame::new_unchecked(bytes);
+        if known {
+            Self::Frame(frame)
+        } else {
+            Self::Unknown(frame)
+        }
+    }
+}
+
 /// Counts of everything the parser saw.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct Stats {
@@ -282,12 +294,7 @@ impl<'a, L: CrcExtra> Iterator for SliceParser<'a, L> {
         match scan(self.buf, self.pos, true, &self.lookup, &mut self.stats) {
             Step::Found { start, len, known } => {
                 self.pos = start + len;
-                let frame = Frame::new_unchecked(&self.buf[start..start + len]);
-                Some(if known {
-                    Item::Frame(frame)
-                } else {
-                    Item::Unknown(frame)
-                })
+                Some(Item::new(&self.buf[start..start + len], known))
             }
             Step::NeedMore { .. } => {
                 self.pos = self.buf.len();
@@ -386,12 +393,7 @@ impl Deframer {
             Step::Found { start, len, known } => {
                 let from = self.start + start;
                 self.start = from + len;
-                let frame = Frame::new_unchecked(&self.buf[from..from + len]);
-                Some(if known {
-                    Item::Frame(frame)
-                } else {
-                    Item::Unknown(frame)
-                })
+                Some(Item::new(&self.buf[from..from + len], known))
             }
             Step::NeedMore { keep } => {
                 // At the end nothing is kept: what could not be a frame was counted as skipped.
