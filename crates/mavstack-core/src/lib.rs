@@ -41,6 +41,7 @@ pub mod payload;
 pub mod serde_arrays;
 pub mod signing;
 pub mod text;
+pub mod time;
 pub mod wire;
 
 pub use crc::Crc16;
