@@ -17,8 +17,10 @@ mkdir -p "$(dirname "$corpus")"
 if [ ! -f "$corpus.bin" ]; then
     "$PEERS_PY" "$peers/gen_corpus.py" --frames 100000000 --max-bytes 52428800 --seed 1 --no-json --out "$corpus" >/dev/null
 fi
-(cd "$root" && cargo build --release --locked -q -p mavstack-cli)
+(cd "$root" && cargo build --release --locked -q -p mavstack-cli &&
+    cargo build --release --locked -q -p mavstack-dialects --example encode_bench)
 ours="$root/target/release/mavstack"
+ours_encode="$root/target/release/examples/encode_bench"
 
 best() { # best (lowest) seconds of $runs runs of a command printing "... seconds=S" on stdout or stderr
     local s b=""
@@ -36,6 +38,22 @@ t_rust=$(best "$PEERS_RUST_BENCH" "$corpus.bin")
 key=000102030405060708090a0b0c0d0e0f101112131415161718191a1b1c1d1e1f
 t_ours_key=$(best "$ours" decode --count --time --key "$key" --dialect ardupilotmega "$corpus.bin")
 t_c_key=$(best "$PEERS_C_BENCH" "$corpus.bin" --decode --key "$key" --accept-unsigned)
+n_enc="${ENCODE_FRAMES:-10000000}"
+n_sig=$((n_enc / 4))
+e_ours=$(best "$ours_encode" "$n_enc")
+e_c=$(best "$PEERS_C_BENCH" --encode "$n_enc")
+e_rust=$(best "$PEERS_RUST_BENCH" --encode "$n_enc")
+es_ours=$(best "$ours_encode" "$n_sig" --sign)
+es_c=$(best "$PEERS_C_BENCH" --encode "$n_sig" --sign)
+awk -v n="$n_enc" -v ns="$n_sig" -v o="$e_ours" -v c="$e_c" -v r="$e_rust" -v so="$es_ours" -v sc="$es_c" 'BEGIN {
+    printf "encode: %d frames (HEARTBEAT, ATTITUDE, GLOBAL_POSITION_INT in turn; MAVLink 2)\n", n
+    printf "%-44s %8.4f s %7.2f M frames/s\n", "mavstack (emit_message)", o, n/o/1e6
+    printf "%-44s %8.4f s %7.2f M frames/s\n", "C library (pack_chan + msg_to_send_buffer)", c, n/c/1e6
+    printf "%-44s %8.4f s %7.2f M frames/s\n", "rust-mavlink 0.21 (write_v2_msg)", r, n/r/1e6
+    printf "%-44s %8.4f s (%d frames)\n", "mavstack signed", so, ns
+    printf "%-44s %8.4f s (%d frames)\n", "C library signed", sc, ns
+    printf "encode ratios: mavstack/C %.2fx, mavstack/rust-mavlink %.2fx, signed mavstack/C %.2fx\n", c/o, r/o, sc/so
+}'
 awk -v f="$frames" -v o="$t_ours" -v c="$t_c" -v r="$t_rust" -v ok="$t_ours_key" -v ck="$t_c_key" 'BEGIN {
     printf "corpus: %d frames (best of '"$runs"' runs, parse loop only)\n", f
     printf "%-44s %8.4f s %7.2f M frames/s\n", "mavstack (parse+validate+typed decode)", o, f/o/1e6

@@ -94,8 +94,7 @@ fn is_magic(b: u8) -> bool {
 /// Whether the checksum after `end` (header + payload) is right for `crc_extra`.
 #[inline(always)]
 fn crc_ok(frame: &[u8], end: usize, crc_extra: u8) -> bool {
-    let mut crc = crate::Crc16::new();
-    crc.update(&frame[1..end]);
+    let mut crc = crate::Crc16::of_prefix(&frame[1..], end - 1);
     crc.update_byte(crc_extra);
     crc.value().to_le_bytes() == [frame[end], frame[end + 1]]
 }
