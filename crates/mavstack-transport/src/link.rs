@@ -1,0 +1,1167 @@
+//! The I/O side: one [`Link`] per connection, whatever its kind.
+//!
+//! A UDP link is read by the driver itself: it is the hot path (one socket, every peer on it),
+//! and a datagram arrives whole, so there is nothing to wait for but the socket. Every other
+//! kind runs small helper tasks (or, for reading a file, a thread) that do the blocking parts
+//! (accepting, connecting and reconnecting, reading a stream, writing to a slow peer) and
+//! talk to the driver over one channel of [`LinkMsg`]s; each stream peer gets a writer task
+//! with a bounded queue, so a slow peer never stalls the driver: what does not fit is dropped
+//! and counted.
+
+use core::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
+use core::sync::atomic::{AtomicU32, Ordering};
+use core::time::Duration;
+use std::collections::HashMap;
+use std::io;
+use std::sync::{Arc, Mutex, PoisonError};
+
+use mavstack_core::time::Instant;
+use mavstack_core::wire::Frame;
+use tokio::io::{AsyncRead, AsyncReadExt as _, AsyncWrite, AsyncWriteExt as _};
+use tokio::net::{TcpListener, TcpStream, UdpSocket};
+use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+
+use crate::clock;
+use crate::conn::{ConnSpec, FileFormat};
+use crate::connection::{FileMode, Options};
+use crate::error::{LinkError, OpenError, Reason};
+use crate::protocol::{Dest, Framing, PeerAddr, PeerId, PeerInfo, Protocol};
+use crate::tlog;
+
+/// The largest UDP datagram, and so the driver's receive buffer.
+pub(crate) const MAX_DATAGRAM: usize = 65_536;
+/// Bytes a stream reader asks for at once.
+const READ_CHUNK: usize = 16 * 1024;
+/// Messages from helper tasks waiting for the driver.
+const LINK_QUEUE: usize = 1024;
+/// Inputs handled per wake-up before the driver looks at its other work.
+const BATCH: usize = 256;
+/// How long closing waits for writer tasks to drain their queues.
+const DRAIN_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// Counters of the link layer.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub struct LinkStats {
+    /// Bytes received.
+    pub rx_bytes: u64,
+    /// Datagrams or stream reads received.
+    pub rx_chunks: u64,
+    /// Receive errors (the link went on).
+    pub rx_errors: u64,
+    /// Bytes handed to the operating system (or to a peer's writer queue).
+    pub tx_bytes: u64,
+    /// Datagrams or writes sent.
+    pub tx_chunks: u64,
+    /// Transmits dropped: no peer to send to (nobody connected yet, a TCP client
+    /// reconnecting), an unknown or departed peer, or a full writer queue.
+    pub tx_dropped: u64,
+    /// Send errors (the link went on).
+    pub tx_errors: u64,
+    /// Peers that appeared (for a TCP client, each successful (re)connection).
+    pub peers_added: u64,
+    /// Peers that went away (disconnected, expired, or a file's end).
+    pub peers_removed: u64,
+}
+
+/// Hands out peer ids, unique within one connection.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct PeerIds(Arc<AtomicU32>);
+
+impl PeerIds {
+    fn next(&self) -> PeerId {
+        PeerId::new(self.0.fetch_add(1, Ordering::Relaxed) + 1)
+    }
+}
+
+/// The live peers, readable by the user's handle.
+#[derive(Debug, Default)]
+pub(crate) struct PeerTable(Mutex<Vec<PeerInfo>>);
+
+impl PeerTable {
+    fn add(&self, info: PeerInfo) {
+        self.0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(info);
+    }
+
+    fn remove(&self, id: PeerId) {
+        self.0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .retain(|p| p.id != id);
+    }
+
+    pub(crate) fn snapshot(&self) -> Vec<PeerInfo> {
+        self.0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+}
+
+/// What helper tasks tell the driver.
+#[derive(Debug)]
+pub(crate) enum LinkMsg {
+    /// Bytes from a peer, received at `time`.
+    Data {
+        peer: PeerId,
+        time: Instant,
+        bytes: Vec<u8>,
+    },
+    /// Several inputs from one peer, each with its own time (tlog records): part `i` is
+    /// `bytes[parts[i-1].1..parts[i].1]`.
+    Records {
+        peer: PeerId,
+        bytes: Vec<u8>,
+        parts: Vec<(Instant, usize)>,
+    },
+    /// A peer appeared; `writer` takes what is sent to it.
+    PeerAdded {
+        info: PeerInfo,
+        writer: Option<mpsc::Sender<Vec<u8>>>,
+    },
+    /// A peer went away.
+    PeerRemoved(PeerId),
+    /// The link ended (a file was read to its end), or failed.
+    Closed(Result<(), LinkError>),
+}
+
+/// One connection's link.
+#[derive(Debug)]
+pub(crate) struct Link {
+    kind: Kind,
+    stats: LinkStats,
+    peers: Arc<PeerTable>,
+    finished: Option<Result<(), LinkError>>,
+    local_addr: Option<SocketAddr>,
+}
+
+#[derive(Debug)]
+enum Kind {
+    Udp(Box<Udp>),
+    Tasks(Tasks),
+}
+
+impl Link {
+    /// Opens the link `spec` describes.
+    pub(crate) async fn open(spec: &ConnSpec, options: &Options) -> Result<Self, OpenError> {
+        let ids = PeerIds::default();
+        let peers = Arc::new(PeerTable::default());
+        let hp = spec.host_port().unwrap_or_default();
+        let (kind, local_addr) = match spec {
+            ConnSpec::UdpIn { host, port } => {
+                let what = format!("udp {hp}");
+                let addr = resolve(host, *port, &what).await?;
+                let socket = udp_socket(addr, false, options).map_err(|e| OpenError::Bind {
+                    what,
+                    reason: Reason::from_io(&e),
+                })?;
+                let local = socket.local_addr().ok();
+                (
+                    Kind::Udp(Box::new(Udp::new(socket, None, ids, options))),
+                    local,
+                )
+            }
+            ConnSpec::UdpOut { host, port } | ConnSpec::UdpBcast { host, port } => {
+                let broadcast = matches!(spec, ConnSpec::UdpBcast { .. });
+                let what = format!("udp {hp}");
+                let target = resolve(host, *port, &what).await?;
+                let any = match target.ip() {
+                    IpAddr::V4(_) => IpAddr::V4(Ipv4Addr::UNSPECIFIED),
+                    IpAddr::V6(_) => IpAddr::V6(Ipv6Addr::UNSPECIFIED),
+                };
+                let socket =
+                    udp_socket(SocketAddr::new(any, 0), broadcast, options).map_err(|e| {
+                        OpenError::Bind {
+                            what,
+                            reason: Reason::from_io(&e),
+                        }
+                    })?;
+                let local = socket.local_addr().ok();
+                let udp = Udp::new(socket, Some((ids.next(), target)), ids, options);
+                (Kind::Udp(Box::new(udp)), local)
+            }
+            ConnSpec::Tcp { host, port } => {
+                let what = format!("tcp {hp}");
+                let addr = resolve(host, *port, &what).await?;
+                let stream =
+                    tcp_connect(addr, options.connect_timeout)
+                        .await
+                        .map_err(|reason| OpenError::Connect {
+                            what: what.clone(),
+                            reason,
+                        })?;
+                let local = stream.local_addr().ok();
+                let (tx, rx) = mpsc::channel(LINK_QUEUE);
+                let timeout = options.connect_timeout;
+                let reconnect = move || tcp_connect(addr, timeout);
+                let supervisor = Supervisor {
+                    addr: PeerAddr::Tcp(addr),
+                    what,
+                    ids,
+                    tx,
+                    options: options.clone(),
+                };
+                tokio::spawn(supervisor.run(stream, reconnect));
+                (Kind::Tasks(Tasks::new(rx)), local)
+            }
+            ConnSpec::TcpIn { host, port } => {
+                let what = format!("tcp {hp}");
+                let addr = resolve(host, *port, &what).await?;
+                let listener = tcp_listener(addr).map_err(|e| OpenError::Bind {
+                    what: what.clone(),
+                    reason: Reason::from_io(&e),
+                })?;
+                let local = listener.local_addr().ok();
+                let (tx, rx) = mpsc::channel(LINK_QUEUE);
+                tokio::spawn(serve_tcp(listener, ids, tx, options.write_queue));
+                (Kind::Tasks(Tasks::new(rx)), local)
+            }
+            ConnSpec::Serial { device, baud } => {
+                let port = open_serial(device, *baud).map_err(|reason| OpenError::Serial {
+                    device: device.clone(),
+                    reason,
+                })?;
+                let (tx, rx) = mpsc::channel(LINK_QUEUE);
+                let (device2, baud2) = (device.clone(), *baud);
+                let reopen = move || {
+                    let result = open_serial(&device2, baud2);
+                    async move { result }
+                };
+                let supervisor = Supervisor {
+                    addr: PeerAddr::Serial(device.clone()),
+                    what: format!("serial {device}"),
+                    ids,
+                    tx,
+                    options: options.clone(),
+                };
+                tokio::spawn(supervisor.run(port, reopen));
+                (Kind::Tasks(Tasks::new(rx)), None)
+            }
+            ConnSpec::File { path, format } => {
+                let (tx, rx) = mpsc::channel(LINK_QUEUE);
+                let mut tasks = Tasks::new(rx);
+                open_file(path, *format, options, ids, tx, &mut tasks)?;
+                (Kind::Tasks(tasks), None)
+            }
+        };
+        Ok(Self {
+            kind,
+            stats: LinkStats::default(),
+            peers,
+            finished: None,
+            local_addr,
+        })
+    }
+
+    /// The peers table the user's handle reads.
+    pub(crate) fn peer_table(&self) -> Arc<PeerTable> {
+        Arc::clone(&self.peers)
+    }
+
+    /// The bound local address (UDP sockets, TCP listeners, a TCP client's first connection).
+    pub(crate) fn local_addr(&self) -> Option<SocketAddr> {
+        self.local_addr
+    }
+
+    pub(crate) fn stats(&self) -> LinkStats {
+        self.stats
+    }
+
+    /// Announces the peers a link has from the start (the target of `udpout`/`udpbcast`).
+    pub(crate) fn start<P: Protocol>(&mut self, proto: &mut P) {
+        if let Kind::Udp(udp) = &mut self.kind
+            && let Some((id, addr)) = udp.target
+        {
+            let info = PeerInfo {
+                id,
+                addr: PeerAddr::Udp(addr),
+                framing: Framing::Datagram,
+            };
+            self.peers.add(info.clone());
+            self.stats.peers_added += 1;
+            proto.handle_peer_added(clock::now(), &info);
+        }
+    }
+
+    /// How the link ended, once it has: then the driver forwards the last events and stops.
+    pub(crate) fn finished(&self) -> Option<&Result<(), LinkError>> {
+        self.finished.as_ref()
+    }
+
+    pub(crate) fn take_result(&mut self) -> Result<(), LinkError> {
+        self.finished.take().unwrap_or(Ok(()))
+    }
+
+    /// Waits for input and keeps it for [`Link::dispatch`]. Cancel-safe: nothing is lost if
+    /// the future is dropped.
+    pub(crate) async fn wait(&mut self) {
+        match &mut self.kind {
+            Kind::Udp(udp) => udp.wait(&mut self.stats).await,
+            Kind::Tasks(tasks) => tasks.wait().await,
+        }
+    }
+
+    /// Hands what [`Link::wait`] got, and whatever else is ready, to the protocol.
+    pub(crate) fn dispatch<P: Protocol>(&mut self, proto: &mut P) {
+        match &mut self.kind {
+            Kind::Udp(udp) => udp.dispatch(proto, &mut self.stats, &self.peers),
+            Kind::Tasks(tasks) => {
+                if let Some(end) = tasks.dispatch(proto, &mut self.stats, &self.peers) {
+                    self.finished = Some(end);
+                }
+            }
+        }
+    }
+
+    /// Sends `data` to `dest`.
+    pub(crate) async fn transmit(&mut self, dest: Dest, data: &[u8]) {
+        match &mut self.kind {
+            Kind::Udp(udp) => udp.transmit(dest, data, &mut self.stats).await,
+            Kind::Tasks(tasks) => tasks.transmit(dest, data, &mut self.stats),
+        }
+    }
+
+    /// When [`Link::housekeeping`] is next due (expiring quiet UDP peers).
+    pub(crate) fn next_housekeeping(&self) -> Option<Instant> {
+        match &self.kind {
+            Kind::Udp(udp) if !udp.learned.is_empty() => udp.next_expiry,
+            _ => None,
+        }
+    }
+
+    pub(crate) fn housekeeping<P: Protocol>(&mut self, proto: &mut P) {
+        if let Kind::Udp(udp) = &mut self.kind {
+            udp.expire(proto, &mut self.stats, &self.peers);
+        }
+    }
+
+    /// Stops the link: writer tasks get to drain their queues (a file sink writes out its
+    /// buffer) for a short while.
+    pub(crate) async fn shutdown(&mut self) -> Result<(), LinkError> {
+        let Kind::Tasks(tasks) = &mut self.kind else {
+            return Ok(());
+        };
+        tasks.writers.clear();
+        tasks.rx.close();
+        let mut result = Ok(());
+        for handle in tasks.sinks.drain(..) {
+            match tokio::time::timeout(DRAIN_TIMEOUT, handle).await {
+                Ok(Ok(Ok(()))) => {}
+                Ok(Ok(Err(e))) => result = Err(e),
+                Ok(Err(e)) => {
+                    result = Err(LinkError::Driver {
+                        reason: e.to_string(),
+                    });
+                }
+                Err(_) => tracing::warn!("a file writer did not finish in time"),
+            }
+        }
+        // A write error the sink reported while running.
+        while let Ok(msg) = tasks.rx.try_recv() {
+            if let LinkMsg::Closed(Err(e)) = msg {
+                result = Err(e);
+            }
+        }
+        result
+    }
+}
+
+/// The first address `host:port` resolves to.
+async fn resolve(host: &str, port: u16, what: &str) -> Result<SocketAddr, OpenError> {
+    let resolve_err = |reason| OpenError::Resolve {
+        what: what.to_owned(),
+        reason,
+    };
+    let mut addrs = tokio::net::lookup_host((host, port))
+        .await
+        .map_err(|e| resolve_err(Reason::from_io(&e)))?;
+    addrs
+        .next()
+        .ok_or_else(|| resolve_err(Reason::new(io::ErrorKind::NotFound, "no address")))
+}
+
+/// A UDP socket bound to `addr` with big buffers.
+fn udp_socket(addr: SocketAddr, broadcast: bool, options: &Options) -> io::Result<UdpSocket> {
+    use socket2::{Domain, Protocol as SockProtocol, Socket, Type};
+    let socket = Socket::new(
+        Domain::for_address(addr),
+        Type::DGRAM,
+        Some(SockProtocol::UDP),
+    )?;
+    if broadcast {
+        socket.set_broadcast(true)?;
+    }
+    // Best effort: the kernel caps the sizes (net.core.rmem_max / wmem_max).
+    if let Err(e) = socket.set_recv_buffer_size(options.socket_buffer) {
+        tracing::debug!("cannot set SO_RCVBUF: {e}");
+    }
+    if let Err(e) = socket.set_send_buffer_size(options.socket_buffer) {
+        tracing::debug!("cannot set SO_SNDBUF: {e}");
+    }
+    socket.set_nonblocking(true)?;
+    socket.bind(&addr.into())?;
+    UdpSocket::from_std(socket.into())
+}
+
+/// A TCP listener on `addr` (with `SO_REUSEADDR`, so a restarted server can bind again while
+/// old connections linger in TIME_WAIT).
+fn tcp_listener(addr: SocketAddr) -> io::Result<TcpListener> {
+    use socket2::{Domain, Protocol as SockProtocol, Socket, Type};
+    let socket = Socket::new(
+        Domain::for_address(addr),
+        Type::STREAM,
+        Some(SockProtocol::TCP),
+    )?;
+    socket.set_reuse_address(true)?;
+    socket.set_nonblocking(true)?;
+    socket.bind(&addr.into())?;
+    socket.listen(128)?;
+    TcpListener::from_std(socket.into())
+}
+
+/// A TCP connection to `addr`, given up after `timeout`.
+async fn tcp_connect(addr: SocketAddr, timeout: Duration) -> Result<TcpStream, Reason> {
+    match tokio::time::timeout(timeout, TcpStream::connect(addr)).await {
+        Ok(Ok(stream)) => {
+            if let Err(e) = stream.set_nodelay(true) {
+                tracing::debug!("cannot set TCP_NODELAY: {e}");
+            }
+            Ok(stream)
+        }
+        Ok(Err(e)) => Err(Reason::from_io(&e)),
+        Err(_) => Err(Reason::new(io::ErrorKind::TimedOut, "timed out")),
+    }
+}
+
+/// An open serial port (8N1, no flow control).
+fn open_serial(device: &str, baud: u32) -> Result<tokio_serial::SerialStream, Reason> {
+    use tokio_serial::SerialPortBuilderExt as _;
+    tokio_serial::new(device, baud)
+        .open_native_async()
+        .map_err(|e| Reason::from_serial(&e))
+}
+
+// ---------------------------------------------------------------------------------------------
+// UDP
+
+#[derive(Debug)]
+struct Learned {
+    addr: SocketAddr,
+    last_seen: Instant,
+}
+
+#[derive(Debug)]
+struct Udp {
+    socket: UdpSocket,
+    buf: Vec<u8>,
+    /// A datagram received by `wait`, not yet dispatched.
+    pending: Option<(usize, SocketAddr)>,
+    /// `udpout`/`udpbcast`: the fixed destination, a peer that never expires.
+    target: Option<(PeerId, SocketAddr)>,
+    by_addr: HashMap<SocketAddr, PeerId>,
+    learned: HashMap<PeerId, Learned>,
+    peer_timeout: Duration,
+    next_expiry: Option<Instant>,
+    ids: PeerIds,
+}
+
+impl Udp {
+    fn new(
+        socket: UdpSocket,
+        target: Option<(PeerId, SocketAddr)>,
+        ids: PeerIds,
+        options: &Options,
+    ) -> Self {
+        Self {
+            socket,
+            buf: vec![0; MAX_DATAGRAM],
+            pending: None,
+            target,
+            by_addr: HashMap::new(),
+            learned: HashMap::new(),
+            peer_timeout: options.peer_timeout,
+            next_expiry: None,
+            ids,
+        }
+    }
+
+    async fn wait(&mut self, stats: &mut LinkStats) {
+        if self.pending.is_some() {
+            return;
+        }
+        match self.socket.recv_from(&mut self.buf).await {
+            Ok(got) => self.pending = Some(got),
+            Err(e) => {
+                // ICMP errors and the like: the socket stays usable.
+                stats.rx_errors += 1;
+                tracing::debug!("udp receive error: {e}");
+                tokio::time::sleep(Duration::from_millis(1)).await;
+            }
+        }
+    }
+
+    fn dispatch<P: Protocol>(&mut self, proto: &mut P, stats: &mut LinkStats, table: &PeerTable) {
+        if let Some((len, from)) = self.pending.take() {
+            self.deliver(proto, len, from, stats, table);
+        }
+        // Drain what else is waiting before going back to the event loop.
+        for _ in 1..BATCH {
+            match self.socket.try_recv_from(&mut self.buf) {
+                Ok((len, from)) => self.deliver(proto, len, from, stats, table),
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
+                Err(e) => {
+                    stats.rx_errors += 1;
+                    tracing::debug!("udp receive error: {e}");
+                    break;
+                }
+            }
+        }
+    }
+
+    fn deliver<P: Protocol>(
+        &mut self,
+        proto: &mut P,
+        len: usize,
+        from: SocketAddr,
+        stats: &mut LinkStats,
+        table: &PeerTable,
+    ) {
+        let now = clock::now();
+        let id = match self.target {
+            Some((id, addr)) if addr == from => id,
+            _ => {
+                if let Some(&id) = self.by_addr.get(&from) {
+                    if let Some(peer) = self.learned.get_mut(&id) {
+                        peer.last_seen = now;
+                    }
+                    id
+                } else {
+                    let id = self.ids.next();
+                    let info = PeerInfo {
+                        id,
+                        addr: PeerAddr::Udp(from),
+                        framing: Framing::Datagram,
+                    };
+                    tracing::debug!("udp peer {from} appeared as {id}");
+                    self.by_addr.insert(from, id);
+                    self.learned.insert(
+                        id,
+                        Learned {
+                            addr: from,
+                            last_seen: now,
+                        },
+                    );
+                    self.next_expiry.get_or_insert(now + self.peer_timeout);
+                    table.add(info.clone());
+                    stats.peers_added += 1;
+                    proto.handle_peer_added(now, &info);
+                    id
+                }
+            }
+        };
+        stats.rx_chunks += 1;
+        stats.rx_bytes += len as u64;
+        proto.handle_input(now, id, &self.buf[..len]);
+    }
+
+    fn expire<P: Protocol>(&mut self, proto: &mut P, stats: &mut LinkStats, table: &PeerTable) {
+        let now = clock::now();
+        let timeout = self.peer_timeout;
+        let gone: Vec<PeerId> = self
+            .learned
+            .iter()
+            .filter(|(_, p)| now - p.last_seen >= timeout)
+            .map(|(&id, _)| id)
+            .collect();
+        for id in gone {
+            if let Some(peer) = self.learned.remove(&id) {
+                tracing::debug!("udp peer {} ({id}) went quiet", peer.addr);
+                self.by_addr.remove(&peer.addr);
+                table.remove(id);
+                stats.peers_removed += 1;
+                proto.handle_peer_removed(now, id);
+            }
+        }
+        self.next_expiry = self.learned.values().map(|p| p.last_seen + timeout).min();
+    }
+
+    async fn transmit(&mut self, dest: Dest, data: &[u8], stats: &mut LinkStats) {
+        match dest {
+            Dest::Peer(id) => {
+                let addr = match self.target {
+                    Some((t, addr)) if t == id => Some(addr),
+                    _ => self.learned.get(&id).map(|p| p.addr),
+                };
+                match addr {
+                    Some(addr) => send_to(&self.socket, data, addr, stats).await,
+                    None => stats.tx_dropped += 1,
+                }
+            }
+            Dest::All | Dest::AllExcept(_) => {
+                let except = match dest {
+                    Dest::AllExcept(id) => Some(id),
+                    _ => None,
+                };
+                if let Some((id, addr)) = self.target {
+                    if except != Some(id) {
+                        send_to(&self.socket, data, addr, stats).await;
+                    }
+                    return;
+                }
+                let mut sent = false;
+                for (&id, peer) in &self.learned {
+                    if except != Some(id) {
+                        send_to(&self.socket, data, peer.addr, stats).await;
+                        sent = true;
+                    }
+                }
+                if !sent {
+                    stats.tx_dropped += 1;
+                }
+            }
+        }
+    }
+}
+
+async fn send_to(socket: &UdpSocket, data: &[u8], addr: SocketAddr, stats: &mut LinkStats) {
+    match socket.send_to(data, addr).await {
+        Ok(n) => {
+            stats.tx_chunks += 1;
+            stats.tx_bytes += n as u64;
+        }
+        Err(e) => {
+            stats.tx_errors += 1;
+            tracing::debug!("udp send to {addr} failed: {e}");
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Links run by helper tasks: TCP, serial, files
+
+#[derive(Debug)]
+struct Tasks {
+    rx: mpsc::Receiver<LinkMsg>,
+    pending: Option<LinkMsg>,
+    writers: HashMap<PeerId, mpsc::Sender<Vec<u8>>>,
+    /// File writers, awaited when the link closes so that nothing buffered is lost.
+    sinks: Vec<JoinHandle<Result<(), LinkError>>>,
+}
+
+impl Tasks {
+    fn new(rx: mpsc::Receiver<LinkMsg>) -> Self {
+        Self {
+            rx,
+            pending: None,
+            writers: HashMap::new(),
+            sinks: Vec::new(),
+        }
+    }
+
+    async fn wait(&mut self) {
+        if self.pending.is_some() {
+            return;
+        }
+        self.pending = Some(self.rx.recv().await.unwrap_or(LinkMsg::Closed(Ok(()))));
+    }
+
+    fn dispatch<P: Protocol>(
+        &mut self,
+        proto: &mut P,
+        stats: &mut LinkStats,
+        table: &PeerTable,
+    ) -> Option<Result<(), LinkError>> {
+        let mut next = self.pending.take();
+        for _ in 0..BATCH {
+            let Some(msg) = next.take() else { break };
+            if let Some(end) = self.apply(msg, proto, stats, table) {
+                return Some(end);
+            }
+            next = self.rx.try_recv().ok();
+        }
+        None
+    }
+
+    fn apply<P: Protocol>(
+        &mut self,
+        msg: LinkMsg,
+        proto: &mut P,
+        stats: &mut LinkStats,
+        table: &PeerTable,
+    ) -> Option<Result<(), LinkError>> {
+        match msg {
+            LinkMsg::Data { peer, time, bytes } => {
+                stats.rx_chunks += 1;
+                stats.rx_bytes += bytes.len() as u64;
+                proto.handle_input(time, peer, &bytes);
+            }
+            LinkMsg::Records { peer, bytes, parts } => {
+                let mut from = 0;
+                for (time, end) in parts {
+                    let Some(part) = bytes.get(from..end) else {
+                        break;
+                    };
+                    stats.rx_chunks += 1;
+                    stats.rx_bytes += part.len() as u64;
+                    proto.handle_input(time, peer, part);
+                    from = end;
+                }
+            }
+            LinkMsg::PeerAdded { info, writer } => {
+                tracing::debug!("{} appeared as {}", info.addr, info.id);
+                if let Some(w) = writer {
+                    self.writers.insert(info.id, w);
+                }
+                table.add(info.clone());
+                stats.peers_added += 1;
+                proto.handle_peer_added(clock::now(), &info);
+            }
+            LinkMsg::PeerRemoved(id) => {
+                tracing::debug!("{id} went away");
+                self.writers.remove(&id);
+                table.remove(id);
+                stats.peers_removed += 1;
+                proto.handle_peer_removed(clock::now(), id);
+            }
+            LinkMsg::Closed(end) => return Some(end),
+        }
+        None
+    }
+
+    fn transmit(&mut self, dest: Dest, data: &[u8], stats: &mut LinkStats) {
+        let mut send = |writer: &mpsc::Sender<Vec<u8>>| match writer.try_send(data.to_vec()) {
+            Ok(()) => {
+                stats.tx_chunks += 1;
+                stats.tx_bytes += data.len() as u64;
+            }
+            Err(_) => stats.tx_dropped += 1,
+        };
+        match dest {
+            Dest::Peer(id) => match self.writers.get(&id) {
+                Some(w) => send(w),
+                None => stats.tx_dropped += 1,
+            },
+            Dest::All | Dest::AllExcept(_) => {
+                let mut sent = false;
+                for (&id, w) in &self.writers {
+                    if dest != Dest::AllExcept(id) {
+                        send(w);
+                        sent = true;
+                    }
+                }
+                if !sent {
+                    stats.tx_dropped += 1;
+                }
+            }
+        }
+    }
+}
+
+/// Reads a stream into [`LinkMsg::Data`] until it ends, fails or the link closes. Returns
+/// why it ended, if by an error.
+async fn read_stream<R: AsyncRead + Unpin>(
+    mut reader: R,
+    peer: PeerId,
+    tx: &mpsc::Sender<LinkMsg>,
+) -> Option<Reason> {
+    loop {
+        let mut buf = vec![0u8; READ_CHUNK];
+        let n = tokio::select! {
+            () = tx.closed() => return None,
+            r = reader.read(&mut buf) => match r {
+                Ok(0) => return None,
+                Ok(n) => n,
+                Err(e) => return Some(Reason::from_io(&e)),
+            },
+        };
+        buf.truncate(n);
+        let msg = LinkMsg::Data {
+            peer,
+            time: clock::now(),
+            bytes: buf,
+        };
+        if tx.send(msg).await.is_err() {
+            return None;
+        }
+    }
+}
+
+/// Writes what the driver queues for one peer, coalescing queued transmits into one write.
+async fn write_stream<W: AsyncWrite + Unpin>(
+    mut writer: W,
+    mut rx: mpsc::Receiver<Vec<u8>>,
+    what: String,
+) {
+    let mut out = Vec::with_capacity(tlog::BUFFER_LEN);
+    while let Some(first) = rx.recv().await {
+        out.clear();
+        out.extend_from_slice(&first);
+        while out.len() < tlog::BUFFER_LEN {
+            match rx.try_recv() {
+                Ok(more) => out.extend_from_slice(&more),
+                Err(_) => break,
+            }
+        }
+        if let Err(e) = writer.write_all(&out).await {
+            tracing::debug!("{what}: write failed: {e}");
+            return;
+        }
+    }
+    let _ = writer.shutdown().await;
+}
+
+/// Runs one stream peer: announces it, starts its writer, reads until it ends. Returns false
+/// when the link has closed.
+async fn run_stream<R, W>(
+    reader: R,
+    writer: W,
+    info: PeerInfo,
+    tx: &mpsc::Sender<LinkMsg>,
+    queue: usize,
+) -> bool
+where
+    R: AsyncRead + Unpin,
+    W: AsyncWrite + Unpin + Send + 'static,
+{
+    let id = info.id;
+    let what = info.addr.to_string();
+    let (wtx, wrx) = mpsc::channel(queue.max(1));
+    tokio::spawn(write_stream(writer, wrx, what.clone()));
+    let added = LinkMsg::PeerAdded {
+        info,
+        writer: Some(wtx),
+    };
+    if tx.send(added).await.is_err() {
+        return false;
+    }
+    match read_stream(reader, id, tx).await {
+        Some(reason) => tracing::info!("{what}: {reason}"),
+        None => tracing::debug!("{what}: closed"),
+    }
+    tx.send(LinkMsg::PeerRemoved(id)).await.is_ok()
+}
+
+/// Keeps one stream up: a TCP client connection or a serial port, reopened with exponential
+/// back-off when it drops.
+struct Supervisor {
+    addr: PeerAddr,
+    what: String,
+    ids: PeerIds,
+    tx: mpsc::Sender<LinkMsg>,
+    options: Options,
+}
+
+impl Supervisor {
+    async fn run<S, F, Fut>(self, first: S, mut reopen: F)
+    where
+        S: AsyncRead + AsyncWrite + Send + 'static,
+        F: FnMut() -> Fut,
+        Fut: Future<Output = Result<S, Reason>>,
+    {
+        let min = self.options.reconnect_min.max(Duration::from_millis(1));
+        let max = self.options.reconnect_max.max(min);
+        let mut stream = first;
+        loop {
+            let info = PeerInfo {
+                id: self.ids.next(),
+                addr: self.addr.clone(),
+                framing: Framing::Stream,
+            };
+            let (reader, writer) = tokio::io::split(stream);
+            if !run_stream(reader, writer, info, &self.tx, self.options.write_queue).await {
+                return;
+            }
+            let mut delay = min;
+            stream = loop {
+                tracing::debug!("{}: reconnecting in {delay:?}", self.what);
+                tokio::select! {
+                    () = self.tx.closed() => return,
+                    () = tokio::time::sleep(delay) => {}
+                }
+                let attempt = tokio::select! {
+                    () = self.tx.closed() => return,
+                    r = reopen() => r,
+                };
+                match attempt {
+                    Ok(s) => {
+                        tracing::info!("{}: connected again", self.what);
+                        break s;
+                    }
+                    Err(reason) => {
+                        tracing::debug!("{}: {reason}", self.what);
+                        delay = (delay * 2).min(max);
+                    }
+                }
+            };
+        }
+    }
+}
+
+/// Accepts TCP clients, each a peer, until the link closes.
+async fn serve_tcp(listener: TcpListener, ids: PeerIds, tx: mpsc::Sender<LinkMsg>, queue: usize) {
+    loop {
+        let accepted = tokio::select! {
+            () = tx.closed() => return,
+            r = listener.accept() => r,
+        };
+        match accepted {
+            Ok((stream, addr)) => {
+                if let Err(e) = stream.set_nodelay(true) {
+                    tracing::debug!("cannot set TCP_NODELAY: {e}");
+                }
+                let info = PeerInfo {
+                    id: ids.next(),
+                    addr: PeerAddr::Tcp(addr),
+                    framing: Framing::Stream,
+                };
+                let tx = tx.clone();
+                tokio::spawn(async move {
+                    let (reader, writer) = stream.into_split();
+                    run_stream(reader, writer, info, &tx, queue).await;
+                });
+            }
+            Err(e) => {
+                // Out of file descriptors and the like: wait a little, then go on.
+                tracing::warn!("tcp accept failed: {e}");
+                tokio::select! {
+                    () = tx.closed() => return,
+                    () = tokio::time::sleep(Duration::from_millis(100)) => {}
+                }
+            }
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Files
+
+fn open_file(
+    path: &std::path::Path,
+    format: FileFormat,
+    options: &Options,
+    ids: PeerIds,
+    tx: mpsc::Sender<LinkMsg>,
+    tasks: &mut Tasks,
+) -> Result<(), OpenError> {
+    let file_err = |e: &io::Error| OpenError::File {
+        path: path.display().to_string(),
+        reason: Reason::from_io(e),
+    };
+    let id = ids.next();
+    let info = PeerInfo {
+        id,
+        addr: PeerAddr::File(path.to_path_buf()),
+        framing: match (options.file_mode, format) {
+            (FileMode::Read, FileFormat::Tlog) => Framing::Datagram,
+            _ => Framing::Stream,
+        },
+    };
+    let what = format!("file {}", path.display());
+    match options.file_mode {
+        FileMode::Read => {
+            let file = std::fs::File::open(path).map_err(|e| file_err(&e))?;
+            if file.metadata().is_ok_and(|m| m.is_dir()) {
+                return Err(OpenError::File {
+                    path: path.display().to_string(),
+                    reason: Reason::new(io::ErrorKind::IsADirectory, "is a directory"),
+                });
+            }
+            std::thread::Builder::new()
+                .name("mavstack-file".into())
+                .spawn(move || read_file(file, format, info, what, &tx))
+                .map_err(|e| file_err(&e))?;
+        }
+        FileMode::Write | FileMode::Append => {
+            let mut open = std::fs::OpenOptions::new();
+            if options.file_mode == FileMode::Append {
+                open.append(true).create(true);
+            } else {
+                open.write(true).create(true).truncate(true);
+            }
+            let file = open.open(path).map_err(|e| file_err(&e))?;
+            let (wtx, wrx) = mpsc::channel(options.write_queue.max(1));
+            let added = LinkMsg::PeerAdded {
+                info,
+                writer: Some(wtx),
+            };
+            if tx.try_send(added).is_err() {
+                return Err(file_err(&io::Error::other("link queue full")));
+            }
+            let sink = write_file(tokio::fs::File::from_std(file), format, wrx, what, tx);
+            tasks.sinks.push(tokio::spawn(sink));
+        }
+    }
+    Ok(())
+}
+
+/// Reads a file to its end (on its own thread: file reads block) and reports it closed.
+fn read_file(
+    file: std::fs::File,
+    format: FileFormat,
+    info: PeerInfo,
+    what: String,
+    tx: &mpsc::Sender<LinkMsg>,
+) {
+    let id = info.id;
+    if tx
+        .blocking_send(LinkMsg::PeerAdded { info, writer: None })
+        .is_err()
+    {
+        return;
+    }
+    let result = match format {
+        FileFormat::Raw => read_raw(file, id, tx),
+        FileFormat::Tlog => read_tlog(file, id, tx),
+    };
+    let end = match result {
+        Ok(true) => Ok(()),
+        Ok(false) => return, // the connection was closed
+        Err(e) => Err(LinkError::Read {
+            what,
+            reason: Reason::from_io(&e),
+        }),
+    };
+    if tx.blocking_send(LinkMsg::PeerRemoved(id)).is_ok() {
+        let _ = tx.blocking_send(LinkMsg::Closed(end));
+    }
+}
+
+/// Ok(false): the link closed before the end.
+fn read_raw(mut file: std::fs::File, peer: PeerId, tx: &mpsc::Sender<LinkMsg>) -> io::Result<bool> {
+    use std::io::Read as _;
+    loop {
+        let mut buf = vec![0u8; tlog::BUFFER_LEN];
+        let n = match file.read(&mut buf) {
+            Ok(0) => return Ok(true),
+            Ok(n) => n,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        };
+        buf.truncate(n);
+        let msg = LinkMsg::Data {
+            peer,
+            time: clock::now(),
+            bytes: buf,
+        };
+        if tx.blocking_send(msg).is_err() {
+            return Ok(false);
+        }
+    }
+}
+
+/// Ok(false): the link closed before the end.
+fn read_tlog(file: std::fs::File, peer: PeerId, tx: &mpsc::Sender<LinkMsg>) -> io::Result<bool> {
+    let mut reader = tlog::Reader::new(file);
+    loop {
+        let mut bytes = Vec::with_capacity(tlog::BUFFER_LEN);
+        let mut parts = Vec::with_capacity(256);
+        let mut done = false;
+        while bytes.len() < tlog::BUFFER_LEN - tlog::MAX_RECORD_LEN {
+            match reader.read_record()? {
+                Some((ts, frame)) => {
+                    bytes.extend_from_slice(frame);
+                    parts.push((Instant::from_micros(ts), bytes.len()));
+                }
+                None => {
+                    done = true;
+                    break;
+                }
+            }
+        }
+        if !parts.is_empty()
+            && tx
+                .blocking_send(LinkMsg::Records { peer, bytes, parts })
+                .is_err()
+        {
+            return Ok(false);
+        }
+        if done {
+            let skipped = reader.stats().skipped_bytes;
+            if skipped > 0 {
+                tracing::info!("tlog: skipped {skipped} corrupt bytes");
+            }
+            return Ok(true);
+        }
+    }
+}
+
+/// Writes what is sent to a file: raw, or as tlog records stamped with the transport's clock.
+/// Writes out at least once a second; writes everything out when the link closes.
+async fn write_file(
+    mut file: tokio::fs::File,
+    format: FileFormat,
+    mut rx: mpsc::Receiver<Vec<u8>>,
+    what: String,
+    link: mpsc::Sender<LinkMsg>,
+) -> Result<(), LinkError> {
+    let mut buffer = tlog::Buffer::new();
+    let fail = |e: &io::Error| LinkError::Write {
+        what: what.clone(),
+        reason: Reason::from_io(e),
+    };
+    loop {
+        let deadline = buffer.deadline().map(tokio::time::Instant::from_std);
+        let flush = tokio::select! {
+            data = rx.recv() => match data {
+                Some(data) => {
+                    append(&mut buffer, format, &data, &what);
+                    buffer.due()
+                }
+                None => break,
+            },
+            () = sleep_until(deadline), if deadline.is_some() => true,
+        };
+        if flush && let Err(e) = write_out(&mut file, &mut buffer).await {
+            let err = fail(&e);
+            let _ = link.send(LinkMsg::Closed(Err(err.clone()))).await;
+            return Err(err);
+        }
+    }
+    write_out(&mut file, &mut buffer)
+        .await
+        .map_err(|e| fail(&e))?;
+    file.sync_data().await.map_err(|e| fail(&e))
+}
+
+fn append(buffer: &mut tlog::Buffer, format: FileFormat, data: &[u8], what: &str) {
+    match format {
+        FileFormat::Raw => buffer.push_raw(data),
+        FileFormat::Tlog => {
+            let now = clock::now().as_micros();
+            let mut rest = data;
+            while !rest.is_empty() {
+                let Ok(frame) = Frame::new_checked(rest) else {
+                    tracing::warn!(
+                        "{what}: {} bytes that are not a frame not logged",
+                        rest.len()
+                    );
+                    return;
+                };
+                let len = frame.frame_len();
+                buffer.push_record(now, &rest[..len]);
+                rest = &rest[len..];
+            }
+        }
+    }
+}
+
+async fn write_out(file: &mut tokio::fs::File, buffer: &mut tlog::Buffer) -> io::Result<()> {
+    if buffer.bytes().is_empty() {
+        return Ok(());
+    }
+    file.write_all(buffer.bytes()).await?;
+    buffer.clear();
+    file.flush().await
+}
+
+/// Sleeps until `deadline`, or forever without one.
+pub(crate) async fn sleep_until(deadline: Option<tokio::time::Instant>) {
+    match deadline {
+        Some(d) => tokio::time::sleep_until(d).await,
+        None => core::future::pending().await,
+    }
+}
