@@ -156,7 +156,10 @@ mod tests {
     #[test]
     fn arithmetic_saturates() {
         let t = Instant::from_secs(2);
-        assert_eq!(t + Duration::from_micros(5), Instant::from_micros(2_000_005));
+        assert_eq!(
+            t + Duration::from_micros(5),
+            Instant::from_micros(2_000_005)
+        );
         assert_eq!(Instant::MAX + Duration::from_secs(1), Instant::MAX);
         assert_eq!(Instant::ZERO - Duration::from_secs(1), Instant::ZERO);
         assert_eq!(t - Instant::from_secs(3), Duration::ZERO);
