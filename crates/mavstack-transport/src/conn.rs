@@ -740,10 +740,7 @@ mod tests {
         ];
         for (input, want) in cases {
             let got = err(input).to_string();
-            assert!(
-                got.contains(want),
-                "{input:?}: got {got:?}, want {want:?}"
-            );
+            assert!(got.contains(want), "{input:?}: got {got:?}, want {want:?}");
             assert!(!got.contains('\n') && !got.ends_with('.'), "{got:?}");
         }
         assert_eq!(

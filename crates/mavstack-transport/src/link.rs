@@ -195,18 +195,10 @@ impl Link {
                             reason,
                         })?;
                 let local = stream.local_addr().ok();
-                let (tx, rx) = mpsc::channel(LINK_QUEUE);
                 let timeout = options.connect_timeout;
                 let reconnect = move || tcp_connect(addr, timeout);
-                let supervisor = Supervisor {
-                    addr: PeerAddr::Tcp(addr),
-                    what,
-                    ids,
-                    tx,
-                    options: options.clone(),
-                };
-                tokio::spawn(supervisor.run(stream, reconnect));
-                (Kind::Tasks(Tasks::new(rx)), local)
+                let tasks = supervise(stream, PeerAddr::Tcp(addr), what, ids, options, reconnect);
+                (Kind::Tasks(tasks), local)
             }
             ConnSpec::TcpIn { host, port } => {
                 let what = format!("tcp {hp}");
@@ -225,21 +217,15 @@ impl Link {
                     device: device.clone(),
                     reason,
                 })?;
-                let (tx, rx) = mpsc::channel(LINK_QUEUE);
                 let (device2, baud2) = (device.clone(), *baud);
                 let reopen = move || {
                     let result = open_serial(&device2, baud2);
                     async move { result }
                 };
-                let supervisor = Supervisor {
-                    addr: PeerAddr::Serial(device.clone()),
-                    what: format!("serial {device}"),
-                    ids,
-                    tx,
-                    options: options.clone(),
-                };
-                tokio::spawn(supervisor.run(port, reopen));
-                (Kind::Tasks(Tasks::new(rx)), None)
+                let addr = PeerAddr::Serial(device.clone());
+                let what = format!("serial {device}");
+                let tasks = supervise(port, addr, what, ids, options, reopen);
+                (Kind::Tasks(tasks), None)
             }
             ConnSpec::File { path, format } => {
                 let (tx, rx) = mpsc::channel(LINK_QUEUE);
@@ -271,16 +257,23 @@ impl Link {
         self.stats
     }
 
-    /// Announces the peers a link has from the start (the target of `udpout`/`udpbcast`).
+    /// Announces the peers a link has from the start: the target of `udpout`/`udpbcast`,
+    /// a TCP client's first connection, a serial port, a file being written. They are known
+    /// before `open` returns, so that what is sent right after opening is not dropped.
     pub(crate) fn start<P: Protocol>(&mut self, proto: &mut P) {
-        if let Kind::Udp(udp) = &mut self.kind
-            && let Some((id, addr)) = udp.target
-        {
-            let info = PeerInfo {
-                id,
-                addr: PeerAddr::Udp(addr),
-                framing: Framing::Datagram,
-            };
+        let initial = match &mut self.kind {
+            Kind::Udp(udp) => udp
+                .target
+                .map(|(id, addr)| PeerInfo {
+                    id,
+                    addr: PeerAddr::Udp(addr),
+                    framing: Framing::Datagram,
+                })
+                .into_iter()
+                .collect(),
+            Kind::Tasks(tasks) => core::mem::take(&mut tasks.initial),
+        };
+        for info in initial {
             self.peers.add(info.clone());
             self.stats.peers_added += 1;
             proto.handle_peer_added(clock::now(), &info);
@@ -650,6 +643,8 @@ struct Tasks {
     writers: HashMap<PeerId, mpsc::Sender<Vec<u8>>>,
     /// File writers, awaited when the link closes so that nothing buffered is lost.
     sinks: Vec<JoinHandle<Result<(), LinkError>>>,
+    /// Peers known when the link opened, announced by [`Link::start`].
+    initial: Vec<PeerInfo>,
 }
 
 impl Tasks {
@@ -659,6 +654,7 @@ impl Tasks {
             pending: None,
             writers: HashMap::new(),
             sinks: Vec::new(),
+            initial: Vec::new(),
         }
     }
 
@@ -814,30 +810,24 @@ async fn write_stream<W: AsyncWrite + Unpin>(
     let _ = writer.shutdown().await;
 }
 
-/// Runs one stream peer: announces it, starts its writer, reads until it ends. Returns false
-/// when the link has closed.
-async fn run_stream<R, W>(
-    reader: R,
-    writer: W,
-    info: PeerInfo,
-    tx: &mpsc::Sender<LinkMsg>,
-    queue: usize,
-) -> bool
+/// Starts the writer task of a stream peer and returns its queue.
+fn spawn_writer<W>(writer: W, what: String, queue: usize) -> mpsc::Sender<Vec<u8>>
 where
-    R: AsyncRead + Unpin,
     W: AsyncWrite + Unpin + Send + 'static,
 {
-    let id = info.id;
-    let what = info.addr.to_string();
     let (wtx, wrx) = mpsc::channel(queue.max(1));
-    tokio::spawn(write_stream(writer, wrx, what.clone()));
-    let added = LinkMsg::PeerAdded {
-        info,
-        writer: Some(wtx),
-    };
-    if tx.send(added).await.is_err() {
-        return false;
-    }
+    tokio::spawn(write_stream(writer, wrx, what));
+    wtx
+}
+
+/// Reads a stream peer until it ends, then reports it gone. Returns false when the link has
+/// closed.
+async fn read_peer<R: AsyncRead + Unpin>(
+    reader: R,
+    id: PeerId,
+    what: &str,
+    tx: &mpsc::Sender<LinkMsg>,
+) -> bool {
     match read_stream(reader, id, tx).await {
         Some(reason) => tracing::info!("{what}: {reason}"),
         None => tracing::debug!("{what}: closed"),
@@ -845,9 +835,47 @@ where
     tx.send(LinkMsg::PeerRemoved(id)).await.is_ok()
 }
 
-/// Keeps one stream up: a TCP client connection or a serial port, reopened with exponential
-/// back-off when it drops.
+/// A link over one stream that is reopened when it drops (a TCP client connection, a
+/// serial port). `first` is already open: it becomes the first peer at once.
+fn supervise<S, F, Fut>(
+    first: S,
+    addr: PeerAddr,
+    what: String,
+    ids: PeerIds,
+    options: &Options,
+    reopen: F,
+) -> Tasks
+where
+    S: AsyncRead + AsyncWrite + Send + 'static,
+    F: FnMut() -> Fut + Send + 'static,
+    Fut: Future<Output = Result<S, Reason>> + Send + 'static,
+{
+    let (tx, rx) = mpsc::channel(LINK_QUEUE);
+    let mut tasks = Tasks::new(rx);
+    let info = PeerInfo {
+        id: ids.next(),
+        addr,
+        framing: Framing::Stream,
+    };
+    let (reader, writer) = tokio::io::split(first);
+    let writer = spawn_writer(writer, what.clone(), options.write_queue);
+    tasks.writers.insert(info.id, writer);
+    let supervisor = Supervisor {
+        first_id: info.id,
+        addr: info.addr.clone(),
+        what,
+        ids,
+        tx,
+        options: options.clone(),
+    };
+    tasks.initial.push(info);
+    tokio::spawn(supervisor.run(reader, reopen));
+    tasks
+}
+
+/// Keeps one stream up, reopening it with exponential back-off when it drops.
 struct Supervisor {
+    first_id: PeerId,
     addr: PeerAddr,
     what: String,
     ids: PeerIds,
@@ -856,7 +884,7 @@ struct Supervisor {
 }
 
 impl Supervisor {
-    async fn run<S, F, Fut>(self, first: S, mut reopen: F)
+    async fn run<S, F, Fut>(self, first: tokio::io::ReadHalf<S>, mut reopen: F)
     where
         S: AsyncRead + AsyncWrite + Send + 'static,
         F: FnMut() -> Fut,
@@ -864,19 +892,14 @@ impl Supervisor {
     {
         let min = self.options.reconnect_min.max(Duration::from_millis(1));
         let max = self.options.reconnect_max.max(min);
-        let mut stream = first;
+        let mut reader = first;
+        let mut id = self.first_id;
         loop {
-            let info = PeerInfo {
-                id: self.ids.next(),
-                addr: self.addr.clone(),
-                framing: Framing::Stream,
-            };
-            let (reader, writer) = tokio::io::split(stream);
-            if !run_stream(reader, writer, info, &self.tx, self.options.write_queue).await {
+            if !read_peer(reader, id, &self.what, &self.tx).await {
                 return;
             }
             let mut delay = min;
-            stream = loop {
+            let stream = loop {
                 tracing::debug!("{}: reconnecting in {delay:?}", self.what);
                 tokio::select! {
                     () = self.tx.closed() => return,
@@ -897,6 +920,22 @@ impl Supervisor {
                     }
                 }
             };
+            id = self.ids.next();
+            let (r, w) = tokio::io::split(stream);
+            let writer = spawn_writer(w, self.what.clone(), self.options.write_queue);
+            let info = PeerInfo {
+                id,
+                addr: self.addr.clone(),
+                framing: Framing::Stream,
+            };
+            let added = LinkMsg::PeerAdded {
+                info,
+                writer: Some(writer),
+            };
+            if self.tx.send(added).await.is_err() {
+                return;
+            }
+            reader = r;
         }
     }
 }
@@ -921,7 +960,16 @@ async fn serve_tcp(listener: TcpListener, ids: PeerIds, tx: mpsc::Sender<LinkMsg
                 let tx = tx.clone();
                 tokio::spawn(async move {
                     let (reader, writer) = stream.into_split();
-                    run_stream(reader, writer, info, &tx, queue).await;
+                    let what = info.addr.to_string();
+                    let id = info.id;
+                    let writer = spawn_writer(writer, what.clone(), queue);
+                    let added = LinkMsg::PeerAdded {
+                        info,
+                        writer: Some(writer),
+                    };
+                    if tx.send(added).await.is_ok() {
+                        read_peer(reader, id, &what, &tx).await;
+                    }
                 });
             }
             Err(e) => {
@@ -984,13 +1032,8 @@ fn open_file(
             }
             let file = open.open(path).map_err(|e| file_err(&e))?;
             let (wtx, wrx) = mpsc::channel(options.write_queue.max(1));
-            let added = LinkMsg::PeerAdded {
-                info,
-                writer: Some(wtx),
-            };
-            if tx.try_send(added).is_err() {
-                return Err(file_err(&io::Error::other("link queue full")));
-            }
+            tasks.writers.insert(id, wtx);
+            tasks.initial.push(info);
             let sink = write_file(tokio::fs::File::from_std(file), format, wrx, what, tx);
             tasks.sinks.push(tokio::spawn(sink));
         }

@@ -36,6 +36,7 @@
 use core::time::Duration;
 use std::io::{self, Read, Write};
 
+use mavstack_core::Crc16;
 use mavstack_core::parse::CrcExtra;
 use mavstack_core::time::Instant;
 use mavstack_core::wire::{Frame, MAX_FRAME_LEN, STX_V1, STX_V2};
@@ -343,7 +344,10 @@ impl<R: Read> Reader<R> {
     /// A record is accepted when its frame's header is valid and the whole frame is there,
     /// and then: for a message id the lookup knows, when the checksum is right; for an
     /// unknown id (or without a lookup), when the frame is followed by the end of the file or
-    /// by a record whose frame starts with a start marker.
+    /// by a record whose frame starts with a start marker, or when its checksum is right for
+    /// some CRC_EXTRA (which 1 in 256 random byte strings pass). Without a lookup a record
+    /// whose frame is damaged but whose length is intact is returned as it is: a parser
+    /// downstream rejects it.
     #[must_use]
     pub fn with_crc_extra(mut self, lookup: impl CrcExtra + Send + 'static) -> Self {
         self.lookup = Some(Box::new(lookup));
@@ -437,12 +441,27 @@ fn check(
         stats.bad_crc += 1;
         return None;
     }
-    match avail.get(TIMESTAMP_LEN + len..) {
+    let followed = match avail.get(TIMESTAMP_LEN + len..) {
         // The input ends with this record, or with fewer bytes than another record needs.
-        Some(next) if next.len() <= TIMESTAMP_LEN => Some(len),
-        Some(next) if next[TIMESTAMP_LEN] == STX_V2 || next[TIMESTAMP_LEN] == STX_V1 => Some(len),
-        _ => None,
-    }
+        Some(next) if next.len() <= TIMESTAMP_LEN => true,
+        Some(next) => next[TIMESTAMP_LEN] == STX_V2 || next[TIMESTAMP_LEN] == STX_V1,
+        None => false,
+    };
+    (followed || checksum_fits_some_crc_extra(&frame)).then_some(len)
+}
+
+/// Whether some CRC_EXTRA byte makes the frame's checksum right: true for 1 in 256 random
+/// frames, and for every intact one whatever its dialect.
+fn checksum_fits_some_crc_extra(frame: &Frame<&[u8]>) -> bool {
+    let end = frame.version().header_len() + frame.payload_len();
+    let mut crc = Crc16::new();
+    crc.update(&frame.as_bytes()[1..end]);
+    let want = frame.checksum();
+    (0..=u8::MAX).any(|extra| {
+        let mut c = crc;
+        c.update_byte(extra);
+        c.value() == want
+    })
 }
 
 impl<R: Read> Iterator for Reader<R> {
