@@ -2,26 +2,47 @@
 //! parsing, checksum validation, typed decoding of every frame, no allocation per frame.
 
 use mavstack_core::MessageSet;
-use mavstack_core::parse::{Item, SliceParser, Stats};
+use mavstack_core::parse::{CrcExtra, Item, SliceParser, Stats};
 use mavstack_core::signing::{self, SecretKey};
 use mavstack_dialects as d;
+
+/// CRC_EXTRA of ids below 65536 from a dense table (0: unknown, else 0x100 | crc), the rest
+/// through the dialect's lookup: one load per frame, inlined into the parser.
+struct DenseCrcExtra<M> {
+    table: Vec<u16>,
+    dialect: core::marker::PhantomData<M>,
+}
+
+impl<M: MessageSet> DenseCrcExtra<M> {
+    fn new() -> Self {
+        let mut table = vec![0u16; 1 << 16];
+        for info in M::all() {
+            if let Some(slot) = usize::try_from(info.id).ok().and_then(|i| table.get_mut(i)) {
+                *slot = 0x100 | u16::from(info.crc_extra);
+            }
+        }
+        Self {
+            table,
+            dialect: core::marker::PhantomData,
+        }
+    }
+}
+
+impl<M: MessageSet> CrcExtra for &DenseCrcExtra<M> {
+    #[inline(always)]
+    fn crc_extra(&self, id: u32) -> Option<u8> {
+        match usize::try_from(id).ok().and_then(|i| self.table.get(i)) {
+            Some(&v) => (v != 0).then_some(v.to_le_bytes()[0]),
+            None => M::info(id).map(|i| i.crc_extra),
+        }
+    }
+}
 
 /// Parses, validates and decodes every frame of `data` as dialect `M`; returns the parser's
 /// counts and the number of frames whose signature does not match `key`.
 pub(crate) fn count<M: MessageSet>(data: &[u8], key: Option<&SecretKey>) -> (Stats, u64) {
-    // CRC_EXTRA of ids below 65536 from a dense table (0: unknown, else 0x100 | crc), the
-    // rest through the dialect's lookup.
-    let mut dense = vec![0u16; 1 << 16];
-    for info in M::all() {
-        if let Some(slot) = usize::try_from(info.id).ok().and_then(|i| dense.get_mut(i)) {
-            *slot = 0x100 | u16::from(info.crc_extra);
-        }
-    }
-    let lookup = |id: u32| match usize::try_from(id).ok().and_then(|i| dense.get(i)) {
-        Some(&v) => (v != 0).then_some(v.to_le_bytes()[0]),
-        None => M::info(id).map(|i| i.crc_extra),
-    };
-    let mut parser = SliceParser::new(data, lookup);
+    let lookup = DenseCrcExtra::<M>::new();
+    let mut parser = SliceParser::new(data, &lookup);
     let mut bad_signature = 0;
     for item in parser.by_ref() {
         let Item::Frame(frame) = item else { continue };
