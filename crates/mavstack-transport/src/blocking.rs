@@ -22,7 +22,7 @@
 //!         _ => {} // the client appearing as a peer
 //!     }
 //! }
-//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! # Ok::<(), Box<dyn core::error::Error>>(())
 //! ```
 
 use core::net::SocketAddr;

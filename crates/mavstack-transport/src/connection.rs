@@ -100,7 +100,7 @@ pub struct ConnectionStats<S> {
 /// ```no_run
 /// use mavstack_transport::{Connection, frame::{FrameEvent, FrameProtocol, crc_extra_of}};
 /// use mavstack_dialects::common::MavMessage;
-/// # async fn run() -> Result<(), Box<dyn std::error::Error>> {
+/// # async fn run() -> Result<(), Box<dyn core::error::Error>> {
 /// let spec = "udpin:0.0.0.0:14550".parse()?;
 /// let mut conn = Connection::open(&spec, FrameProtocol::new(crc_extra_of::<MavMessage>)).await?;
 /// while let Some(event) = conn.recv().await {

@@ -55,7 +55,7 @@
 //! use mavstack_transport::{Connection, frame::{FrameEvent, FrameProtocol, crc_extra_of}};
 //! use mavstack_dialects::common::MavMessage;
 //! # #[tokio::main(flavor = "current_thread")]
-//! # async fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! # async fn main() -> Result<(), Box<dyn core::error::Error>> {
 //! let spec = "udp://:14550".parse()?;
 //! let mut conn = Connection::open(&spec, FrameProtocol::new(crc_extra_of::<MavMessage>)).await?;
 //! while let Some(event) = conn.recv().await {
