@@ -449,3 +449,43 @@ async fn closing_sends_what_was_queued_first() {
     }
     let _ = event;
 }
+
+#[tokio::test]
+async fn ipv6_loopback_round_trip() {
+    let mut server = match Connection::open(&spec("udpin:[::1]:0"), proto()).await {
+        Ok(s) => s,
+        // No IPv6 on this machine: nothing to test.
+        Err(e) if e.to_string().contains("address not available") => return,
+        Err(e) => panic!("{e}"),
+    };
+    let port = server.local_addr().unwrap().port();
+    let client = open(&format!("udpout://[::1]:{port}")).await;
+    client.send(send(Dest::All, 61)).await.unwrap();
+    let f = frame(&mut server).await;
+    assert_eq!(f.frame.sysid(), 61);
+    let peers = server.peers();
+    assert!(matches!(peers[0].addr, PeerAddr::Udp(a) if a.is_ipv6()));
+}
+
+#[tokio::test]
+async fn all_except_skips_one_peer_and_unknown_peers_are_dropped() {
+    let mut server = open("tcpin:127.0.0.1:0").await;
+    let port = server.local_addr().unwrap().port();
+    let mut a = open(&format!("tcp:127.0.0.1:{port}")).await;
+    let mut b = open(&format!("tcp:127.0.0.1:{port}")).await;
+    a.send(send(Dest::All, 1)).await.unwrap();
+    let from_a = frame(&mut server).await.peer;
+    b.send(send(Dest::All, 2)).await.unwrap();
+    frame(&mut server).await;
+    // Forward what `a` sent to everyone else.
+    server.send(send(Dest::AllExcept(from_a), 3)).await.unwrap();
+    assert_eq!(frame(&mut b).await.frame.sysid(), 3);
+    server
+        .send(send(Dest::Peer(mavstack_transport::PeerId::new(999)), 4))
+        .await
+        .unwrap();
+    server.send(send(Dest::Peer(from_a), 5)).await.unwrap();
+    // `a` gets only the frame meant for it: the forwarded one never came.
+    assert_eq!(frame(&mut a).await.frame.sysid(), 5);
+    assert_eq!(server.stats().link.tx_dropped, 1);
+}
