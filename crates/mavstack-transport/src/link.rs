@@ -121,12 +121,20 @@ pub(crate) enum LinkMsg {
     /// A peer appeared; `writer` takes what is sent to it.
     PeerAdded {
         info: PeerInfo,
-        writer: Option<mpsc::Sender<Vec<u8>>>,
+        writer: Option<PeerWriter>,
     },
     /// A peer went away.
     PeerRemoved(PeerId),
     /// The link ended (a file was read to its end), or failed.
     Closed(Result<(), LinkError>),
+}
+
+/// The queue to a stream peer's writer task, and the task (awaited when the link closes, so
+/// that what was queued is written).
+#[derive(Debug)]
+pub(crate) struct PeerWriter {
+    queue: mpsc::Sender<Vec<u8>>,
+    task: Option<JoinHandle<()>>,
 }
 
 /// One connection's link.
@@ -338,8 +346,16 @@ impl Link {
         let Kind::Tasks(tasks) = &mut self.kind else {
             return Ok(());
         };
-        tasks.writers.clear();
+        // Dropping the queues lets each writer task write what is queued, then end.
+        let writers: Vec<JoinHandle<()>> =
+            tasks.writers.drain().filter_map(|(_, w)| w.task).collect();
         tasks.rx.close();
+        let deadline = tokio::time::Instant::now() + DRAIN_TIMEOUT;
+        for handle in writers {
+            if tokio::time::timeout_at(deadline, handle).await.is_err() {
+                tracing::debug!("a peer's writer did not finish in time");
+            }
+        }
         let mut result = Ok(());
         for handle in tasks.sinks.drain(..) {
             match tokio::time::timeout(DRAIN_TIMEOUT, handle).await {
@@ -640,7 +656,7 @@ async fn send_to(socket: &UdpSocket, data: &[u8], addr: SocketAddr, stats: &mut 
 struct Tasks {
     rx: mpsc::Receiver<LinkMsg>,
     pending: Option<LinkMsg>,
-    writers: HashMap<PeerId, mpsc::Sender<Vec<u8>>>,
+    writers: HashMap<PeerId, PeerWriter>,
     /// File writers, awaited when the link closes so that nothing buffered is lost.
     sinks: Vec<JoinHandle<Result<(), LinkError>>>,
     /// Peers known when the link opened, announced by [`Link::start`].
@@ -729,7 +745,7 @@ impl Tasks {
     }
 
     fn transmit(&mut self, dest: Dest, data: &[u8], stats: &mut LinkStats) {
-        let mut send = |writer: &mpsc::Sender<Vec<u8>>| match writer.try_send(data.to_vec()) {
+        let mut send = |writer: &PeerWriter| match writer.queue.try_send(data.to_vec()) {
             Ok(()) => {
                 stats.tx_chunks += 1;
                 stats.tx_bytes += data.len() as u64;
@@ -810,14 +826,16 @@ async fn write_stream<W: AsyncWrite + Unpin>(
     let _ = writer.shutdown().await;
 }
 
-/// Starts the writer task of a stream peer and returns its queue.
-fn spawn_writer<W>(writer: W, what: String, queue: usize) -> mpsc::Sender<Vec<u8>>
+/// Starts the writer task of a stream peer.
+fn spawn_writer<W>(writer: W, what: String, queue: usize) -> PeerWriter
 where
     W: AsyncWrite + Unpin + Send + 'static,
 {
     let (wtx, wrx) = mpsc::channel(queue.max(1));
-    tokio::spawn(write_stream(writer, wrx, what));
-    wtx
+    PeerWriter {
+        queue: wtx,
+        task: Some(tokio::spawn(write_stream(writer, wrx, what))),
+    }
 }
 
 /// Reads a stream peer until it ends, then reports it gone. Returns false when the link has
@@ -1032,7 +1050,13 @@ fn open_file(
             }
             let file = open.open(path).map_err(|e| file_err(&e))?;
             let (wtx, wrx) = mpsc::channel(options.write_queue.max(1));
-            tasks.writers.insert(id, wtx);
+            tasks.writers.insert(
+                id,
+                PeerWriter {
+                    queue: wtx,
+                    task: None,
+                },
+            );
             tasks.initial.push(info);
             let sink = write_file(tokio::fs::File::from_std(file), format, wrx, what, tx);
             tasks.sinks.push(tokio::spawn(sink));

@@ -489,3 +489,27 @@ async fn all_except_skips_one_peer_and_unknown_peers_are_dropped() {
     assert_eq!(frame(&mut a).await.frame.sysid(), 5);
     assert_eq!(server.stats().link.tx_dropped, 1);
 }
+
+#[test]
+fn blocking_close_writes_out_what_was_queued_on_tcp() {
+    use mavstack_transport::blocking;
+    let mut server = blocking::Connection::open(&spec("tcpin:127.0.0.1:0"), proto()).unwrap();
+    let port = server.local_addr().unwrap().port();
+    let client =
+        blocking::Connection::open(&spec(&format!("tcp:127.0.0.1:{port}")), proto()).unwrap();
+    for i in 0..500u32 {
+        client
+            .send(FrameCommand::to_all(heartbeat(9, (i % 256) as u8)))
+            .unwrap();
+    }
+    // The client's runtime stops right after this: its writer must have written everything.
+    client.close().unwrap();
+    let mut frames = 0;
+    while frames < 500 {
+        match server.recv_timeout(WAIT) {
+            Ok(FrameEvent::Frame(_)) => frames += 1,
+            Ok(_) => {}
+            Err(e) => panic!("after {frames} frames: {e}"),
+        }
+    }
+}
