@@ -1,0 +1,1014 @@
+//! One link's protocol state: the [`Channel`].
+//!
+//! See the crate docs for the driving loop and the version rules; this module holds the
+//! state machine itself.
+
+use mavstack_core::message::{MAX_PAYLOAD_LEN, Message, MessageInfo};
+use mavstack_core::parse::{CrcExtra, Deframer, Item};
+use mavstack_core::signing::{MAX_TIMESTAMP, SecretKey, append_signature};
+use mavstack_core::time::Instant;
+use mavstack_core::wire::{self, EmitError, FrameHeader, MAX_FRAME_LEN, Version};
+use mavstack_dialects::common::{
+    AutopilotVersion, CommandAck, MavCmd, MavProtocolCapability, MavResult, ProtocolVersion,
+    SetupSigning,
+};
+
+use crate::config::{Config, ConfigError, GroundPolicy, Role, VehiclePolicy, VehicleVersion};
+use crate::dialect::{CommandEncoding, CommandRequest, CommonCrc, WithBuiltins};
+use crate::event::{
+    Event, LinkVersion, ProtocolVersionAnswer, RejectReason, Rejected, SigningSetup, SwitchCause,
+};
+use crate::frame::{Authentication, OwnedFrame, ReceivedFrame};
+use crate::handshake::{
+    AwaitingAnswer, Handshake, HandshakeConfig, HandshakeMethod, HandshakeOutcome,
+    HandshakeRequest, HandshakeResult, RequestMessage, Step, Target,
+};
+use crate::queue::Queue;
+use crate::seq::{SeqTable, SourceStats};
+use crate::signing::{LinkSigning, SigningConfig, SigningStream, WallClock};
+use crate::stats::LinkStats;
+
+/// How many events the channel holds before input processing pauses.
+pub const EVENT_CAPACITY: usize = 16;
+/// How many control frames (answers, handshake requests) wait for
+/// [`Channel::poll_transmit`]; more are dropped and counted
+/// ([`LinkStats::control_dropped`]).
+pub const TRANSMIT_CAPACITY: usize = 8;
+/// The most events one frame can cause; a frame is only processed with this much room.
+const EVENTS_PER_FRAME: usize = 5;
+
+/// A frame written into the caller's buffer: send `buf[..len]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[must_use = "the frame is in the buffer and must be sent"]
+pub struct Transmit {
+    /// The frame's length.
+    pub len: usize,
+    /// Its version.
+    pub version: Version,
+    /// Whether it is signed.
+    pub signed: bool,
+    /// Its sequence number.
+    pub seq: u8,
+    /// Its message id.
+    pub msg_id: u32,
+}
+
+/// Why a frame could not be sent.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, thiserror::Error)]
+#[non_exhaustive]
+pub enum SendError {
+    /// A message id above 255 on a link that sends MAVLink 1: MAVLink 1 cannot carry it.
+    #[error("message {msg_id} exists only in MAVLink 2 and the link sends MAVLink 1")]
+    NeedsMavlink2 {
+        /// The message id.
+        msg_id: u32,
+    },
+    /// [`Channel::send_mavlink2`] on a vehicle with MAVLink 2 disabled.
+    #[error("MAVLink 2 is disabled on this link")]
+    Mavlink2Disabled,
+    /// A message id wider than 24 bits.
+    #[error("message id {msg_id} does not fit in 24 bits")]
+    InvalidMessageId {
+        /// The message id.
+        msg_id: u32,
+    },
+    /// The frame could not be written (buffer too small, payload too long).
+    #[error(transparent)]
+    Emit(#[from] EmitError),
+}
+
+/// Why a handshake could not start.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, thiserror::Error)]
+#[non_exhaustive]
+pub enum HandshakeError {
+    /// Only a ground station runs the handshake; a vehicle answers it.
+    #[error("only a ground-station channel runs the handshake")]
+    NotGroundStation,
+    /// A handshake is already running.
+    #[error("a handshake is already running")]
+    InProgress,
+    /// [`HandshakeMethod::RequestMessageOther`] with an id below 256, which MAVLink 1 could
+    /// carry: its arrival would prove nothing.
+    #[error("message {msg_id} is not MAVLink 2-only (ids from 256 are)")]
+    NotMavlink2Message {
+        /// The id asked for.
+        msg_id: u32,
+    },
+}
+
+/// A frame the channel sends on its own.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Control {
+    Ack {
+        command: MavCmd,
+        result: MavResult,
+        to: (u8, u8),
+    },
+    ProtocolVersion(ProtocolVersion),
+    Request {
+        request: HandshakeRequest,
+        attempt: u8,
+    },
+}
+
+/// Which version a frame goes out in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Framing {
+    /// The link's current version.
+    Link,
+    /// MAVLink 2 whatever the link's version (signed when the link signs): the handshake
+    /// request and its answer.
+    Mavlink2,
+}
+
+/// The sans-IO state of one MAVLink link.
+///
+/// Bytes come in with [`handle_input`](Self::handle_input), time with
+/// [`handle_timeout`](Self::handle_timeout); events come out of
+/// [`poll_event`](Self::poll_event) and the frames the channel sends on its own out of
+/// [`poll_transmit`](Self::poll_transmit); [`poll_timeout`](Self::poll_timeout) says when to
+/// call `handle_timeout` next. The caller's own frames are written by
+/// [`send`](Self::send). The channel never reads a clock, sleeps or allocates.
+///
+/// `L` is where CRC_EXTRA comes from (see [`crate::dialect`]); the default is `common`.
+#[derive(Clone)]
+pub struct Channel<L = CommonCrc> {
+    sysid: u8,
+    compid: u8,
+    role: Role,
+    secure: bool,
+    handshake_config: HandshakeConfig,
+    lookup: L,
+    deframer: Deframer,
+    /// The unsigned output version; a signing link always sends signed MAVLink 2.
+    out_version: Version,
+    signing: Option<LinkSigning>,
+    seq: u8,
+    events: Queue<Event, EVENT_CAPACITY>,
+    transmits: Queue<(Control, Framing), TRANSMIT_CAPACITY>,
+    handshake: Option<Handshake>,
+    peer_protocol_version: Option<ProtocolVersion>,
+    mavlink2_received: bool,
+    input_pending: bool,
+    last_input_at: Instant,
+    seqs: SeqTable,
+    stats: LinkStats,
+}
+
+impl Channel<CommonCrc> {
+    /// A channel for the `common` dialect.
+    ///
+    /// # Errors
+    /// [`ConfigError`] if `config` cannot work (see [`Config::validate`]).
+    pub fn new(config: Config) -> Result<Self, ConfigError> {
+        Self::with_lookup(config, CommonCrc::new())
+    }
+}
+
+impl<L: CrcExtra> Channel<L> {
+    /// A channel that takes CRC_EXTRA from `lookup` (the messages the channel reads itself
+    /// are always known).
+    ///
+    /// # Errors
+    /// [`ConfigError`] if `config` cannot work (see [`Config::validate`]).
+    pub fn with_lookup(config: Config, lookup: L) -> Result<Self, ConfigError> {
+        config.validate()?;
+        let out_version = match config.role {
+            Role::Vehicle(VehiclePolicy {
+                version: VehicleVersion::Mavlink2,
+                ..
+            })
+            | Role::GroundStation(GroundPolicy::Mavlink2) => Version::V2,
+            _ if config.signing.is_some() => Version::V2,
+            _ => Version::V1,
+        };
+        Ok(Self {
+            sysid: config.system_id,
+            compid: config.component_id,
+            role: config.role,
+            secure: config.secure,
+            handshake_config: config.handshake,
+            lookup,
+            deframer: Deframer::new(),
+            out_version,
+            signing: config.signing.map(LinkSigning::new),
+            seq: 0,
+            events: Queue::new(),
+            transmits: Queue::new(),
+            handshake: None,
+            peer_protocol_version: None,
+            mavlink2_received: false,
+            input_pending: false,
+            last_input_at: Instant::ZERO,
+            seqs: SeqTable::new(),
+            stats: LinkStats::default(),
+        })
+    }
+
+    // ----- driving ---------------------------------------------------------------------
+
+    /// Feeds bytes received on the link at `now` (a piece of a serial or TCP stream, or a
+    /// whole UDP datagram) and returns how many were taken.
+    ///
+    /// Frames are parsed, checked and turned into events at once. When the event queue
+    /// fills up, processing pauses and fewer than `data.len()` bytes may be taken: drain
+    /// [`poll_event`](Self::poll_event) (which resumes processing) and call again with the
+    /// rest. Bad frames never stop the stream: they are counted and reported as events.
+    #[must_use = "bytes not taken must be fed again after draining poll_event"]
+    pub fn handle_input(&mut self, now: Instant, data: &[u8]) -> usize {
+        self.last_input_at = now;
+        let mut taken = 0;
+        loop {
+            if !self.process_buffered() || taken == data.len() {
+                return taken;
+            }
+            let n = self.deframer.push(&data[taken..]);
+            if n == 0 {
+                return taken;
+            }
+            taken += n;
+            self.input_pending = true;
+        }
+    }
+
+    /// Lets time pass: call at (or after) the instant [`poll_timeout`](Self::poll_timeout)
+    /// returned. Resends the handshake request or ends the handshake with a timeout.
+    /// Does nothing while the event queue is nearly full; drain
+    /// [`poll_event`](Self::poll_event) and call again.
+    pub fn handle_timeout(&mut self, now: Instant) {
+        if self.events.free() < EVENTS_PER_FRAME {
+            return;
+        }
+        if let Some(state) = self.handshake.take() {
+            let step = state.handle_timeout(now, &self.handshake_config);
+            self.apply_step(step);
+        }
+    }
+
+    /// The next event, or `None`. Call after every [`handle_input`](Self::handle_input) and
+    /// [`handle_timeout`](Self::handle_timeout) until it returns `None`.
+    #[must_use]
+    pub fn poll_event(&mut self) -> Option<Event> {
+        if let Some(timestamp) = self.signing.as_mut().and_then(LinkSigning::take_persist) {
+            return Some(Event::PersistTimestamp { timestamp });
+        }
+        if self.input_pending {
+            self.process_buffered();
+        }
+        self.events.pop()
+    }
+
+    /// Writes the next frame the channel sends on its own (a COMMAND_ACK, a PROTOCOL_VERSION,
+    /// a handshake request) into `buf` and describes it, or returns `None`. Call after every
+    /// `handle_*` and [`poll_event`](Self::poll_event) until it returns `None`; `now` dates
+    /// the signature.
+    #[must_use]
+    pub fn poll_transmit(
+        &mut self,
+        now: Instant,
+        buf: &mut [u8; MAX_FRAME_LEN],
+    ) -> Option<Transmit> {
+        while let Some((control, framing)) = self.transmits.pop() {
+            // Only a bug could make these fail: the buffer holds any frame and every
+            // control message fits its framing. Drop and count rather than panic.
+            match self.write_control(now, &control, framing, buf) {
+                Ok(t) => return Some(t),
+                Err(_) => self.stats.control_dropped += 1,
+            }
+        }
+        None
+    }
+
+    /// When to call [`handle_timeout`](Self::handle_timeout) next, or `None` if no timer
+    /// runs.
+    #[must_use]
+    pub fn poll_timeout(&self) -> Option<Instant> {
+        self.handshake.as_ref().map(Handshake::deadline)
+    }
+
+    // ----- sending ---------------------------------------------------------------------
+
+    /// Writes `message` into `out` as the link's next frame: the link's version, our ids,
+    /// the running sequence number, signed when the link signs.
+    ///
+    /// ```
+    /// use mavstack_channel::{Channel, Config};
+    /// use mavstack_core::time::Instant;
+    /// use mavstack_dialects::common::Heartbeat;
+    /// let mut vehicle = Channel::new(Config::vehicle(1, 1)).unwrap();
+    /// let mut buf = [0u8; 280];
+    /// let t = vehicle.send(Instant::ZERO, &Heartbeat::default(), &mut buf).unwrap();
+    /// assert_eq!((buf[0], t.len, t.seq), (0xfe, 17, 0)); // starts in MAVLink 1
+    /// ```
+    ///
+    /// # Errors
+    /// [`SendError::NeedsMavlink2`] for a message id above 255 on a MAVLink 1 link;
+    /// [`SendError::Emit`] if `out` is too small.
+    pub fn send<M: Message>(
+        &mut self,
+        now: Instant,
+        message: &M,
+        out: &mut [u8],
+    ) -> Result<Transmit, SendError> {
+        let mut payload = [0u8; MAX_PAYLOAD_LEN];
+        let len = message.encode(&mut payload);
+        self.write(now, &M::INFO, &payload[..len], Framing::Link, out)
+    }
+
+    /// Like [`send`](Self::send), but in MAVLink 2 framing whatever the link's version: the
+    /// one exception to a link's single version, for a vehicle's answer to
+    /// MAV_CMD_REQUEST_MESSAGE for a message id of 256 or more (the handshake's
+    /// "other message" method) on a link that still sends MAVLink 1.
+    ///
+    /// # Errors
+    /// [`SendError::Mavlink2Disabled`] on a vehicle with MAVLink 2 disabled;
+    /// [`SendError::Emit`] if `out` is too small.
+    pub fn send_mavlink2<M: Message>(
+        &mut self,
+        now: Instant,
+        message: &M,
+        out: &mut [u8],
+    ) -> Result<Transmit, SendError> {
+        if !self.accepts_mavlink2() {
+            return Err(SendError::Mavlink2Disabled);
+        }
+        let mut payload = [0u8; MAX_PAYLOAD_LEN];
+        let len = message.encode(&mut payload);
+        self.write(now, &M::INFO, &payload[..len], Framing::Mavlink2, out)
+    }
+
+    /// Writes a message given as raw payload bytes (its full encoding; a MAVLink 2 frame
+    /// truncates trailing zeros, a MAVLink 1 frame carries the bytes as given) with message
+    /// id `msg_id` and its `crc_extra`, like [`send`](Self::send).
+    ///
+    /// # Errors
+    /// [`SendError::InvalidMessageId`] for an id over 24 bits; [`SendError::NeedsMavlink2`]
+    /// for an id above 255 on a MAVLink 1 link; [`SendError::Emit`] for a payload over
+    /// 255 bytes or an `out` too small.
+    pub fn send_raw(
+        &mut self,
+        now: Instant,
+        msg_id: u32,
+        crc_extra: u8,
+        payload: &[u8],
+        out: &mut [u8],
+    ) -> Result<Transmit, SendError> {
+        if msg_id > 0xFF_FFFF {
+            return Err(SendError::InvalidMessageId { msg_id });
+        }
+        let len = u8::try_from(payload.len()).map_err(|_| EmitError::PayloadTooLong {
+            len: payload.len(),
+            max: MAX_PAYLOAD_LEN,
+        })?;
+        let info = MessageInfo {
+            id: msg_id,
+            name: "",
+            crc_extra,
+            min_len: len,
+            max_len: len,
+            target_system_offset: None,
+            target_component_offset: None,
+        };
+        self.write(now, &info, payload, Framing::Link, out)
+    }
+
+    // ----- the handshake ---------------------------------------------------------------
+
+    /// Starts the ground-station handshake with `target` at `now`: the request goes out
+    /// (always in MAVLink 2 framing, signed when the link signs) through
+    /// [`poll_transmit`](Self::poll_transmit), is resent per the configured
+    /// [`HandshakeConfig`], and the outcome arrives as [`Event::Handshake`].
+    ///
+    /// # Errors
+    /// [`HandshakeError`]: not a ground station, a handshake already running, or
+    /// [`HandshakeMethod::RequestMessageOther`] with an id below 256.
+    pub fn start_handshake(
+        &mut self,
+        now: Instant,
+        target: Target,
+        method: HandshakeMethod,
+        encoding: CommandEncoding,
+    ) -> Result<(), HandshakeError> {
+        if !matches!(self.role, Role::GroundStation(_)) {
+            return Err(HandshakeError::NotGroundStation);
+        }
+        if self.handshake.is_some() {
+            return Err(HandshakeError::InProgress);
+        }
+        if let HandshakeMethod::RequestMessageOther { msg_id } = method
+            && msg_id < 256
+        {
+            return Err(HandshakeError::NotMavlink2Message { msg_id });
+        }
+        let request = HandshakeRequest {
+            target,
+            method,
+            encoding,
+        };
+        let state = AwaitingAnswer::start(now, request, &self.handshake_config);
+        self.queue_control(
+            Control::Request {
+                request,
+                attempt: 1,
+            },
+            Framing::Mavlink2,
+        );
+        self.handshake = Some(Handshake::AwaitingAnswer(state));
+        Ok(())
+    }
+
+    /// The running handshake, if any.
+    #[must_use]
+    pub const fn handshake(&self) -> Option<&Handshake> {
+        self.handshake.as_ref()
+    }
+
+    /// Abandons the running handshake (no outcome event) and returns its last state.
+    pub const fn cancel_handshake(&mut self) -> Option<Handshake> {
+        self.handshake.take()
+    }
+
+    /// The PROTOCOL_VERSION the peer reported in the last successful handshake.
+    #[must_use]
+    pub const fn peer_protocol_version(&self) -> Option<&ProtocolVersion> {
+        self.peer_protocol_version.as_ref()
+    }
+
+    // ----- state -----------------------------------------------------------------------
+
+    /// The framing the link sends now.
+    #[must_use]
+    pub const fn version(&self) -> LinkVersion {
+        match (self.signing.is_some(), self.out_version) {
+            (true, _) => LinkVersion::SignedMavlink2,
+            (false, Version::V2) => LinkVersion::Mavlink2,
+            (false, Version::V1) => LinkVersion::Mavlink1,
+        }
+    }
+
+    /// Whether the link accepts MAVLink 2 (all but a vehicle with MAVLink 2 disabled).
+    #[must_use]
+    pub const fn accepts_mavlink2(&self) -> bool {
+        !matches!(
+            self.role,
+            Role::Vehicle(VehiclePolicy {
+                version: VehicleVersion::Mavlink1Only,
+                ..
+            })
+        )
+    }
+
+    /// The protocol capabilities the link contributes to AUTOPILOT_VERSION:
+    /// MAV_PROTOCOL_CAPABILITY_MAVLINK2 (8192) whenever MAVLink 2 would be accepted, even
+    /// while the link still sends MAVLink 1. OR it into the vehicle's own capabilities.
+    #[must_use]
+    pub const fn capabilities(&self) -> MavProtocolCapability {
+        if self.accepts_mavlink2() {
+            MavProtocolCapability::MAVLINK2
+        } else {
+            MavProtocolCapability(0)
+        }
+    }
+
+    /// Our system id.
+    #[must_use]
+    pub const fn system_id(&self) -> u8 {
+        self.sysid
+    }
+
+    /// Our component id.
+    #[must_use]
+    pub const fn component_id(&self) -> u8 {
+        self.compid
+    }
+
+    /// Our role and version policy.
+    #[must_use]
+    pub const fn role(&self) -> &Role {
+        &self.role
+    }
+
+    /// Whether the link is marked secure (SETUP_SIGNING accepted).
+    #[must_use]
+    pub const fn is_secure(&self) -> bool {
+        self.secure
+    }
+
+    /// Marks the link secure or not.
+    pub const fn set_secure(&mut self, secure: bool) {
+        self.secure = secure;
+    }
+
+    /// The counters.
+    #[must_use]
+    pub fn stats(&self) -> LinkStats {
+        let mut stats = self.stats;
+        stats.parser = *self.deframer.stats();
+        for s in self.seqs.sources() {
+            stats.received += s.received;
+            stats.lost += s.lost;
+            stats.duplicates += s.duplicates;
+        }
+        stats.untracked_frames = self.seqs.untracked;
+        stats
+    }
+
+    /// Sequence statistics per source (up to [`crate::seq::MAX_SOURCES`]).
+    #[must_use]
+    pub fn sources(&self) -> &[SourceStats] {
+        self.seqs.sources()
+    }
+
+    // ----- signing ---------------------------------------------------------------------
+
+    /// The signing settings, if the link signs.
+    #[must_use]
+    pub fn signing(&self) -> Option<&SigningConfig> {
+        self.signing.as_ref().map(|s| &s.config)
+    }
+
+    /// Turns signing on (the link sends signed MAVLink 2 from the next frame) or off (the
+    /// link sends unsigned MAVLink 2). A [`Event::VersionChanged`] reports the change.
+    ///
+    /// # Errors
+    /// [`ConfigError::SigningNeedsMavlink2`] on a vehicle with MAVLink 2 disabled.
+    pub fn set_signing(&mut self, signing: Option<SigningConfig>) -> Result<(), ConfigError> {
+        if signing.is_some() && !self.accepts_mavlink2() {
+            return Err(ConfigError::SigningNeedsMavlink2);
+        }
+        let before = self.version();
+        let cause = if signing.is_some() {
+            SwitchCause::SigningEnabled
+        } else {
+            SwitchCause::SigningDisabled
+        };
+        self.signing = signing.map(LinkSigning::new);
+        if self.signing.is_some() || before == LinkVersion::SignedMavlink2 {
+            self.out_version = Version::V2;
+        }
+        let after = self.version();
+        if before != after {
+            let _ = self.events.push(Event::VersionChanged {
+                from: before,
+                to: after,
+                cause,
+            });
+        }
+        Ok(())
+    }
+
+    /// The largest signing timestamp issued or accepted (store it at shutdown), if the link
+    /// signs.
+    #[must_use]
+    pub fn signing_timestamp(&self) -> Option<u64> {
+        self.signing.as_ref().map(LinkSigning::last_timestamp)
+    }
+
+    /// Changes how `now` maps to wall-clock time for signing timestamps, e.g. when GPS time
+    /// becomes known. Timestamps still never go backwards.
+    pub fn set_wall_clock(&mut self, clock: WallClock) {
+        if let Some(s) = &mut self.signing {
+            s.config.wall_clock = clock;
+        }
+    }
+
+    /// The signing streams seen, with their last accepted timestamps.
+    #[must_use]
+    pub fn signing_streams(&self) -> &[SigningStream] {
+        self.signing.as_ref().map_or(&[], |s| s.replay.streams())
+    }
+
+    // ----- internals -------------------------------------------------------------------
+
+    /// Processes buffered frames while the event queue has room. Returns whether every
+    /// complete frame has been processed.
+    fn process_buffered(&mut self) -> bool {
+        loop {
+            if self.events.free() < EVENTS_PER_FRAME {
+                return false;
+            }
+            let lookup = WithBuiltins(&self.lookup);
+            let Some(item) = self.deframer.next_item(&lookup) else {
+                self.input_pending = false;
+                return true;
+            };
+            let (view, known) = match item {
+                Item::Frame(f) => (f, true),
+                Item::Unknown(f) => (f, false),
+            };
+            // The parser only yields complete frames, which always copy.
+            if let Ok(frame) = OwnedFrame::new(view.as_bytes()) {
+                self.process(frame, known);
+            }
+        }
+    }
+
+    fn process(&mut self, frame: OwnedFrame, known: bool) {
+        let now = self.last_input_at;
+        let auth = match self.authenticate(now, &frame) {
+            Ok(auth) => auth,
+            Err(reason) => return self.reject(now, &frame, reason),
+        };
+        if known && frame.msg_id() == SetupSigning::ID {
+            return self.handle_setup_signing(now, &frame);
+        }
+        self.stats.accepted += 1;
+        // A frame whose checksum or signature was checked can drive the link's state; an
+        // unknown id whose checksum could not be checked is only delivered.
+        let trusted = known || auth.is_authenticated();
+        let mut after: [Option<Event>; EVENTS_PER_FRAME - 1] = [None, None, None, None];
+        let mut answered = false;
+        if trusted {
+            self.seqs.record(frame.sysid(), frame.compid(), frame.seq());
+            after[0] = self.switch_on_receive(&frame);
+        }
+        if known {
+            let (a, event) = self.answer_protocol_version_request(&frame);
+            answered = a;
+            after[1] = event;
+            if let Some(state) = self.handshake.take() {
+                let step = state.handle_frame(now, &frame, self.sysid);
+                (after[2], after[3]) = self.apply_step(step);
+            }
+        }
+        self.push_event(Event::Frame(ReceivedFrame {
+            frame,
+            received_at: now,
+            auth,
+            crc_checked: known,
+            answered,
+        }));
+        for event in after.into_iter().flatten() {
+            self.push_event(event);
+        }
+    }
+
+    fn push_event(&mut self, event: Event) {
+        // Room was reserved (EVENTS_PER_FRAME) before the frame or timeout was processed.
+        let _ = self.events.push(event);
+    }
+
+    fn reject(&mut self, now: Instant, frame: &OwnedFrame, reason: RejectReason) {
+        self.stats.rejected.count(reason);
+        self.push_event(Event::Rejected(Rejected {
+            reason,
+            version: frame.version(),
+            sysid: frame.sysid(),
+            compid: frame.compid(),
+            msg_id: frame.msg_id(),
+            received_at: now,
+        }));
+    }
+
+    /// The signing checks, in order: unsigned frames against the allow-list; the signature
+    /// against every key; only then the replay table.
+    fn authenticate(
+        &mut self,
+        now: Instant,
+        frame: &OwnedFrame,
+    ) -> Result<Authentication, RejectReason> {
+        let signature = frame.signature();
+        let Some(signing) = self.signing.as_mut() else {
+            return Ok(signature.map_or(Authentication::Unsigned, |s| {
+                Authentication::NotChecked {
+                    link_id: s.link_id,
+                    timestamp: s.timestamp,
+                }
+            }));
+        };
+        let Some(signature) = signature else {
+            if signing.config.is_allowed_unsigned(frame.msg_id()) {
+                return Ok(Authentication::AllowedUnsigned);
+            }
+            return Err(match frame.version() {
+                Version::V1 => RejectReason::Mavlink1OnSignedLink,
+                Version::V2 => RejectReason::UnsignedNotAllowed,
+            });
+        };
+        let key_index = signing
+            .verify(&frame.view())
+            .ok_or(RejectReason::BadSignature)?;
+        let local = signing.current(now);
+        signing.replay.check_and_record(
+            (frame.sysid(), frame.compid(), signature.link_id),
+            signature.timestamp,
+            local,
+        )?;
+        signing.raise(signature.timestamp);
+        Ok(Authentication::Verified {
+            link_id: signature.link_id,
+            timestamp: signature.timestamp,
+            key_index,
+        })
+    }
+
+    /// The version rules on receipt: the first MAVLink 2 frame, and AUTOPILOT_VERSION's
+    /// capability flag for an automatic ground station.
+    fn switch_on_receive(&mut self, frame: &OwnedFrame) -> Option<Event> {
+        if frame.version() == Version::V2 {
+            self.mavlink2_received = true;
+            let switches = match self.role {
+                Role::Vehicle(p) => p.version == VehicleVersion::StartMavlink1,
+                Role::GroundStation(p) => p == GroundPolicy::Automatic,
+            };
+            if switches {
+                return self.set_out_version(Version::V2, SwitchCause::Mavlink2Received);
+            }
+        }
+        if self.role == Role::GroundStation(GroundPolicy::Automatic)
+            && let Some(av) = frame.decode_as::<AutopilotVersion>()
+            && av.capabilities.contains(MavProtocolCapability::MAVLINK2)
+        {
+            return self.set_out_version(Version::V2, SwitchCause::CapabilityFlag);
+        }
+        None
+    }
+
+    fn set_out_version(&mut self, version: Version, cause: SwitchCause) -> Option<Event> {
+        if self.signing.is_some() || self.out_version == version {
+            return None;
+        }
+        let from = self.version();
+        self.out_version = version;
+        Some(Event::VersionChanged {
+            from,
+            to: self.version(),
+            cause,
+        })
+    }
+
+    /// A vehicle's side of the handshake.
+    fn answer_protocol_version_request(&mut self, frame: &OwnedFrame) -> (bool, Option<Event>) {
+        let Role::Vehicle(policy) = self.role else {
+            return (false, None);
+        };
+        let Some(cmd) = CommandRequest::from_frame(frame) else {
+            return (false, None);
+        };
+        if !cmd.requests_protocol_version() || !cmd.is_for(self.sysid, self.compid) {
+            return (false, None);
+        }
+        let to = (frame.sysid(), frame.compid());
+        let answer = match (policy.protocol_version, policy.version) {
+            (None, _) => ProtocolVersionAnswer::Ignored,
+            (Some(_), VehicleVersion::Mavlink1Only) => {
+                let result = policy.nack_result;
+                self.queue_control(
+                    Control::Ack {
+                        command: cmd.command,
+                        result,
+                        to,
+                    },
+                    Framing::Link,
+                );
+                ProtocolVersionAnswer::Nacked(result)
+            }
+            (Some(version), _) => {
+                if self.transmits.free() < 2 {
+                    self.stats.control_dropped += 2;
+                } else {
+                    self.queue_control(
+                        Control::Ack {
+                            command: cmd.command,
+                            result: MavResult::ACCEPTED,
+                            to,
+                        },
+                        Framing::Link,
+                    );
+                    self.queue_control(Control::ProtocolVersion(version), Framing::Mavlink2);
+                }
+                ProtocolVersionAnswer::Accepted
+            }
+        };
+        let event = Event::ProtocolVersionRequested {
+            sysid: to.0,
+            compid: to.1,
+            command: cmd.command,
+            encoding: cmd.encoding,
+            answer,
+        };
+        (answer != ProtocolVersionAnswer::Ignored, Some(event))
+    }
+
+    /// Carries out a handshake transition; returns the events it causes.
+    fn apply_step(&mut self, step: Step) -> (Option<Event>, Option<Event>) {
+        match step {
+            Step::Wait(state) => {
+                self.handshake = Some(state);
+                (None, None)
+            }
+            Step::Resend(state) => {
+                self.queue_control(
+                    Control::Request {
+                        request: *state.request(),
+                        attempt: state.attempts(),
+                    },
+                    Framing::Mavlink2,
+                );
+                self.handshake = Some(state);
+                (None, None)
+            }
+            Step::Done(outcome) => {
+                let switch = self.finish_handshake(&outcome);
+                (Some(Event::Handshake(outcome)), switch)
+            }
+        }
+    }
+
+    fn finish_handshake(&mut self, outcome: &HandshakeOutcome) -> Option<Event> {
+        let automatic = self.role == Role::GroundStation(GroundPolicy::Automatic);
+        match outcome.result {
+            HandshakeResult::ProtocolVersion(version) => {
+                self.peer_protocol_version = Some(version);
+                self.set_out_version(Version::V2, SwitchCause::Handshake)
+            }
+            HandshakeResult::Message { .. } => {
+                self.set_out_version(Version::V2, SwitchCause::Handshake)
+            }
+            HandshakeResult::Nack { .. } if automatic => {
+                self.set_out_version(Version::V1, SwitchCause::HandshakeFallback)
+            }
+            // A timeout falls back unless MAVLink 2 frames did arrive: then the link carries
+            // MAVLink 2 and the first-frame rule already decided.
+            HandshakeResult::Timeout { .. } if automatic && !self.mavlink2_received => {
+                self.set_out_version(Version::V1, SwitchCause::HandshakeFallback)
+            }
+            _ => None,
+        }
+    }
+
+    fn handle_setup_signing(&mut self, now: Instant, frame: &OwnedFrame) {
+        let Some(setup) = frame.decode_as::<SetupSigning>() else {
+            return;
+        };
+        if !self.secure {
+            return self.reject(now, frame, RejectReason::SetupSigningInsecure);
+        }
+        if setup.target_system != self.sysid
+            || (setup.target_component != 0 && setup.target_component != self.compid)
+        {
+            return self.reject(now, frame, RejectReason::SetupSigningMisaddressed);
+        }
+        if !self.accepts_mavlink2() {
+            return self.reject(now, frame, RejectReason::SetupSigningNeedsMavlink2);
+        }
+        self.stats.accepted += 1;
+        let before = self.version();
+        let disable = setup.secret_key == [0; 32] && setup.initial_timestamp == 0;
+        let (event, cause) = if disable {
+            self.signing = None;
+            self.out_version = Version::V2;
+            (SigningSetup::Disabled, SwitchCause::SigningDisabled)
+        } else {
+            let key = SecretKey::new(setup.secret_key);
+            let previous = self.signing.take();
+            let mut config = previous
+                .as_ref()
+                .map_or_else(|| SigningConfig::new(key.clone(), 0), |p| p.config.clone());
+            config.replace_keys(key.clone());
+            let carried = previous
+                .as_ref()
+                .map_or(0, |p| p.last_timestamp().saturating_add(1));
+            config.initial_timestamp = carried.max(setup.initial_timestamp).min(MAX_TIMESTAMP);
+            let mut signing = LinkSigning::new(config);
+            if let Some(p) = previous {
+                signing.replay = p.replay;
+            }
+            self.signing = Some(signing);
+            self.out_version = Version::V2;
+            (
+                SigningSetup::Enabled {
+                    key,
+                    initial_timestamp: setup.initial_timestamp,
+                },
+                SwitchCause::SigningEnabled,
+            )
+        };
+        self.push_event(Event::SigningSetup {
+            sysid: frame.sysid(),
+            compid: frame.compid(),
+            setup: event,
+        });
+        let after = self.version();
+        if before != after {
+            self.push_event(Event::VersionChanged {
+                from: before,
+                to: after,
+                cause,
+            });
+        }
+    }
+
+    fn queue_control(&mut self, control: Control, framing: Framing) {
+        if self.transmits.push((control, framing)).is_err() {
+            self.stats.control_dropped += 1;
+        }
+    }
+
+    fn write_control(
+        &mut self,
+        now: Instant,
+        control: &Control,
+        framing: Framing,
+        out: &mut [u8],
+    ) -> Result<Transmit, SendError> {
+        match *control {
+            Control::Ack {
+                command,
+                result,
+                to,
+            } => {
+                let ack = CommandAck {
+                    command,
+                    result,
+                    progress: 0,
+                    result_param2: 0,
+                    target_system: to.0,
+                    target_component: to.1,
+                };
+                self.write_message(now, &ack, framing, out)
+            }
+            Control::ProtocolVersion(version) => self.write_message(now, &version, framing, out),
+            Control::Request { request, attempt } => match request.message(attempt) {
+                RequestMessage::Long(m) => self.write_message(now, &m, framing, out),
+                RequestMessage::Int(m) => self.write_message(now, &m, framing, out),
+            },
+        }
+    }
+
+    fn write_message<M: Message>(
+        &mut self,
+        now: Instant,
+        message: &M,
+        framing: Framing,
+        out: &mut [u8],
+    ) -> Result<Transmit, SendError> {
+        let mut payload = [0u8; MAX_PAYLOAD_LEN];
+        let len = message.encode(&mut payload);
+        self.write(now, &M::INFO, &payload[..len], framing, out)
+    }
+
+    /// Writes one frame: version per `framing`, our ids, the next sequence number, the
+    /// signature when the link signs.
+    fn write(
+        &mut self,
+        now: Instant,
+        info: &MessageInfo,
+        payload: &[u8],
+        framing: Framing,
+        out: &mut [u8],
+    ) -> Result<Transmit, SendError> {
+        let version = match framing {
+            Framing::Link => self.out_version,
+            Framing::Mavlink2 => Version::V2,
+        };
+        if version == Version::V1 && info.id > 255 {
+            return Err(SendError::NeedsMavlink2 { msg_id: info.id });
+        }
+        let signed = self.signing.is_some() && version == Version::V2;
+        let header = FrameHeader {
+            version,
+            seq: self.seq,
+            sysid: self.sysid,
+            compid: self.compid,
+            signed,
+        };
+        let mut len = wire::emit(&header, info, payload, out)?;
+        if let Some(s) = self.signing.as_mut().filter(|_| signed) {
+            let timestamp = s.next_timestamp(now);
+            len = append_signature(
+                out,
+                len,
+                s.config.link_id,
+                timestamp,
+                s.config.primary_key(),
+            )?;
+        }
+        let seq = self.seq;
+        self.seq = self.seq.wrapping_add(1);
+        self.stats.sent += 1;
+        Ok(Transmit {
+            len,
+            version,
+            signed,
+            seq,
+            msg_id: info.id,
+        })
+    }
+}
+
+impl<L: CrcExtra> core::fmt::Debug for Channel<L> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Channel")
+            .field("sysid", &self.sysid)
+            .field("compid", &self.compid)
+            .field("role", &self.role)
+            .field("secure", &self.secure)
+            .field("version", &self.version())
+            .field("seq", &self.seq)
+            .field("handshake", &self.handshake)
+            .field("events", &self.events.len())
+            .field("transmits", &self.transmits.len())
+            .finish_non_exhaustive()
+    }
+}
