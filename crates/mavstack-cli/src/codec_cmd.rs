@@ -90,20 +90,20 @@ fn read_input(file: Option<&Path>) -> Result<Vec<u8>, Failure> {
     Ok(data)
 }
 
-fn parse_key(key: Option<&str>) -> Result<Option<SecretKey>, Failure> {
+pub(crate) fn parse_key(key: Option<&str>) -> Result<Option<SecretKey>, Failure> {
     key.map(|k| SecretKey::from_hex(k).map_err(|e| Failure::Input(anyhow!("--key: {e}"))))
         .transpose()
 }
 
 /// Decoding counts (the JSON of `--count` and `--stats`).
 #[derive(Default)]
-struct Counts {
-    parse: Stats,
-    bad_signature: u64,
+pub(crate) struct Counts {
+    pub(crate) parse: Stats,
+    pub(crate) bad_signature: u64,
 }
 
 impl Counts {
-    fn json(&self) -> String {
+    pub(crate) fn json(&self) -> String {
         let s = &self.parse;
         format!(
             "{{\"frames\":{},\"bytes\":{},\"bad_crc\":{},\"unknown_id\":{},\"bad_signature\":{},\"skipped_bytes\":{}}}",
@@ -113,7 +113,7 @@ impl Counts {
 }
 
 /// A frame as one JSON line, or `None` for an unknown id without `--keep-unknown`.
-fn frame_line(
+pub(crate) fn frame_line(
     out: &mut String,
     frame: &Frame<&[u8]>,
     message: Option<&Message>,

@@ -7,6 +7,7 @@ mod codec_cmd;
 mod dialect_cmd;
 mod fast_count;
 mod json_frames;
+mod link_cmd;
 
 use std::process::ExitCode;
 
@@ -33,6 +34,12 @@ enum Command {
     Decode(codec_cmd::DecodeArgs),
     /// Encode JSON lines (as `decode` prints them) into raw MAVLink frames.
     Encode(codec_cmd::EncodeArgs),
+    /// Print the frames arriving on a link as JSON lines (or a live table with `--table`).
+    Listen(link_cmd::ListenArgs),
+    /// Record a link into a tlog (flushed at least once a second).
+    Record(link_cmd::RecordArgs),
+    /// Send a tlog (original timing) or a raw capture onto a link.
+    Replay(link_cmd::ReplayArgs),
 }
 
 /// A failure with the exit code it maps to.
@@ -66,6 +73,9 @@ fn main() -> ExitCode {
         Command::Codegen(args) => dialect_cmd::codegen(&args),
         Command::Decode(args) => codec_cmd::decode(&args),
         Command::Encode(args) => codec_cmd::encode(&args),
+        Command::Listen(args) => link_cmd::listen(&args),
+        Command::Record(args) => link_cmd::record(&args),
+        Command::Replay(args) => link_cmd::replay(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -24,94 +24,17 @@
 //! our output are kept in a temporary directory whose path is printed. `MAVSTACK_INTEROP_SEED`
 //! (added to each test's own seed) and `MAVSTACK_INTEROP_FRAMES` vary the corpus.
 
+mod support;
+
 use std::ffi::{OsStr, OsString};
+
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
-use std::sync::OnceLock;
+use support::{require_pymavlink, run_script, text};
 
 /// The signing key of the signed corpora (an arbitrary test key).
 const KEY: &str = "5f1e2d3c4b5a69788796a5b4c3d2e1f00f1e2d3c4b5a69788796a5b4c3d2e1f0";
-/// The pymavlink release the expectations come from.
-const PYMAVLINK: &str = "2.4.50";
-
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../..")
-        .canonicalize()
-        .expect("workspace root")
-}
-
-fn script(name: &str) -> PathBuf {
-    workspace().join("tests-interop").join(name)
-}
-
-fn python() -> PathBuf {
-    std::env::var_os("MAVSTACK_PYTHON")
-        .filter(|p| !p.is_empty())
-        .map_or_else(|| workspace().join(".venv/bin/python"), PathBuf::from)
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
-
-/// Fails (never skips) unless the python runs and has pymavlink 2.4.50; checked once.
-fn require_pymavlink() {
-    static CHECKED: OnceLock<Result<(), String>> = OnceLock::new();
-    let checked = CHECKED.get_or_init(|| {
-        let py = python();
-        let probe = "from importlib.metadata import version; import pymavlink.dialects.v20.all; \
-                     print(version('pymavlink'))";
-        let out = Command::new(&py).args(["-c", probe]).output().map_err(|e| {
-            format!(
-                "cannot run python {}: {e}. Run scripts/setup-peers.sh or set MAVSTACK_PYTHON",
-                py.display()
-            )
-        })?;
-        if !out.status.success() {
-            return Err(format!(
-                "python {} has no usable pymavlink: {}. Run scripts/setup-peers.sh or set MAVSTACK_PYTHON",
-                py.display(),
-                text(&out.stderr).trim()
-            ));
-        }
-        let version = text(&out.stdout).trim().to_owned();
-        if version != PYMAVLINK {
-            return Err(format!(
-                "python {} has pymavlink {version}, the expectations need {PYMAVLINK}. Run scripts/setup-peers.sh",
-                py.display()
-            ));
-        }
-        Ok(())
-    });
-    if let Err(e) = checked {
-        panic!("interop tests need pymavlink: {e}");
-    }
-}
-
-/// Runs a harness script; panics with its output unless it succeeds.
-fn run_script(name: &str, args: &[&OsStr]) -> String {
-    let py = python();
-    let out = Command::new(&py)
-        .arg(script(name))
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run {} {name}: {e}", py.display()));
-    let stdout = text(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{name} {} failed ({}):\n{stdout}{}",
-        args.iter()
-            .map(|a| a.to_string_lossy())
-            .collect::<Vec<_>>()
-            .join(" "),
-        out.status,
-        text(&out.stderr)
-    );
-    stdout
-}
-
 /// Runs `mavstack ARGS`, with `stdin` fed to it when given.
 fn mavstack(args: &[&OsStr], stdin: Option<Vec<u8>>) -> Output {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_mavstack"));

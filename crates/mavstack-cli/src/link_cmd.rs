@@ -1,0 +1,551 @@
+//! `mavstack listen`, `record` and `replay`: live links to JSON lines or a table, links to
+//! tlogs, and tlogs (or raw captures) back onto links with their original timing.
+
+use std::collections::BTreeMap;
+use std::io::{self, IsTerminal as _, Write as _};
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use anyhow::{Context as _, anyhow};
+use clap::Args;
+use core::time::Duration;
+use mavstack_core::parse::{Item, SliceParser};
+use mavstack_core::wire::Frame;
+use mavstack_dialect::Dialect;
+use mavstack_transport::conn::FileFormat;
+use mavstack_transport::frame::FrameStats;
+use mavstack_transport::{
+    ConnSpec, Connection, FileMode, FrameBuf, FrameCommand, FrameEvent, FrameProtocol, Options,
+    tlog,
+};
+use tokio::time::Instant;
+
+use crate::Failure;
+use crate::codec_cmd::{Counts, frame_line, parse_key};
+
+/// The options every link command shares.
+#[derive(Debug, Args)]
+pub(crate) struct DialectArg {
+    /// A built-in dialect name or a path to an XML file.
+    #[arg(long, default_value = "ardupilotmega")]
+    dialect: String,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct ListenArgs {
+    /// Where to listen: udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT, tcpin:HOST:PORT,
+    /// serial:/dev/ttyUSB0:57600, file:PATH, or the URL forms (udp://:14550, ...).
+    conn: String,
+    #[command(flatten)]
+    dialect: DialectArg,
+    /// Signing key (64 hex digits): report each signed frame's signature as valid or invalid.
+    #[arg(long)]
+    key: Option<String>,
+    /// Also print frames of unknown message ids (`"name":null` and `"payload_hex"`).
+    #[arg(long)]
+    keep_unknown: bool,
+    /// A live table of the messages seen, with counts and rates, instead of JSON lines.
+    #[arg(long)]
+    table: bool,
+    /// Only these messages (names, comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    filter: Vec<String>,
+    /// Only frames from this system id.
+    #[arg(long)]
+    sysid: Option<u8>,
+    /// Print counts to stderr at the end.
+    #[arg(long)]
+    stats: bool,
+    /// Stop after this many frames (after filtering).
+    #[arg(long)]
+    count: Option<u64>,
+    /// Stop after this many seconds.
+    #[arg(long)]
+    duration: Option<f64>,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct RecordArgs {
+    /// The link to record (as for `listen`).
+    conn: String,
+    /// The tlog to write (created or truncated).
+    file: PathBuf,
+    #[command(flatten)]
+    dialect: DialectArg,
+    /// Stop after this many frames.
+    #[arg(long)]
+    count: Option<u64>,
+    /// Stop after this many seconds.
+    #[arg(long)]
+    duration: Option<f64>,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct ReplayArgs {
+    /// A tlog (original timing) or a raw capture (`--raw`, or a name not ending in .tlog:
+    /// sent as fast as the link takes it).
+    file: PathBuf,
+    /// Where to send it (as for `listen`; udpout:HOST:PORT to reach a listener).
+    conn: String,
+    #[command(flatten)]
+    dialect: DialectArg,
+    /// Playback speed: 2 plays twice as fast; 0 sends as fast as possible.
+    #[arg(long, default_value_t = 1.0)]
+    speed: f64,
+    /// Start again from the beginning at the end, until interrupted.
+    #[arg(long = "loop")]
+    repeat: bool,
+    /// Read the file as a raw stream even if its name ends in `.tlog`.
+    #[arg(long)]
+    raw: bool,
+}
+
+/// Opens `conn` with the frame protocol over `dialect`'s CRC_EXTRA values.
+async fn open(
+    conn: &str,
+    dialect: &Arc<Dialect>,
+    keep_unknown: bool,
+    mode: FileMode,
+) -> Result<Connection<FrameProtocol<impl Fn(u32) -> Option<u8> + Send + 'static>>, Failure> {
+    let spec: ConnSpec = conn.parse().map_err(|e| Failure::Input(anyhow!("{e}")))?;
+    let lookup = {
+        let dialect = Arc::clone(dialect);
+        move |id: u32| dialect.message(id).map(|m| m.crc_extra)
+    };
+    let protocol = FrameProtocol::new(lookup)
+        .keep_unknown(keep_unknown)
+        .peer_events(false);
+    let mut options = Options::default();
+    options.file_mode = mode;
+    Connection::open_with(&spec, protocol, &options)
+        .await
+        .map_err(|e| Failure::Other(anyhow!("{e}")))
+}
+
+fn load_dialect(name: &str) -> Result<Arc<Dialect>, Failure> {
+    crate::dialect_cmd::load(name).map(Arc::new)
+}
+
+fn runtime() -> Result<tokio::runtime::Runtime, Failure> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")
+        .map_err(Failure::Other)
+}
+
+/// Resolves when the process is asked to stop (SIGINT or SIGTERM).
+async fn interrupted() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        match signal(SignalKind::terminate()) {
+            Ok(mut term) => {
+                tokio::select! {
+                    _ = tokio::signal::ctrl_c() => {}
+                    _ = term.recv() => {}
+                }
+            }
+            Err(_) => {
+                let _ = tokio::signal::ctrl_c().await;
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = tokio::signal::ctrl_c().await;
+    }
+}
+
+/// When a command with `--duration` must stop.
+fn deadline(duration: Option<f64>) -> Result<Option<Instant>, Failure> {
+    duration
+        .map(|s| {
+            Duration::try_from_secs_f64(s)
+                .map(|d| Instant::now() + d)
+                .map_err(|_| Failure::Input(anyhow!("--duration: {s} is not a number of seconds")))
+        })
+        .transpose()
+}
+
+async fn sleep_until_opt(at: Option<Instant>) {
+    match at {
+        Some(at) => tokio::time::sleep_until(at).await,
+        None => core::future::pending().await,
+    }
+}
+
+fn counts_of(stats: &FrameStats, bad_signature: u64) -> Counts {
+    let mut counts = Counts::default();
+    counts.parse.frames = stats.frames;
+    counts.parse.bytes = stats.bytes;
+    counts.parse.bad_crc = stats.bad_crc;
+    counts.parse.unknown_id = stats.unknown_id;
+    counts.parse.skipped_bytes = stats.skipped_bytes;
+    counts.parse.bad_incompat = stats.bad_incompat;
+    counts.bad_signature = bad_signature;
+    counts
+}
+
+/// One row of the `--table` view.
+#[derive(Default)]
+struct Row {
+    count: u64,
+    /// The count when the table was last drawn, for the rate.
+    shown: u64,
+    rate: f64,
+    version: u8,
+}
+
+/// The messages seen, by (sysid, compid, msgid).
+struct Table {
+    rows: BTreeMap<(u8, u8, u32), Row>,
+    drawn: Instant,
+    terminal: bool,
+}
+
+impl Table {
+    fn new() -> Self {
+        Self {
+            rows: BTreeMap::new(),
+            drawn: Instant::now(),
+            terminal: io::stdout().is_terminal(),
+        }
+    }
+
+    fn add(&mut self, frame: &Frame<&[u8]>) {
+        let row = self
+            .rows
+            .entry((frame.sysid(), frame.compid(), frame.msg_id()))
+            .or_default();
+        row.count += 1;
+        row.version = frame.version().number();
+    }
+
+    fn draw(&mut self, dialect: &Dialect, out: &mut impl io::Write) -> io::Result<()> {
+        let elapsed = self.drawn.elapsed().as_secs_f64().max(1e-3);
+        self.drawn = Instant::now();
+        let mut text = String::new();
+        if self.terminal {
+            text.push_str("\x1b[H\x1b[2J");
+        }
+        text.push_str(
+            "sysid compid  msgid name                              v     count    rate/s\n",
+        );
+        for (&(sysid, compid, msgid), row) in &mut self.rows {
+            row.rate = (row.count - row.shown) as f64 / elapsed;
+            row.shown = row.count;
+            let name = dialect.message(msgid).map_or("?", |m| m.name.as_str());
+            text.push_str(&format!(
+                "{sysid:>5} {compid:>6} {msgid:>6} {name:<33} {} {:>9} {:>9.1}\n",
+                row.version, row.count, row.rate
+            ));
+        }
+        if !self.terminal {
+            text.push('\n');
+        }
+        out.write_all(text.as_bytes())?;
+        out.flush()
+    }
+}
+
+pub(crate) fn listen(args: &ListenArgs) -> Result<(), Failure> {
+    let key = parse_key(args.key.as_deref())?;
+    let dialect = load_dialect(&args.dialect.dialect)?;
+    let filter: Vec<u32> = args
+        .filter
+        .iter()
+        .filter(|n| !n.is_empty())
+        .map(|name| {
+            dialect
+                .message_by_name(&name.to_ascii_uppercase())
+                .map(|m| m.id)
+                .ok_or_else(|| {
+                    Failure::Input(anyhow!(
+                        "--filter: no message {name} in dialect {}",
+                        dialect.name
+                    ))
+                })
+        })
+        .collect::<Result<_, _>>()?;
+    let until = deadline(args.duration)?;
+    let with_ts = matches!(
+        args.conn.parse::<ConnSpec>(),
+        Ok(ConnSpec::File {
+            format: FileFormat::Tlog,
+            ..
+        })
+    );
+    runtime()?.block_on(async {
+        let mut conn = open(&args.conn, &dialect, args.keep_unknown, FileMode::Read).await?;
+        let stdout = io::stdout();
+        let mut sink = io::BufWriter::with_capacity(1 << 16, stdout.lock());
+        let mut counts = Counts::default();
+        let mut line = String::with_capacity(4096);
+        let mut table = args.table.then(Table::new);
+        let mut printed = 0u64;
+        let mut batch = Vec::with_capacity(1024);
+        let mut redraw = tokio::time::interval(Duration::from_secs(1));
+        let stop = interrupted();
+        tokio::pin!(stop);
+        'run: loop {
+            tokio::select! {
+                n = conn.recv_many(&mut batch, 1024) => {
+                    if n == 0 {
+                        break 'run;
+                    }
+                }
+                () = &mut stop => break 'run,
+                () = sleep_until_opt(until) => break 'run,
+                _ = redraw.tick(), if table.is_some() => {
+                    if let Some(t) = table.as_mut() {
+                        t.draw(&dialect, &mut sink).context("writing output")?;
+                    }
+                    continue;
+                }
+            }
+            for event in batch.drain(..) {
+                let (received, known) = match event {
+                    FrameEvent::Frame(f) => (f, true),
+                    FrameEvent::Unknown(f) => (f, false),
+                    _ => continue,
+                };
+                let frame = received.frame.frame();
+                if args.sysid.is_some_and(|s| s != frame.sysid())
+                    || (!filter.is_empty() && !filter.contains(&frame.msg_id()))
+                {
+                    continue;
+                }
+                if let Some(t) = table.as_mut() {
+                    t.add(&frame);
+                } else {
+                    line.clear();
+                    frame_line(
+                        &mut line,
+                        &frame,
+                        dialect.message(frame.msg_id()).filter(|_| known),
+                        with_ts.then(|| received.time.as_micros()),
+                        key.as_ref(),
+                        &mut counts,
+                    );
+                    sink.write_all(line.as_bytes()).context("writing output")?;
+                }
+                printed += 1;
+                if args.count.is_some_and(|c| printed >= c) {
+                    break 'run;
+                }
+            }
+            if table.is_none() {
+                sink.flush().context("writing output")?;
+            }
+        }
+        if let Some(t) = table.as_mut() {
+            t.draw(&dialect, &mut sink).context("writing output")?;
+        }
+        sink.flush().context("writing output")?;
+        let stats = conn.stats();
+        if args.stats {
+            let counts = counts_of(&stats.protocol, counts.bad_signature);
+            eprintln!("{}", counts.json());
+        }
+        conn.close()
+            .await
+            .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+        Ok(())
+    })
+}
+
+/// A live line on a terminal (stderr), at most five times a second.
+struct Status {
+    on: bool,
+    shown: Instant,
+}
+
+impl Status {
+    fn new() -> Self {
+        Self {
+            on: io::stderr().is_terminal(),
+            shown: Instant::now(),
+        }
+    }
+
+    fn show(&mut self, text: impl FnOnce() -> String) {
+        if self.on && self.shown.elapsed() >= Duration::from_millis(200) {
+            self.shown = Instant::now();
+            eprint!("\r\x1b[2K{}", text());
+        }
+    }
+
+    fn clear(&self) {
+        if self.on {
+            eprint!("\r\x1b[2K");
+        }
+    }
+}
+
+pub(crate) fn record(args: &RecordArgs) -> Result<(), Failure> {
+    let dialect = load_dialect(&args.dialect.dialect)?;
+    let until = deadline(args.duration)?;
+    let file = std::fs::File::create(&args.file)
+        .map_err(|e| Failure::Other(anyhow!("cannot create {}: {e}", args.file.display())))?;
+    let mut writer = tlog::Writer::new(io::BufWriter::with_capacity(1 << 16, file));
+    runtime()?.block_on(async {
+        // Unknown ids are recorded too: a recorder keeps everything that frames correctly.
+        let mut conn = open(&args.conn, &dialect, true, FileMode::Read).await?;
+        eprintln!("recording {} to {}", args.conn, args.file.display());
+        let mut batch = Vec::with_capacity(1024);
+        let mut flush = tokio::time::interval(Duration::from_millis(500));
+        let mut status = Status::new();
+        let stop = interrupted();
+        tokio::pin!(stop);
+        let mut recorded = 0u64;
+        let write_failed =
+            |e: io::Error| Failure::Other(anyhow!("writing {}: {e}", args.file.display()));
+        'run: loop {
+            tokio::select! {
+                n = conn.recv_many(&mut batch, 1024) => {
+                    if n == 0 {
+                        break 'run;
+                    }
+                }
+                () = &mut stop => break 'run,
+                () = sleep_until_opt(until) => break 'run,
+                _ = flush.tick() => {
+                    writer.flush_if_due().map_err(write_failed)?;
+                    continue;
+                }
+            }
+            for event in batch.drain(..) {
+                let (FrameEvent::Frame(f) | FrameEvent::Unknown(f)) = event else {
+                    continue;
+                };
+                writer
+                    .write_record(f.time.as_micros(), f.frame.as_bytes())
+                    .map_err(write_failed)?;
+                recorded += 1;
+                if args.count.is_some_and(|c| recorded >= c) {
+                    break 'run;
+                }
+            }
+            writer.flush_if_due().map_err(write_failed)?;
+            status.show(|| format!("recording: {recorded} frames"));
+        }
+        writer.flush().map_err(write_failed)?;
+        status.clear();
+        eprintln!("recorded {recorded} frames to {}", args.file.display());
+        conn.close()
+            .await
+            .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+        Ok(())
+    })
+}
+
+/// The frames of the file to replay, with their timestamps (none for a raw capture).
+fn replay_frames(
+    args: &ReplayArgs,
+    dialect: &Arc<Dialect>,
+) -> Result<Vec<(Option<u64>, FrameBuf)>, Failure> {
+    let data = std::fs::read(&args.file)
+        .map_err(|e| Failure::Input(anyhow!("cannot read {}: {e}", args.file.display())))?;
+    let is_tlog = !args.raw && FileFormat::from_path(&args.file) == FileFormat::Tlog;
+    let mut frames = Vec::new();
+    if is_tlog {
+        let lookup = {
+            let dialect = Arc::clone(dialect);
+            move |id: u32| dialect.message(id).map(|m| m.crc_extra)
+        };
+        let mut reader = tlog::Reader::new(&data[..]).with_crc_extra(lookup);
+        while let Some((ts, bytes)) = reader.read_record().context("reading the tlog")? {
+            if let Ok(frame) = FrameBuf::new(bytes) {
+                frames.push((Some(ts), frame));
+            }
+        }
+    } else {
+        let lookup = |id: u32| dialect.message(id).map(|m| m.crc_extra);
+        for item in SliceParser::new(&data, lookup) {
+            let (Item::Frame(f) | Item::Unknown(f)) = item;
+            if let Ok(frame) = FrameBuf::new(f.as_bytes()) {
+                frames.push((None, frame));
+            }
+        }
+    }
+    Ok(frames)
+}
+
+pub(crate) fn replay(args: &ReplayArgs) -> Result<(), Failure> {
+    if !(args.speed >= 0.0 && args.speed.is_finite()) {
+        return Err(Failure::Input(anyhow!(
+            "--speed: {} is not a speed (0 or more)",
+            args.speed
+        )));
+    }
+    let dialect = load_dialect(&args.dialect.dialect)?;
+    let frames = replay_frames(args, &dialect)?;
+    if frames.is_empty() {
+        return Err(Failure::Input(anyhow!(
+            "{}: no frames to replay",
+            args.file.display()
+        )));
+    }
+    runtime()?.block_on(async {
+        let conn = open(&args.conn, &dialect, false, FileMode::Write).await?;
+        let mut status = Status::new();
+        let stop = interrupted();
+        tokio::pin!(stop);
+        // A server (udpin, tcpin) has no one to send to until a peer shows up.
+        let server = matches!(
+            args.conn.parse::<ConnSpec>(),
+            Ok(ConnSpec::UdpIn { .. } | ConnSpec::TcpIn { .. })
+        );
+        if server && conn.peers().is_empty() {
+            eprintln!("waiting for a peer on {}", args.conn);
+            while conn.peers().is_empty() {
+                tokio::select! {
+                    () = tokio::time::sleep(Duration::from_millis(20)) => {}
+                    () = &mut stop => return Ok(()),
+                }
+            }
+        }
+        let mut sent = 0u64;
+        'run: loop {
+            let started = Instant::now();
+            let first = frames.iter().find_map(|(ts, _)| *ts);
+            for (i, (ts, frame)) in frames.iter().enumerate() {
+                if let (Some(ts), Some(first)) = (ts, first)
+                    && args.speed > 0.0
+                {
+                    let offset = ts.saturating_sub(first) as f64 / 1e6 / args.speed;
+                    let at = started + Duration::from_secs_f64(offset);
+                    tokio::select! {
+                        () = tokio::time::sleep_until(at) => {}
+                        () = &mut stop => break 'run,
+                    }
+                }
+                tokio::select! {
+                    r = conn.send(FrameCommand::to_all(*frame)) => {
+                        r.map_err(|e| Failure::Other(anyhow!("{e}")))?;
+                    }
+                    () = &mut stop => break 'run,
+                }
+                sent += 1;
+                status.show(|| {
+                    format!(
+                        "replaying: {:>3}% ({} of {} frames)",
+                        (i + 1) * 100 / frames.len(),
+                        i + 1,
+                        frames.len()
+                    )
+                });
+            }
+            if !args.repeat {
+                break;
+            }
+        }
+        status.clear();
+        conn.close()
+            .await
+            .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+        eprintln!("replayed {sent} frames");
+        Ok(())
+    })
+}
