@@ -126,8 +126,11 @@ fn load_dialect(name: &str) -> Result<Arc<Dialect>, Failure> {
     crate::dialect_cmd::load(name).map(Arc::new)
 }
 
+/// Two workers: the link's driver reads on one while the command formats or writes on the
+/// other, so a busy consumer does not stall the socket.
 fn runtime() -> Result<tokio::runtime::Runtime, Failure> {
-    tokio::runtime::Builder::new_current_thread()
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
         .enable_all()
         .build()
         .context("starting the async runtime")
