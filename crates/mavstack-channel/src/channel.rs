@@ -241,7 +241,10 @@ impl<L: CrcExtra> Channel<L> {
         }
         if let Some(state) = self.handshake.take() {
             let step = state.handle_timeout(now, &self.handshake_config);
-            self.apply_step(step);
+            let (outcome, switch) = self.apply_step(step);
+            for event in [outcome, switch].into_iter().flatten() {
+                self.push_event(event);
+            }
         }
     }
 
