@@ -620,15 +620,16 @@ impl<L: CrcExtra> Channel<L> {
         // unknown id whose checksum could not be checked is only delivered.
         let trusted = known || auth.is_authenticated();
         let mut after: [Option<Event>; EVENTS_PER_FRAME - 1] = [None, None, None, None];
-        let mut answered = false;
+        let mut request = None;
         if trusted {
             self.seqs.record(frame.sysid(), frame.compid(), frame.seq());
             after[0] = self.switch_on_receive(&frame);
         }
         if known {
-            let (a, event) = self.answer_protocol_version_request(&frame);
-            answered = a;
-            after[1] = event;
+            if let Some((answer, event)) = self.answer_protocol_version_request(&frame) {
+                request = Some(answer);
+                after[1] = Some(event);
+            }
             if let Some(state) = self.handshake.take() {
                 let step = state.handle_frame(now, &frame, self.sysid);
                 (after[2], after[3]) = self.apply_step(step);
@@ -639,7 +640,8 @@ impl<L: CrcExtra> Channel<L> {
             received_at: now,
             auth,
             crc_checked: known,
-            answered,
+            answered: request.is_some_and(|a| a != ProtocolVersionAnswer::Ignored),
+            protocol_version_request: request,
         }));
         for event in after.into_iter().flatten() {
             self.push_event(event);
@@ -740,16 +742,18 @@ impl<L: CrcExtra> Channel<L> {
         })
     }
 
-    /// A vehicle's side of the handshake.
-    fn answer_protocol_version_request(&mut self, frame: &OwnedFrame) -> (bool, Option<Event>) {
+    /// A vehicle's side of the handshake: what it did with a request for PROTOCOL_VERSION
+    /// addressed to it, and the event reporting it.
+    fn answer_protocol_version_request(
+        &mut self,
+        frame: &OwnedFrame,
+    ) -> Option<(ProtocolVersionAnswer, Event)> {
         let Role::Vehicle(policy) = self.role else {
-            return (false, None);
+            return None;
         };
-        let Some(cmd) = CommandRequest::from_frame(frame) else {
-            return (false, None);
-        };
+        let cmd = CommandRequest::from_frame(frame)?;
         if !cmd.requests_protocol_version() || !cmd.is_for(self.sysid, self.compid) {
-            return (false, None);
+            return None;
         }
         let to = (frame.sysid(), frame.compid());
         let answer = match (policy.protocol_version, policy.version) {
@@ -790,7 +794,7 @@ impl<L: CrcExtra> Channel<L> {
             encoding: cmd.encoding,
             answer,
         };
-        (answer != ProtocolVersionAnswer::Ignored, Some(event))
+        Some((answer, event))
     }
 
     /// Carries out a handshake transition; returns the events it causes.

@@ -21,6 +21,11 @@ pub enum VehicleVersion {
 }
 
 /// A vehicle's version policy.
+///
+/// The vehicle answers a request for PROTOCOL_VERSION (MAV_CMD_REQUEST_PROTOCOL_VERSION, or
+/// MAV_CMD_REQUEST_MESSAGE with param1 = 300, as COMMAND_LONG or COMMAND_INT) whose target
+/// system is 0 or its own and whose target component is 0 or its own. (PX4 answers whatever
+/// the component; we follow the routing rules.)
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[non_exhaustive]
 pub struct VehiclePolicy {
@@ -82,11 +87,9 @@ pub enum Role {
 /// The setup of one link.
 ///
 /// ```
-/// use mavstack_channel::{Config, VehicleVersion, Role};
+/// use mavstack_channel::{Config, VehicleVersion};
 /// let mut config = Config::vehicle(1, 1);
-/// if let Role::Vehicle(policy) = &mut config.role {
-///     policy.version = VehicleVersion::Mavlink2;
-/// }
+/// config.vehicle_policy_mut().unwrap().version = VehicleVersion::Mavlink2;
 /// config.secure = true; // e.g. a USB link: SETUP_SIGNING is accepted here
 /// assert!(config.validate().is_ok());
 /// ```
@@ -133,6 +136,22 @@ impl Config {
             signing: None,
             secure: false,
             handshake: HandshakeConfig::default(),
+        }
+    }
+
+    /// The vehicle policy, to adjust it (`None` for a ground station).
+    ///
+    /// ```
+    /// use mavstack_channel::{Config, VehicleVersion};
+    /// let mut config = Config::vehicle(1, 1);
+    /// let policy = config.vehicle_policy_mut().unwrap();
+    /// policy.version = VehicleVersion::Mavlink1Only;
+    /// policy.protocol_version = None; // no PROTOCOL_VERSION support: stay silent
+    /// ```
+    pub const fn vehicle_policy_mut(&mut self) -> Option<&mut VehiclePolicy> {
+        match &mut self.role {
+            Role::Vehicle(policy) => Some(policy),
+            Role::GroundStation(_) => None,
         }
     }
 

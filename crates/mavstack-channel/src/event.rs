@@ -152,7 +152,10 @@ pub enum ProtocolVersionAnswer {
 #[derive(Clone, Debug)]
 pub enum SigningSetup {
     /// Signing is now on with this key (the link's only key from now on) and a timestamp at
-    /// least `initial_timestamp`. Store the key if it must survive a restart.
+    /// least `initial_timestamp`. Store the key if it must survive a restart. A link that did
+    /// not sign before gets link id 0, the wall clock of [`crate::WallClock::InstantIsUnix`]
+    /// and the default allow-list; call [`crate::Channel::set_signing`] with this key to
+    /// choose otherwise.
     Enabled {
         /// The new key.
         key: SecretKey,

@@ -10,6 +10,8 @@ use mavstack_core::message::{Message, MessageSet, UnknownMessage};
 use mavstack_core::time::Instant;
 use mavstack_core::wire::{self, Frame, MAX_FRAME_LEN, Signature, Version};
 
+use crate::event::ProtocolVersionAnswer;
+
 /// One complete frame, copied out of the input: up to [`MAX_FRAME_LEN`] bytes, no heap.
 ///
 /// ```
@@ -186,6 +188,12 @@ pub struct ReceivedFrame {
     /// The channel answered the frame itself (a protocol-version request on a vehicle): the
     /// caller's command handling must not acknowledge it again.
     pub answered: bool,
+    /// On a vehicle, `Some` when the frame is a request for PROTOCOL_VERSION addressed to it
+    /// (MAV_CMD_REQUEST_PROTOCOL_VERSION, or MAV_CMD_REQUEST_MESSAGE with param1 = 300), with
+    /// what the channel did. [`ProtocolVersionAnswer::Ignored`] means the vehicle is
+    /// configured without protocol-version support: the caller's command handling should
+    /// stay silent too, as such a target does.
+    pub protocol_version_request: Option<ProtocolVersionAnswer>,
 }
 
 impl ReceivedFrame {

@@ -282,3 +282,20 @@ fn radio_reports_the_first_mavlink2_frame_once() {
     let _ = radio.handle_input(T0, Side::B, &signed);
     assert_eq!(drain(&mut radio), [(Side::A, false, signed)]);
 }
+
+#[test]
+fn radio_forwards_frames_of_unknown_ids_without_checking_them() {
+    let mut radio = Radio::new(RadioConfig::default());
+    let mut unknown = vec![
+        0xfd, 3, 0, 0, 0, 1, 1, 0xde, 0xbc, 0x0a, 1, 2, 3, 0x12, 0x34,
+    ];
+    let hb = frame(Version::V1, 1, 1, 1, &Heartbeat::default());
+    unknown.extend_from_slice(&hb);
+    assert_eq!(radio.handle_input(T0, Side::A, &unknown), unknown.len());
+    let out: Vec<_> = drain(&mut radio)
+        .into_iter()
+        .map(|(to, _, b)| (to, b))
+        .collect();
+    assert_eq!(out, [(Side::B, unknown[..15].to_vec()), (Side::B, hb)]);
+    assert_eq!(radio.stats().parser[0].unknown_id, 1);
+}

@@ -20,17 +20,13 @@ use util::{Origin, Pair, T0, feed, frame, transmits};
 
 fn vehicle(version: VehicleVersion) -> Config {
     let mut c = Config::vehicle(1, 1);
-    if let Role::Vehicle(p) = &mut c.role {
-        p.version = version;
-    }
+    c.vehicle_policy_mut().unwrap().version = version;
     c
 }
 
 fn silent_vehicle(version: VehicleVersion) -> Config {
     let mut c = vehicle(version);
-    if let Role::Vehicle(p) = &mut c.role {
-        p.protocol_version = None;
-    }
+    c.vehicle_policy_mut().unwrap().protocol_version = None;
     c
 }
 
@@ -237,11 +233,9 @@ fn vehicle_without_protocol_version_support_stays_silent() {
     // The requests reach the application, unanswered, for its own command handling.
     let frames = Pair::frames(&p.vehicle_events);
     assert!(!frames.is_empty());
-    assert!(
-        frames
-            .iter()
-            .all(|f| f.msg_id() == CommandLong::ID && !f.answered)
-    );
+    assert!(frames.iter().all(|f| f.msg_id() == CommandLong::ID
+        && !f.answered
+        && f.protocol_version_request == Some(ProtocolVersionAnswer::Ignored)));
     assert!(p.vehicle_events.iter().any(|e| matches!(
         e,
         Event::ProtocolVersionRequested {
@@ -278,6 +272,8 @@ fn vehicle_answers_requests_for_itself_or_broadcast_only() {
             panic!("{events:?}")
         };
         assert_eq!(f.answered, answered, "target {ts}/{tc}");
+        let expected = answered.then_some(ProtocolVersionAnswer::Accepted);
+        assert_eq!(f.protocol_version_request, expected);
         assert_eq!(transmits(&mut v, now).len(), if answered { 2 } else { 0 });
     }
 }
@@ -356,6 +352,18 @@ fn gcs_ignores_autopilot_version_without_capability_flag() {
         LinkVersion::Mavlink1,
         "32768 is MISSION_RALLY, not MAVLINK2"
     );
+}
+
+#[test]
+fn heartbeat_mavlink_version_field_does_not_decide_the_version() {
+    // HEARTBEAT.mavlink_version is the XML minor version (3), not "1 or 2".
+    let mut g = Channel::new(gcs(GroundPolicy::Automatic)).unwrap();
+    let hb = Heartbeat {
+        mavlink_version: 3,
+        ..Heartbeat::default()
+    };
+    let _ = feed(&mut g, T0, &frame(Version::V1, 0, 1, 1, &hb));
+    assert_eq!(g.version(), LinkVersion::Mavlink1);
 }
 
 #[test]
