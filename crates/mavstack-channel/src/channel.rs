@@ -531,7 +531,9 @@ impl<L: CrcExtra> Channel<L> {
     }
 
     /// Turns signing on (the link sends signed MAVLink 2 from the next frame) or off (the
-    /// link sends unsigned MAVLink 2). A [`Event::VersionChanged`] reports the change.
+    /// link sends unsigned MAVLink 2), or changes its settings. A [`Event::VersionChanged`]
+    /// reports a change of version. When the link already signs, its timestamp and replay
+    /// table carry over: timestamps keep rising whatever `initial_timestamp` says.
     ///
     /// # Errors
     /// [`ConfigError::SigningNeedsMavlink2`] on a vehicle with MAVLink 2 disabled.
@@ -545,7 +547,20 @@ impl<L: CrcExtra> Channel<L> {
         } else {
             SwitchCause::SigningDisabled
         };
-        self.signing = signing.map(LinkSigning::new);
+        let previous = self.signing.take();
+        self.signing = signing.map(|mut config| {
+            if let Some(p) = &previous {
+                config.initial_timestamp = config
+                    .initial_timestamp
+                    .max(p.last_timestamp().saturating_add(1))
+                    .min(MAX_TIMESTAMP);
+            }
+            let mut next = LinkSigning::new(config);
+            if let Some(p) = previous {
+                next.replay = p.replay;
+            }
+            next
+        });
         if self.signing.is_some() || before == LinkVersion::SignedMavlink2 {
             self.out_version = Version::V2;
         }

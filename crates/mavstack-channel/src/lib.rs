@@ -116,6 +116,17 @@
 //! [`channel::TRANSMIT_CAPACITY`] (8), radio queue [`radio::RADIO_QUEUE`] (8 per side). What
 //! does not fit is counted, never silently lost (see each constant).
 //!
+//! ## Limitations
+//! - The replay table belongs to one channel; the C library shares one across all links to
+//!   stop cross-link replay (see the [`manual`]).
+//! - Input is a byte stream: a UDP datagram that ends inside a false start (a stray start
+//!   marker claiming more bytes than arrive) holds the frames behind it until the next
+//!   datagram's bytes resolve it. Nothing is lost, but it is late.
+//! - Sequence statistics assume a link that does not reorder (see [`seq`]).
+//! - Capacities are fixed at compile time; there is no `alloc` feature for larger tables.
+//! - The MAVProxy trick of a ground station copying the vehicle's link id is not done:
+//!   configure distinct link ids instead.
+//!
 //! ## Features
 //! - `std` (default): links `std` for host conveniences; nothing in the crate needs it.
 //!

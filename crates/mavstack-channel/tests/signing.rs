@@ -792,3 +792,42 @@ fn no_genuine_frame_is_rejected_under_loss_duplication_and_attack() {
         );
     }
 }
+
+#[test]
+fn changing_signing_settings_keeps_timestamps_rising_and_replay_state() {
+    let mut config = signed_config(Config::vehicle(1, 1), 1);
+    config.signing.as_mut().unwrap().wall_clock = WallClock::None;
+    let mut v = Channel::new(config.clone()).unwrap();
+    let mut buf = [0u8; MAX_FRAME_LEN];
+    for _ in 0..5 {
+        let _ = v.send(T0, &Heartbeat::default(), &mut buf).unwrap();
+    }
+    let _ = feed(
+        &mut v,
+        T0,
+        &signed_frame(0, 255, 190, &Heartbeat::default(), &key(), 0, 1_000),
+    );
+    let last = v.signing_timestamp().unwrap();
+    // New settings (a second key) with a stale initial timestamp.
+    let mut new = config.signing.clone().unwrap();
+    new.add_key(wrong_key()).unwrap();
+    new.initial_timestamp = 0;
+    v.set_signing(Some(new)).unwrap();
+    let t = v.send(T0, &Heartbeat::default(), &mut buf).unwrap();
+    let ts = mavstack_channel::OwnedFrame::new(&buf[..t.len])
+        .unwrap()
+        .signature()
+        .unwrap()
+        .timestamp;
+    assert!(ts > last);
+    // The replayed frame of the old settings is still a replay.
+    let events = feed(
+        &mut v,
+        T0,
+        &signed_frame(0, 255, 190, &Heartbeat::default(), &key(), 0, 1_000),
+    );
+    assert!(matches!(
+        rejected(&events)[..],
+        [RejectReason::Replayed { .. }]
+    ));
+}
