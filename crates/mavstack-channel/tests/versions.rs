@@ -626,9 +626,8 @@ fn handshake_timeout_when_the_path_drops_mavlink2_falls_back_to_mavlink1() {
 
 #[test]
 fn handshake_timeout_with_an_ack_reports_that_the_target_answered() {
-    // The vehicle acknowledges in MAVLink 1 (its link is still MAVLink 1 because the request
-    // came in MAVLink 1 from some other requester's framing), but its MAVLink 2 answer never
-    // gets through.
+    // The target's MAVLink 1 ACK ACCEPTED gets through, its MAVLink 2 answer never does (a
+    // path that carries MAVLink 1 only, as far as the answer is concerned).
     let mut g = Channel::new(gcs(GroundPolicy::Automatic)).unwrap();
     g.start_handshake(
         T0,
