@@ -128,7 +128,7 @@ fn load_dialect(name: &str) -> Result<Arc<Dialect>, Failure> {
 
 /// Two workers: the link's driver reads on one while the command formats or writes on the
 /// other, so a busy consumer does not stall the socket.
-fn runtime() -> Result<tokio::runtime::Runtime, Failure> {
+pub(crate) fn runtime() -> Result<tokio::runtime::Runtime, Failure> {
     tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -138,7 +138,7 @@ fn runtime() -> Result<tokio::runtime::Runtime, Failure> {
 }
 
 /// Resolves when the process is asked to stop (SIGINT or SIGTERM).
-async fn interrupted() {
+pub(crate) async fn interrupted() {
     #[cfg(unix)]
     {
         use tokio::signal::unix::{SignalKind, signal};

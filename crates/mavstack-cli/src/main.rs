@@ -8,6 +8,7 @@ mod dialect_cmd;
 mod fast_count;
 mod json_frames;
 mod link_cmd;
+mod version_cmd;
 
 use std::process::ExitCode;
 
@@ -40,6 +41,12 @@ enum Command {
     Record(link_cmd::RecordArgs),
     /// Send a tlog (original timing) or a raw capture onto a link.
     Replay(link_cmd::ReplayArgs),
+    /// A simulated vehicle that follows the MAVLink version rules (runs until interrupted).
+    Vehicle(version_cmd::VehicleArgs),
+    /// Find the systems on a link, run the MAVLink 2 handshake, report each as JSON.
+    Probe(version_cmd::ProbeArgs),
+    /// A semi-transparent radio between a ground station (A) and a vehicle (B).
+    Radio(version_cmd::RadioArgs),
 }
 
 /// A failure with the exit code it maps to.
@@ -76,6 +83,9 @@ fn main() -> ExitCode {
         Command::Listen(args) => link_cmd::listen(&args),
         Command::Record(args) => link_cmd::record(&args),
         Command::Replay(args) => link_cmd::replay(&args),
+        Command::Vehicle(args) => version_cmd::vehicle(&args),
+        Command::Probe(args) => version_cmd::probe(&args),
+        Command::Radio(args) => version_cmd::radio(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

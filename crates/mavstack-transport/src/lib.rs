@@ -79,6 +79,7 @@
 #![forbid(unsafe_code)]
 
 pub mod blocking;
+pub mod channel_protocol;
 pub mod clock;
 pub mod conn;
 mod connection;

@@ -1,0 +1,750 @@
+//! `mavstack vehicle`, `probe` and `radio`: the MAVLink version rules on real links.
+//!
+//! - `vehicle CONN`: a simulated vehicle: HEARTBEAT at 1 Hz, AUTOPILOT_VERSION on request,
+//!   the MAVLink 2 handshake answered (or refused, or ignored) by its link's channel, signing.
+//! - `probe CONN`: the ground station's side: find the systems on a link, ask for
+//!   AUTOPILOT_VERSION, run the handshake, print one JSON report per system.
+//! - `radio CONN_A CONN_B`: a semi-transparent radio forwarding frames between a ground
+//!   station (A) and a vehicle (B) and injecting RADIO_STATUS, MAVLink 1 until it has seen
+//!   MAVLink 2.
+//!
+//! The version logic lives in `mavstack-channel`; these commands only move frames and decide
+//! what to answer.
+
+use core::time::Duration;
+use std::collections::BTreeMap;
+
+use anyhow::anyhow;
+use clap::{Args, ValueEnum};
+use mavstack_channel::{
+    Authentication, CommandEncoding, Config, Event, HandshakeMethod, HandshakeResult, Radio,
+    RadioConfig, Side, SigningConfig, Target, VehicleVersion,
+};
+use mavstack_core::Message;
+use mavstack_core::signing::SecretKey;
+use mavstack_core::wire::{MAX_FRAME_LEN, Version};
+use mavstack_dialects::common::{
+    AutopilotVersion, CommandAck, CommandInt, CommandLong, Heartbeat, MavAutopilot, MavCmd,
+    MavModeFlag, MavProtocolCapability, MavResult, MavState, MavType,
+};
+use mavstack_transport::channel_protocol::{
+    ChannelCommand, ChannelEvent, ChannelEventKind, ChannelProtocol, RawMessage,
+};
+use mavstack_transport::{
+    ConnSpec, Connection, Dest, FrameBuf, FrameCommand, FrameEvent, FrameProtocol, PeerId, clock,
+};
+use tokio::sync::mpsc;
+use tokio::time::Instant;
+
+use crate::Failure;
+use crate::link_cmd::{interrupted, runtime};
+
+/// The autopilot a simulated vehicle claims to be.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub(crate) enum Autopilot {
+    /// ArduPilot (MAV_AUTOPILOT_ARDUPILOTMEGA, 3).
+    Ardupilot,
+    /// PX4 (MAV_AUTOPILOT_PX4, 12).
+    Px4,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct VehicleArgs {
+    /// The vehicle's side of the link: udpout:HOST:PORT sends to a ground station listening
+    /// there, udpin:HOST:PORT waits for one, tcpin:HOST:PORT serves TCP.
+    conn: String,
+    /// System id.
+    #[arg(long, default_value_t = 1)]
+    sysid: u8,
+    /// Component id.
+    #[arg(long, default_value_t = 1)]
+    compid: u8,
+    /// Which autopilot to claim.
+    #[arg(long, value_enum, default_value = "ardupilot")]
+    autopilot: Autopilot,
+    /// MAVLink 1 only: refuse the handshake (failure COMMAND_ACK), never switch.
+    #[arg(long, conflicts_with_all = ["start_mavlink2", "sign_key"])]
+    mavlink1_only: bool,
+    /// Send MAVLink 2 from the start (default: MAVLink 1 until a MAVLink 2 frame arrives).
+    #[arg(long)]
+    start_mavlink2: bool,
+    /// Sign every frame with this key (64 hex digits) and accept only signed frames
+    /// (RADIO_STATUS excepted); signed MAVLink 2 from the first frame.
+    #[arg(long)]
+    sign_key: Option<String>,
+    /// Signing link id.
+    #[arg(long, default_value_t = 0)]
+    link_id: u8,
+    /// Never answer the handshake (no PROTOCOL_VERSION support): neither ACK nor answer.
+    #[arg(long)]
+    no_protocol_version: bool,
+    /// Treat the link as secure (a USB cable): accept SETUP_SIGNING on it.
+    #[arg(long)]
+    secure: bool,
+    /// Print what happens on the link (version changes, handshakes, rejections) to stderr.
+    #[arg(long, short)]
+    verbose: bool,
+}
+
+/// How the probe runs the handshake.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub(crate) enum Method {
+    /// MAV_CMD_REQUEST_MESSAGE with param1 = 300 (PROTOCOL_VERSION).
+    #[value(name = "request-message-300")]
+    RequestMessage300,
+    /// MAV_CMD_REQUEST_PROTOCOL_VERSION.
+    RequestProtocolVersion,
+    /// MAV_CMD_REQUEST_MESSAGE for another message the target sends (`--other-id`, ≥ 256).
+    RequestMessageOther,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct ProbeArgs {
+    /// The ground station's side of the link (udpin:HOST:PORT waits for vehicles,
+    /// udpout:HOST:PORT reaches one listening there, tcp:HOST:PORT, serial:...).
+    conn: String,
+    /// Seconds to wait for the first system.
+    #[arg(long, default_value_t = 5.0)]
+    timeout: f64,
+    /// Handshake request.
+    #[arg(long, value_enum, default_value = "request-message-300")]
+    method: Method,
+    /// With `--method request-message-other`: the message to ask for (id ≥ 256).
+    #[arg(long, default_value_t = 397)]
+    other_id: u32,
+    /// Send the requests as COMMAND_INT instead of COMMAND_LONG.
+    #[arg(long)]
+    command_int: bool,
+    /// Our system id.
+    #[arg(long, default_value_t = 255)]
+    sysid: u8,
+    /// Our component id.
+    #[arg(long, default_value_t = 190)]
+    compid: u8,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct RadioArgs {
+    /// The ground station's side.
+    conn_a: String,
+    /// The vehicle's side.
+    conn_b: String,
+    /// Seconds between RADIO_STATUS frames.
+    #[arg(long, default_value_t = 1.0)]
+    interval: f64,
+    /// Print the radio's events to stderr.
+    #[arg(long, short)]
+    verbose: bool,
+}
+
+pub(crate) fn parse_spec(conn: &str) -> Result<ConnSpec, Failure> {
+    conn.parse().map_err(|e| Failure::Input(anyhow!("{e}")))
+}
+
+pub(crate) fn secret_key(hex: &str, what: &str) -> Result<SecretKey, Failure> {
+    SecretKey::from_hex(hex).map_err(|e| Failure::Input(anyhow!("{what}: {e}")))
+}
+
+fn seconds(s: f64, what: &str) -> Result<Duration, Failure> {
+    Duration::try_from_secs_f64(s)
+        .map_err(|_| Failure::Input(anyhow!("{what}: {s} is not a number of seconds")))
+}
+
+/// The vehicle's settings, shared by `mavstack vehicle` and `mavstack demo`.
+#[derive(Clone, Debug)]
+pub(crate) struct VehicleSetup {
+    pub(crate) sysid: u8,
+    pub(crate) compid: u8,
+    pub(crate) autopilot: Autopilot,
+    pub(crate) version: VehicleVersion,
+    pub(crate) signing: Option<SigningConfig>,
+    pub(crate) protocol_version: bool,
+    pub(crate) secure: bool,
+}
+
+impl VehicleSetup {
+    fn config(&self) -> Config {
+        let mut config = Config::vehicle(self.sysid, self.compid);
+        config.signing.clone_from(&self.signing);
+        config.secure = self.secure;
+        if let Some(policy) = config.vehicle_policy_mut() {
+            policy.version = self.version;
+            if !self.protocol_version {
+                policy.protocol_version = None;
+            }
+        }
+        config
+    }
+
+    fn heartbeat(&self) -> Heartbeat {
+        Heartbeat {
+            r#type: MavType::QUADROTOR,
+            autopilot: match self.autopilot {
+                Autopilot::Ardupilot => MavAutopilot::ARDUPILOTMEGA,
+                Autopilot::Px4 => MavAutopilot::PX4,
+            },
+            base_mode: MavModeFlag::CUSTOM_MODE_ENABLED,
+            custom_mode: 0,
+            system_status: MavState::STANDBY,
+            mavlink_version: 3,
+        }
+    }
+
+    fn autopilot_version(&self) -> AutopilotVersion {
+        let mut capabilities = MavProtocolCapability::MISSION_INT
+            | MavProtocolCapability::COMMAND_INT
+            | MavProtocolCapability::PARAM_ENCODE_BYTEWISE;
+        if self.version != VehicleVersion::Mavlink1Only {
+            capabilities |= MavProtocolCapability::MAVLINK2;
+        }
+        AutopilotVersion {
+            capabilities,
+            flight_sw_version: 0x0401_00ff,
+            vendor_id: 0x1209,
+            product_id: 0x5741,
+            uid: 0x6d61_7673_7461_636b,
+            ..AutopilotVersion::default()
+        }
+    }
+}
+
+/// One line of what happened, for `--verbose` and the demo's timeline.
+pub(crate) type Log = Option<mpsc::UnboundedSender<String>>;
+
+fn say(log: &Log, line: impl FnOnce() -> String) {
+    if let Some(tx) = log {
+        let _ = tx.send(line());
+    }
+}
+
+fn version_name(v: Version) -> &'static str {
+    match v {
+        Version::V1 => "MAVLink 1",
+        Version::V2 => "MAVLink 2",
+    }
+}
+
+/// A command addressed to us: (command, param1, confirmation, encoding), or `None`.
+fn command_for(frame: &mavstack_channel::OwnedFrame, sysid: u8) -> Option<(MavCmd, f32)> {
+    let ours = |t: u8| t == 0 || t == sysid;
+    match frame.msg_id() {
+        CommandLong::ID => {
+            let c = CommandLong::decode(frame.payload());
+            ours(c.target_system).then_some((c.command, c.param1))
+        }
+        CommandInt::ID => {
+            let c = CommandInt::decode(frame.payload());
+            ours(c.target_system).then_some((c.command, c.param1))
+        }
+        _ => None,
+    }
+}
+
+fn ack(command: MavCmd, result: MavResult, to_sys: u8, to_comp: u8) -> RawMessage {
+    RawMessage::new(&CommandAck {
+        command,
+        result,
+        target_system: to_sys,
+        target_component: to_comp,
+        ..CommandAck::default()
+    })
+}
+
+/// Runs a simulated vehicle on `spec` until `stop` resolves.
+pub(crate) async fn run_vehicle(
+    setup: VehicleSetup,
+    spec: &ConnSpec,
+    log: Log,
+    stop: impl Future<Output = ()>,
+) -> Result<(), Failure> {
+    let protocol = ChannelProtocol::new(setup.config())
+        .map_err(|e| Failure::Input(anyhow!("vehicle configuration: {e}")))?;
+    let mut conn = Connection::open(spec, protocol)
+        .await
+        .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+    let mut beat = tokio::time::interval(Duration::from_secs(1));
+    tokio::pin!(stop);
+    let send = |dest: Dest, message: RawMessage| ChannelCommand::Send { dest, message };
+    loop {
+        let event: ChannelEvent = tokio::select! {
+            () = &mut stop => break,
+            _ = beat.tick() => {
+                conn.send(ChannelCommand::to_all(RawMessage::new(&setup.heartbeat())))
+                    .await
+                    .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+                continue;
+            }
+            e = conn.recv() => match e {
+                Some(e) => e,
+                None => break,
+            },
+        };
+        let peer = event.peer;
+        let ChannelEventKind::Channel(event) = event.event else {
+            if let ChannelEventKind::CommandFailed(why) = event.event {
+                say(&log, || format!("vehicle: {why}"));
+            }
+            continue;
+        };
+        match event {
+            Event::Frame(rf) => {
+                // Handshake requests are the channel's (answered, refused or ignored).
+                if rf.protocol_version_request.is_some() || rf.answered {
+                    continue;
+                }
+                let Some((command, param1)) = command_for(&rf.frame, setup.sysid) else {
+                    continue;
+                };
+                let (sys, comp) = (rf.frame.sysid(), rf.frame.compid());
+                let wants_version = command == MavCmd::REQUEST_AUTOPILOT_CAPABILITIES
+                    || (command == MavCmd::REQUEST_MESSAGE
+                        && param1 == AutopilotVersion::ID as f32);
+                let dest = Dest::Peer(peer);
+                if wants_version {
+                    say(&log, || {
+                        format!(
+                            "vehicle ← AUTOPILOT_VERSION requested ({})",
+                            version_name(rf.frame.version())
+                        )
+                    });
+                    let reply = [
+                        ack(command, MavResult::ACCEPTED, sys, comp),
+                        RawMessage::new(&setup.autopilot_version()),
+                    ];
+                    for m in reply {
+                        conn.send(send(dest, m))
+                            .await
+                            .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+                    }
+                } else {
+                    conn.send(send(dest, ack(command, MavResult::UNSUPPORTED, sys, comp)))
+                        .await
+                        .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+                }
+            }
+            Event::VersionChanged { from, to, cause } => {
+                say(&log, || {
+                    format!("vehicle: link {from:?} → {to:?} ({cause:?})")
+                });
+            }
+            Event::ProtocolVersionRequested { answer, .. } => {
+                say(&log, || format!("vehicle ← handshake request: {answer:?}"));
+            }
+            Event::Rejected(r) => {
+                say(&log, || {
+                    format!("vehicle ✗ rejected {}: {:?}", r.msg_id, r.reason)
+                });
+            }
+            Event::SigningSetup { setup: s, .. } => {
+                say(&log, || match s {
+                    mavstack_channel::SigningSetup::Enabled { .. } => {
+                        "vehicle: SETUP_SIGNING accepted, link signed from now on".to_owned()
+                    }
+                    mavstack_channel::SigningSetup::Disabled => {
+                        "vehicle: SETUP_SIGNING turned signing off".to_owned()
+                    }
+                });
+            }
+            _ => {}
+        }
+    }
+    conn.close()
+        .await
+        .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+    Ok(())
+}
+
+/// Prints `--verbose` lines to stderr as they come.
+fn stderr_log(on: bool) -> Log {
+    on.then(|| {
+        let (tx, mut rx) = mpsc::unbounded_channel::<String>();
+        tokio::spawn(async move {
+            while let Some(line) = rx.recv().await {
+                eprintln!("{line}");
+            }
+        });
+        tx
+    })
+}
+
+pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
+    let spec = parse_spec(&args.conn)?;
+    let signing = args
+        .sign_key
+        .as_deref()
+        .map(|k| secret_key(k, "--sign-key").map(|key| SigningConfig::new(key, args.link_id)))
+        .transpose()?;
+    if args.sysid == 0 || args.compid == 0 {
+        return Err(Failure::Input(anyhow!(
+            "--sysid and --compid must be 1 to 255"
+        )));
+    }
+    let version = if args.mavlink1_only {
+        VehicleVersion::Mavlink1Only
+    } else if args.start_mavlink2 {
+        VehicleVersion::Mavlink2
+    } else {
+        VehicleVersion::StartMavlink1
+    };
+    let setup = VehicleSetup {
+        sysid: args.sysid,
+        compid: args.compid,
+        autopilot: args.autopilot,
+        version,
+        signing,
+        protocol_version: !args.no_protocol_version,
+        secure: args.secure,
+    };
+    runtime()?.block_on(async {
+        let log = stderr_log(args.verbose);
+        run_vehicle(setup, &spec, log, interrupted()).await
+    })
+}
+
+/// What the probe learnt about one system.
+#[derive(Debug)]
+struct System {
+    peer: PeerId,
+    autopilot: u8,
+    kind: u8,
+    version_before: Version,
+    version_after: Option<Version>,
+    capability: Option<bool>,
+    signed: bool,
+    handshake: Option<&'static str>,
+}
+
+struct Probe {
+    conn: Connection<ChannelProtocol>,
+    systems: BTreeMap<(u8, u8), System>,
+    outcomes: BTreeMap<PeerId, HandshakeResult>,
+    /// Heartbeats seen after each system's handshake ended.
+    after: BTreeMap<(u8, u8), Version>,
+    handshake_done: BTreeMap<(u8, u8), bool>,
+}
+
+impl Probe {
+    async fn send(&self, command: ChannelCommand) -> Result<(), Failure> {
+        self.conn
+            .send(command)
+            .await
+            .map_err(|e| Failure::Other(anyhow!("{e}")))
+    }
+
+    /// Takes events until `until`, recording what they say.
+    async fn pump(&mut self, until: Instant) -> Result<(), Failure> {
+        loop {
+            let event = tokio::select! {
+                () = tokio::time::sleep_until(until) => return Ok(()),
+                e = self.conn.recv() => match e {
+                    Some(e) => e,
+                    None => return Err(Failure::Other(anyhow!("the link closed"))),
+                },
+            };
+            self.note(event);
+        }
+    }
+
+    fn note(&mut self, event: ChannelEvent) {
+        let peer = event.peer;
+        let ChannelEventKind::Channel(event) = event.event else {
+            return;
+        };
+        match event {
+            Event::Frame(rf) => {
+                let f = &rf.frame;
+                let key = (f.sysid(), f.compid());
+                let signed = !matches!(
+                    rf.auth,
+                    Authentication::Unsigned | Authentication::AllowedUnsigned
+                );
+                if f.msg_id() == Heartbeat::ID {
+                    let hb = Heartbeat::decode(f.payload());
+                    if hb.r#type == MavType::GCS {
+                        return;
+                    }
+                    let system = self.systems.entry(key).or_insert(System {
+                        peer,
+                        autopilot: hb.autopilot.0,
+                        kind: hb.r#type.0,
+                        version_before: f.version(),
+                        version_after: None,
+                        capability: None,
+                        signed: false,
+                        handshake: None,
+                    });
+                    system.signed |= signed && f.is_signed();
+                    if self.handshake_done.get(&key).copied().unwrap_or(false) {
+                        self.after.entry(key).or_insert(f.version());
+                    }
+                } else if let Some(system) = self.systems.get_mut(&key) {
+                    system.signed |= f.is_signed();
+                    if f.msg_id() == AutopilotVersion::ID {
+                        let av = AutopilotVersion::decode(f.payload());
+                        system.capability =
+                            Some(av.capabilities.0 & MavProtocolCapability::MAVLINK2.0 != 0);
+                    }
+                }
+            }
+            Event::Handshake(outcome) => {
+                self.outcomes.insert(peer, outcome.result);
+            }
+            _ => {}
+        }
+    }
+}
+
+fn report(key: (u8, u8), s: &System, method: &str) -> String {
+    let v = |v: Version| v.number();
+    let capability = s
+        .capability
+        .map_or_else(|| "null".to_owned(), |c| c.to_string());
+    format!(
+        "{{\"sysid\":{},\"compid\":{},\"autopilot\":{},\"type\":{},\"version_before\":{},\"version_after\":{},\"handshake\":{{\"method\":\"{method}\",\"result\":\"{}\"}},\"mavlink2_capability\":{capability},\"signed\":{}}}",
+        key.0,
+        key.1,
+        s.autopilot,
+        s.kind,
+        v(s.version_before),
+        v(s.version_after.unwrap_or(s.version_before)),
+        s.handshake.unwrap_or("timeout"),
+        s.signed
+    )
+}
+
+pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
+    let spec = parse_spec(&args.conn)?;
+    let wait = seconds(args.timeout, "--timeout")?;
+    if args.method == Method::RequestMessageOther && args.other_id < 256 {
+        return Err(Failure::Input(anyhow!(
+            "--other-id: {} is below 256",
+            args.other_id
+        )));
+    }
+    let method = match args.method {
+        Method::RequestMessage300 => HandshakeMethod::RequestMessage300,
+        Method::RequestProtocolVersion => HandshakeMethod::RequestProtocolVersion,
+        Method::RequestMessageOther => HandshakeMethod::RequestMessageOther {
+            msg_id: args.other_id,
+        },
+    };
+    let encoding = if args.command_int {
+        CommandEncoding::Int
+    } else {
+        CommandEncoding::Long
+    };
+    let config = Config::ground_station(args.sysid, args.compid);
+    let protocol =
+        ChannelProtocol::new(config).map_err(|e| Failure::Input(anyhow!("probe: {e}")))?;
+    runtime()?.block_on(async {
+        let conn = Connection::open(&spec, protocol)
+            .await
+            .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+        let mut probe = Probe {
+            conn,
+            systems: BTreeMap::new(),
+            outcomes: BTreeMap::new(),
+            after: BTreeMap::new(),
+            handshake_done: BTreeMap::new(),
+        };
+        let gcs_heartbeat = RawMessage::new(&Heartbeat {
+            r#type: MavType::GCS,
+            autopilot: MavAutopilot::INVALID,
+            mavlink_version: 3,
+            ..Heartbeat::default()
+        });
+        // 1. Find the systems: heartbeats until the first, then a little longer for others.
+        let give_up = Instant::now() + wait;
+        while probe.systems.is_empty() && Instant::now() < give_up {
+            probe.send(ChannelCommand::to_all(gcs_heartbeat)).await?;
+            let next = (Instant::now() + Duration::from_millis(500)).min(give_up);
+            probe.pump(next).await?;
+        }
+        if probe.systems.is_empty() {
+            probe
+                .conn
+                .close()
+                .await
+                .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+            return Err(Failure::Other(anyhow!(
+                "no system found on {} within {} s",
+                args.conn,
+                args.timeout
+            )));
+        }
+        probe
+            .pump(Instant::now() + Duration::from_millis(1200))
+            .await?;
+        let keys: Vec<(u8, u8)> = probe.systems.keys().copied().collect();
+        let method_name = method.name();
+        for key in keys {
+            let Some(peer) = probe.systems.get(&key).map(|s| s.peer) else {
+                continue;
+            };
+            // 2. AUTOPILOT_VERSION, in the link's current framing.
+            let request = RawMessage::new(&CommandLong {
+                target_system: key.0,
+                target_component: key.1,
+                command: MavCmd::REQUEST_MESSAGE,
+                param1: AutopilotVersion::ID as f32,
+                ..CommandLong::default()
+            });
+            for _ in 0..3 {
+                probe
+                    .send(ChannelCommand::Send {
+                        dest: Dest::Peer(peer),
+                        message: request,
+                    })
+                    .await?;
+                probe
+                    .pump(Instant::now() + Duration::from_millis(400))
+                    .await?;
+                if probe
+                    .systems
+                    .get(&key)
+                    .is_some_and(|s| s.capability.is_some())
+                {
+                    break;
+                }
+            }
+            // 3. The handshake; the channel retries and times out by itself.
+            probe.outcomes.remove(&peer);
+            probe
+                .send(ChannelCommand::StartHandshake {
+                    peer,
+                    target: Target::new(key.0, key.1),
+                    method,
+                    encoding,
+                })
+                .await?;
+            let deadline = Instant::now() + Duration::from_secs(5);
+            while !probe.outcomes.contains_key(&peer) && Instant::now() < deadline {
+                probe
+                    .pump(Instant::now() + Duration::from_millis(100))
+                    .await?;
+            }
+            let result = probe.outcomes.get(&peer).map(HandshakeResult::name);
+            probe.handshake_done.insert(key, true);
+            // 4. The version the system uses now: its next heartbeat.
+            let deadline = Instant::now() + Duration::from_millis(2500);
+            while !probe.after.contains_key(&key) && Instant::now() < deadline {
+                probe.send(ChannelCommand::to_all(gcs_heartbeat)).await?;
+                probe
+                    .pump(Instant::now() + Duration::from_millis(250))
+                    .await?;
+            }
+            if let Some(system) = probe.systems.get_mut(&key) {
+                system.handshake = result;
+                system.version_after = probe.after.get(&key).copied();
+            }
+        }
+        for (key, system) in &probe.systems {
+            println!("{}", report(*key, system, method_name));
+        }
+        probe
+            .conn
+            .close()
+            .await
+            .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+        Ok(())
+    })
+}
+
+/// Runs a semi-transparent radio between `a` (ground) and `b` (vehicle) until `stop`.
+pub(crate) async fn run_radio(
+    a: &ConnSpec,
+    b: &ConnSpec,
+    interval: Duration,
+    log: Log,
+    stop: impl Future<Output = ()>,
+) -> Result<(), Failure> {
+    let lookup = mavstack_transport::frame::crc_extra_of::<mavstack_dialects::common::MavMessage>;
+    let open = |spec: &ConnSpec| {
+        let spec = spec.clone();
+        async move {
+            Connection::open(
+                &spec,
+                FrameProtocol::new(lookup)
+                    .keep_unknown(true)
+                    .peer_events(false),
+            )
+            .await
+            .map_err(|e| Failure::Other(anyhow!("{e}")))
+        }
+    };
+    let mut side_a = open(a).await?;
+    let mut side_b = open(b).await?;
+    let mut config = RadioConfig::default();
+    config.interval = interval;
+    let mut radio = Radio::new(config);
+    tokio::pin!(stop);
+    let mut buf = [0u8; MAX_FRAME_LEN];
+    loop {
+        let wake = radio
+            .poll_timeout()
+            .map(|t| t.as_micros().saturating_sub(clock::now().as_micros()))
+            .map_or(Duration::from_secs(1), Duration::from_micros);
+        let (side, event) = tokio::select! {
+            () = &mut stop => break,
+            () = tokio::time::sleep(wake) => {
+                radio.handle_timeout(clock::now());
+                (None, None)
+            }
+            e = side_a.recv() => (Some(Side::A), e),
+            e = side_b.recv() => (Some(Side::B), e),
+        };
+        if let Some(side) = side {
+            let Some(event) = event else { break };
+            if let FrameEvent::Frame(f) | FrameEvent::Unknown(f) = event {
+                let mut rest = f.frame.as_bytes();
+                while !rest.is_empty() {
+                    let taken = radio.handle_input(clock::now(), side, rest);
+                    rest = &rest[taken..];
+                    if taken == 0 {
+                        break;
+                    }
+                }
+            }
+        }
+        while let Some(mavstack_channel::RadioEvent::FirstMavlink2 { from }) = radio.poll_event() {
+            say(&log, || {
+                format!(
+                    "radio: first MAVLink 2 frame (from side {from:?}); RADIO_STATUS in MAVLink 2 from now on"
+                )
+            });
+        }
+        while let Some(t) = radio.poll_transmit(clock::now(), &mut buf) {
+            let Ok(frame) = FrameBuf::new(&buf[..t.len]) else {
+                continue;
+            };
+            if t.injected {
+                say(&log, || {
+                    format!("radio → RADIO_STATUS ({})", version_name(t.version))
+                });
+            }
+            let conn = if t.to == Side::A { &side_a } else { &side_b };
+            conn.send(FrameCommand::to_all(frame))
+                .await
+                .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+        }
+    }
+    side_a
+        .close()
+        .await
+        .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+    side_b
+        .close()
+        .await
+        .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+    Ok(())
+}
+
+pub(crate) fn radio(args: &RadioArgs) -> Result<(), Failure> {
+    let a = parse_spec(&args.conn_a)?;
+    let b = parse_spec(&args.conn_b)?;
+    let interval = seconds(args.interval, "--interval")?;
+    runtime()?.block_on(async {
+        let log = stderr_log(args.verbose);
+        run_radio(&a, &b, interval, log, interrupted()).await
+    })
+}
