@@ -4,6 +4,7 @@
 //! failure and 2 on bad usage or bad input (shared/DESIGN.md, "Command line").
 
 mod codec_cmd;
+mod demo_cmd;
 mod dialect_cmd;
 mod fast_count;
 mod json_frames;
@@ -24,6 +25,9 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// The main job: vehicle, radio and ground station on loopback run the MAVLink 2
+    /// handshake, set up signing and fend off a replay and a forgery, as a timeline.
+    Demo(demo_cmd::DemoArgs),
     /// List the built-in dialects, or show one dialect's messages and enums.
     Dialect {
         #[command(subcommand)]
@@ -76,6 +80,7 @@ fn is_broken_pipe(e: &anyhow::Error) -> bool {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Demo(args) => demo_cmd::demo(&args),
         Command::Dialect { action } => dialect_cmd::run(action),
         Command::Codegen(args) => dialect_cmd::codegen(&args),
         Command::Decode(args) => codec_cmd::decode(&args),

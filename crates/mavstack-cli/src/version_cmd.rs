@@ -17,8 +17,8 @@ use std::collections::BTreeMap;
 use anyhow::anyhow;
 use clap::{Args, ValueEnum};
 use mavstack_channel::{
-    Authentication, CommandEncoding, Config, Event, HandshakeMethod, HandshakeResult, Radio,
-    RadioConfig, Side, SigningConfig, Target, VehicleVersion,
+    Authentication, CommandEncoding, Config, Event, HandshakeMethod, HandshakeResult, LinkStats,
+    Radio, RadioConfig, Side, SigningConfig, Target, VehicleVersion,
 };
 use mavstack_core::Message;
 use mavstack_core::signing::SecretKey;
@@ -250,18 +250,28 @@ fn ack(command: MavCmd, result: MavResult, to_sys: u8, to_comp: u8) -> RawMessag
     })
 }
 
-/// Runs a simulated vehicle on `spec` until `stop` resolves.
-pub(crate) async fn run_vehicle(
-    setup: VehicleSetup,
+/// Opens the vehicle's link.
+pub(crate) async fn open_vehicle(
+    setup: &VehicleSetup,
     spec: &ConnSpec,
-    log: Log,
-    stop: impl Future<Output = ()>,
-) -> Result<(), Failure> {
+) -> Result<Connection<ChannelProtocol>, Failure> {
     let protocol = ChannelProtocol::new(setup.config())
         .map_err(|e| Failure::Input(anyhow!("vehicle configuration: {e}")))?;
-    let mut conn = Connection::open(spec, protocol)
+    Connection::open(spec, protocol)
         .await
-        .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+        .map_err(|e| Failure::Other(anyhow!("{e}")))
+}
+
+/// Runs a simulated vehicle on `conn` (from [`open_vehicle`]) until `stop` resolves; returns
+/// the statistics of its links. `tap` gets a copy of every signed COMMAND_LONG the vehicle
+/// accepts (the demo replays one).
+pub(crate) async fn run_vehicle(
+    setup: VehicleSetup,
+    mut conn: Connection<ChannelProtocol>,
+    log: Log,
+    tap: Option<mpsc::UnboundedSender<Vec<u8>>>,
+    stop: impl Future<Output = ()>,
+) -> Result<Vec<LinkStats>, Failure> {
     let mut beat = tokio::time::interval(Duration::from_secs(1));
     tokio::pin!(stop);
     let send = |dest: Dest, message: RawMessage| ChannelCommand::Send { dest, message };
@@ -288,6 +298,12 @@ pub(crate) async fn run_vehicle(
         };
         match event {
             Event::Frame(rf) => {
+                if let Some(tap) = &tap
+                    && rf.frame.is_signed()
+                    && rf.frame.msg_id() == CommandLong::ID
+                {
+                    let _ = tap.send(rf.frame.as_bytes().to_vec());
+                }
                 // Handshake requests are the channel's (answered, refused or ignored).
                 if rf.protocol_version_request.is_some() || rf.answered {
                     continue;
@@ -348,10 +364,17 @@ pub(crate) async fn run_vehicle(
             _ => {}
         }
     }
+    let links = conn
+        .stats()
+        .protocol
+        .links
+        .into_iter()
+        .map(|(_, stats)| stats)
+        .collect();
     conn.close()
         .await
         .map_err(|e| Failure::Other(anyhow!("{e}")))?;
-    Ok(())
+    Ok(links)
 }
 
 /// Prints `--verbose` lines to stderr as they come.
@@ -397,7 +420,10 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
     };
     runtime()?.block_on(async {
         let log = stderr_log(args.verbose);
-        run_vehicle(setup, &spec, log, interrupted()).await
+        let conn = open_vehicle(&setup, &spec).await?;
+        run_vehicle(setup, conn, log, None, interrupted())
+            .await
+            .map(drop)
     })
 }
 
@@ -650,35 +676,37 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
     })
 }
 
-/// Runs a semi-transparent radio between `a` (ground) and `b` (vehicle) until `stop`.
+/// A radio side: frames of any id, forwarded as they are.
+pub(crate) type RadioLink = Connection<FrameProtocol<fn(u32) -> Option<u8>>>;
+
+pub(crate) async fn open_radio_side(spec: &ConnSpec) -> Result<RadioLink, Failure> {
+    let lookup: fn(u32) -> Option<u8> =
+        mavstack_transport::frame::crc_extra_of::<mavstack_dialects::common::MavMessage>;
+    Connection::open(
+        spec,
+        FrameProtocol::new(lookup)
+            .keep_unknown(true)
+            .peer_events(false),
+    )
+    .await
+    .map_err(|e| Failure::Other(anyhow!("{e}")))
+}
+
+/// Runs a semi-transparent radio between `side_a` (ground) and `side_b` (vehicle) until
+/// `stop`.
 pub(crate) async fn run_radio(
-    a: &ConnSpec,
-    b: &ConnSpec,
+    mut side_a: RadioLink,
+    mut side_b: RadioLink,
     interval: Duration,
     log: Log,
     stop: impl Future<Output = ()>,
 ) -> Result<(), Failure> {
-    let lookup = mavstack_transport::frame::crc_extra_of::<mavstack_dialects::common::MavMessage>;
-    let open = |spec: &ConnSpec| {
-        let spec = spec.clone();
-        async move {
-            Connection::open(
-                &spec,
-                FrameProtocol::new(lookup)
-                    .keep_unknown(true)
-                    .peer_events(false),
-            )
-            .await
-            .map_err(|e| Failure::Other(anyhow!("{e}")))
-        }
-    };
-    let mut side_a = open(a).await?;
-    let mut side_b = open(b).await?;
     let mut config = RadioConfig::default();
     config.interval = interval;
     let mut radio = Radio::new(config);
     tokio::pin!(stop);
     let mut buf = [0u8; MAX_FRAME_LEN];
+    let mut last_injected = None;
     loop {
         let wake = radio
             .poll_timeout()
@@ -717,9 +745,13 @@ pub(crate) async fn run_radio(
             let Ok(frame) = FrameBuf::new(&buf[..t.len]) else {
                 continue;
             };
-            if t.injected {
+            if t.injected && last_injected != Some(t.version) {
+                last_injected = Some(t.version);
                 say(&log, || {
-                    format!("radio → RADIO_STATUS ({})", version_name(t.version))
+                    format!(
+                        "radio → RADIO_STATUS ({}), every {interval:?}",
+                        version_name(t.version)
+                    )
                 });
             }
             let conn = if t.to == Side::A { &side_a } else { &side_b };
@@ -745,6 +777,8 @@ pub(crate) fn radio(args: &RadioArgs) -> Result<(), Failure> {
     let interval = seconds(args.interval, "--interval")?;
     runtime()?.block_on(async {
         let log = stderr_log(args.verbose);
-        run_radio(&a, &b, interval, log, interrupted()).await
+        let side_a = open_radio_side(&a).await?;
+        let side_b = open_radio_side(&b).await?;
+        run_radio(side_a, side_b, interval, log, interrupted()).await
     })
 }

@@ -85,4 +85,3 @@ pub(crate) fn run_script(name: &str, args: &[&OsStr]) -> String {
     );
     stdout
 }
-

@@ -1,0 +1,520 @@
+//! `mavstack demo`: the version document's diagram, live, on loopback.
+//!
+//! A simulated vehicle (starting in MAVLink 1), a semi-transparent radio and a ground station
+//! run over real UDP sockets on 127.0.0.1:
+//!
+//! ```text
+//!   ground station ──udp──► radio (side A │ side B) ──udp──► vehicle
+//!        ▲                                                  │
+//!        └──────────────── frames, RADIO_STATUS ◄───────────┘
+//!   attacker ──udp──► radio side A   (replayed and forged frames)
+//! ```
+//!
+//! The ground station finds the vehicle, runs the MAVLink 2 handshake (both sides switch to
+//! MAVLink 2, the radio's RADIO_STATUS follows), asks for AUTOPILOT_VERSION, sets up signing
+//! with SETUP_SIGNING, exchanges signed traffic; an attacker on the ground link replays a
+//! captured signed command and sends a forged one with a timestamp far in the future; the
+//! vehicle rejects both and still accepts the genuine stream. Every step is printed as a
+//! timeline; any step that does not happen fails the demo (exit 1).
+
+use core::time::Duration;
+use std::net::UdpSocket;
+
+use anyhow::anyhow;
+use clap::Args;
+use mavstack_channel::{
+    Authentication, CommandEncoding, Config, Event, HandshakeMethod, HandshakeResult,
+    SigningConfig, Target, VehicleVersion,
+};
+use mavstack_core::Message;
+use mavstack_core::signing::{self, SecretKey};
+use mavstack_core::wire::{FrameHeader, MAX_FRAME_LEN, Version, emit_message};
+use mavstack_dialects::common::{
+    AutopilotVersion, CommandLong, Heartbeat, MavAutopilot, MavCmd, MavProtocolCapability, MavType,
+    ProtocolVersion, RadioStatus, SetupSigning,
+};
+use mavstack_transport::channel_protocol::{
+    ChannelCommand, ChannelEvent, ChannelEventKind, ChannelProtocol, RawMessage,
+};
+use mavstack_transport::{ConnSpec, Connection, Dest, PeerId, clock};
+use tokio::sync::{mpsc, watch};
+use tokio::time::Instant;
+
+use crate::Failure;
+use crate::link_cmd::runtime;
+use crate::version_cmd::{
+    Autopilot, Log, VehicleSetup, open_radio_side, open_vehicle, run_radio, run_vehicle,
+};
+
+#[derive(Debug, Args)]
+pub(crate) struct DemoArgs {}
+
+/// The demo's signing key (a real deployment generates one per vehicle and keeps it secret).
+const KEY: [u8; 32] = *b"mavstack demo key: not a secret!";
+
+fn other(e: impl core::fmt::Display) -> Failure {
+    Failure::Other(anyhow!("{e}"))
+}
+
+fn version_name(v: Version) -> &'static str {
+    match v {
+        Version::V1 => "MAVLink 1",
+        Version::V2 => "MAVLink 2",
+    }
+}
+
+/// The timeline: lines from every actor, stamped with the time since the start.
+struct Timeline {
+    started: Instant,
+    tx: mpsc::UnboundedSender<String>,
+    printer: tokio::task::JoinHandle<()>,
+}
+
+impl Timeline {
+    fn new() -> Self {
+        let started = Instant::now();
+        let (tx, mut rx) = mpsc::unbounded_channel::<String>();
+        let printer = tokio::spawn(async move {
+            while let Some(line) = rx.recv().await {
+                let t = started.elapsed().as_secs_f64();
+                println!("{t:7.3}s  {line}");
+            }
+        });
+        Self {
+            started,
+            tx,
+            printer,
+        }
+    }
+
+    fn log(&self) -> Log {
+        Some(self.tx.clone())
+    }
+
+    fn say(&self, line: impl Into<String>) {
+        let _ = self.tx.send(line.into());
+    }
+}
+
+/// The ground station's side of the demo.
+struct Ground {
+    conn: Connection<ChannelProtocol>,
+    peer: Option<PeerId>,
+    heartbeat_due: Instant,
+    seen_v1_status: bool,
+    seen_v2_status: bool,
+    seen_hb: Option<Version>,
+    seen_signed_hb: bool,
+}
+
+impl Ground {
+    async fn send(&self, command: ChannelCommand) -> Result<(), Failure> {
+        self.conn.send(command).await.map_err(other)
+    }
+
+    /// Takes events until `found` says yes (returns it) or `within` passes (`None`); sends a
+    /// ground-station HEARTBEAT every second meanwhile and narrates what it sees.
+    async fn wait(
+        &mut self,
+        timeline: &Timeline,
+        within: Duration,
+        mut found: impl FnMut(&ChannelEvent) -> bool,
+    ) -> Result<Option<ChannelEvent>, Failure> {
+        let deadline = Instant::now() + within;
+        loop {
+            if Instant::now() >= self.heartbeat_due {
+                self.heartbeat_due = Instant::now() + Duration::from_secs(1);
+                let hb = RawMessage::new(&Heartbeat {
+                    r#type: MavType::GCS,
+                    autopilot: MavAutopilot::INVALID,
+                    mavlink_version: 3,
+                    ..Heartbeat::default()
+                });
+                self.send(ChannelCommand::to_all(hb)).await?;
+            }
+            let event = tokio::select! {
+                () = tokio::time::sleep_until(deadline.min(self.heartbeat_due)) => {
+                    if Instant::now() >= deadline {
+                        return Ok(None);
+                    }
+                    continue;
+                }
+                e = self.conn.recv() => e.ok_or_else(|| other("the ground station's link closed"))?,
+            };
+            self.narrate(timeline, &event);
+            if found(&event) {
+                return Ok(Some(event));
+            }
+        }
+    }
+
+    fn narrate(&mut self, timeline: &Timeline, event: &ChannelEvent) {
+        let ChannelEventKind::Channel(e) = &event.event else {
+            return;
+        };
+        match e {
+            Event::Frame(rf) => {
+                let f = &rf.frame;
+                if f.msg_id() == RadioStatus::ID {
+                    let first = match f.version() {
+                        Version::V1 => !core::mem::replace(&mut self.seen_v1_status, true),
+                        Version::V2 => !core::mem::replace(&mut self.seen_v2_status, true),
+                    };
+                    if first {
+                        timeline.say(format!(
+                            "ground station ← RADIO_STATUS from the radio ({}{})",
+                            version_name(f.version()),
+                            if matches!(rf.auth, Authentication::AllowedUnsigned) {
+                                ", unsigned: on the allow-list"
+                            } else {
+                                ""
+                            }
+                        ));
+                    }
+                } else if f.msg_id() == Heartbeat::ID && f.sysid() == 1 {
+                    self.peer.get_or_insert(event.peer);
+                    let signed = matches!(rf.auth, Authentication::Verified { .. });
+                    if self.seen_hb != Some(f.version()) || (signed && !self.seen_signed_hb) {
+                        self.seen_hb = Some(f.version());
+                        self.seen_signed_hb |= signed;
+                        timeline.say(format!(
+                            "ground station ← HEARTBEAT from vehicle 1/1 ({}{})",
+                            version_name(f.version()),
+                            if signed {
+                                ", signed, signature verified"
+                            } else {
+                                ""
+                            }
+                        ));
+                    }
+                }
+            }
+            Event::VersionChanged { from, to, cause } => {
+                timeline.say(format!(
+                    "ground station: link {from:?} → {to:?} ({cause:?})"
+                ));
+            }
+            Event::Rejected(r) => {
+                timeline.say(format!(
+                    "ground station ✗ rejected message {}: {:?}",
+                    r.msg_id, r.reason
+                ));
+            }
+            _ => {}
+        }
+    }
+}
+
+fn request(command: MavCmd, param1: f32) -> RawMessage {
+    RawMessage::new(&CommandLong {
+        target_system: 1,
+        target_component: 1,
+        command,
+        param1,
+        ..CommandLong::default()
+    })
+}
+
+fn is_message(event: &ChannelEvent, id: u32) -> bool {
+    matches!(&event.event, ChannelEventKind::Channel(Event::Frame(rf)) if rf.frame.msg_id() == id)
+}
+
+/// A forged COMMAND_LONG: signed with the wrong key, timestamp far in the future (the frame
+/// that locks a pymavlink receiver out of the genuine stream).
+fn forged_command() -> Result<Vec<u8>, Failure> {
+    let header = FrameHeader {
+        version: Version::V2,
+        seq: 200,
+        sysid: 255,
+        compid: 190,
+        signed: true,
+    };
+    let command = CommandLong {
+        target_system: 1,
+        target_component: 1,
+        command: MavCmd::COMPONENT_ARM_DISARM,
+        param1: 1.0,
+        ..CommandLong::default()
+    };
+    let mut buf = [0u8; MAX_FRAME_LEN];
+    let len = emit_message(&header, &command, &mut buf).map_err(other)?;
+    let future =
+        signing::timestamp_from_unix_micros(clock::now().as_micros()) + 100 * 24 * 3600 * 100_000;
+    let wrong = SecretKey::new([0x42; 32]);
+    let len = signing::append_signature(&mut buf, len, 1, future, &wrong).map_err(other)?;
+    Ok(buf[..len].to_vec())
+}
+
+pub(crate) fn demo(_args: &DemoArgs) -> Result<(), Failure> {
+    runtime()?.block_on(async {
+        let timeline = Timeline::new();
+        let result = run(&timeline).await;
+        let elapsed = timeline.started.elapsed().as_secs_f64();
+        let Timeline { tx, printer, .. } = timeline;
+        drop(tx);
+        let _ = printer.await;
+        if result.is_ok() {
+            println!("demo finished in {elapsed:.1} s");
+        }
+        result
+    })
+}
+
+async fn run(timeline: &Timeline) -> Result<(), Failure> {
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let stopped = |mut rx: watch::Receiver<bool>| async move {
+        let _ = rx.wait_for(|&s| s).await;
+    };
+    // The vehicle: MAVLink 1 until a MAVLink 2 frame, MAVLink 2 capable, a secure link
+    // (think USB) so it accepts SETUP_SIGNING.
+    let setup = VehicleSetup {
+        sysid: 1,
+        compid: 1,
+        autopilot: Autopilot::Ardupilot,
+        version: VehicleVersion::StartMavlink1,
+        signing: None,
+        protocol_version: true,
+        secure: true,
+    };
+    let any_port = |scheme: &str| -> Result<ConnSpec, Failure> {
+        format!("{scheme}:127.0.0.1:0").parse().map_err(other)
+    };
+    let vehicle_conn = open_vehicle(&setup, &any_port("udpin")?).await?;
+    let vehicle_addr = vehicle_conn
+        .local_addr()
+        .ok_or_else(|| other("the vehicle's socket has no address"))?;
+    let radio_a = open_radio_side(&any_port("udpin")?).await?;
+    let radio_a_addr = radio_a
+        .local_addr()
+        .ok_or_else(|| other("the radio's socket has no address"))?;
+    let radio_b =
+        open_radio_side(&format!("udpout:{vehicle_addr}").parse().map_err(other)?).await?;
+    timeline.say(format!(
+        "setup: vehicle 1/1 on udp {vehicle_addr} (starts in MAVLink 1), radio {radio_a_addr} ⇄ vehicle, ground station 255/190 → radio"
+    ));
+    let (tap_tx, mut tap_rx) = mpsc::unbounded_channel();
+    let vehicle = tokio::spawn(run_vehicle(
+        setup,
+        vehicle_conn,
+        timeline.log(),
+        Some(tap_tx),
+        stopped(stop_rx.clone()),
+    ));
+    let radio = tokio::spawn(run_radio(
+        radio_a,
+        radio_b,
+        Duration::from_millis(700),
+        timeline.log(),
+        stopped(stop_rx.clone()),
+    ));
+    let gcs_conn = Connection::open(
+        &format!("udpout:{radio_a_addr}").parse().map_err(other)?,
+        ChannelProtocol::new(Config::ground_station(255, 190)).map_err(other)?,
+    )
+    .await
+    .map_err(other)?;
+    let mut ground = Ground {
+        conn: gcs_conn,
+        peer: None,
+        heartbeat_due: Instant::now(),
+        seen_v1_status: false,
+        seen_v2_status: false,
+        seen_hb: None,
+        seen_signed_hb: false,
+    };
+    let outcome = script(timeline, &mut ground, &mut tap_rx, radio_a_addr).await;
+    let _ = stop_tx.send(true);
+    ground.conn.close().await.map_err(other)?;
+    let links = vehicle.await.map_err(other)??;
+    radio.await.map_err(other)??;
+    outcome?;
+    let replayed: u64 = links.iter().map(|l| l.rejected.replayed).sum();
+    let forged: u64 = links.iter().map(|l| l.rejected.bad_signature).sum();
+    let accepted: u64 = links.iter().map(|l| l.accepted).sum();
+    timeline.say(format!(
+        "vehicle's link: {accepted} frames accepted, {replayed} replay and {forged} forgery rejected"
+    ));
+    if replayed == 0 || forged == 0 {
+        return Err(other(
+            "the vehicle did not reject the replayed and forged frames",
+        ));
+    }
+    Ok(())
+}
+
+async fn script(
+    timeline: &Timeline,
+    ground: &mut Ground,
+    tap: &mut mpsc::UnboundedReceiver<Vec<u8>>,
+    radio_addr: core::net::SocketAddr,
+) -> Result<(), Failure> {
+    let need = |found: Option<ChannelEvent>, what: &str| {
+        found.ok_or_else(|| other(format!("demo step failed: {what}")))
+    };
+    // 1. Discovery, in MAVLink 1.
+    let hb = ground
+        .wait(timeline, Duration::from_secs(4), |e| {
+            is_message(e, Heartbeat::ID)
+        })
+        .await?;
+    need(hb, "no HEARTBEAT from the vehicle")?;
+    let peer = ground.peer.ok_or_else(|| other("no link to the vehicle"))?;
+    let _ = ground
+        .wait(timeline, Duration::from_millis(900), |e| {
+            is_message(e, RadioStatus::ID)
+        })
+        .await?;
+    // 2. The handshake.
+    timeline.say("ground station → COMMAND_LONG REQUEST_MESSAGE(300) in MAVLink 2 (the handshake)");
+    ground
+        .send(ChannelCommand::StartHandshake {
+            peer,
+            target: Target::new(1, 1),
+            method: HandshakeMethod::RequestMessage300,
+            encoding: CommandEncoding::Long,
+        })
+        .await?;
+    let done = ground
+        .wait(timeline, Duration::from_secs(4), |e| {
+            matches!(e.event, ChannelEventKind::Channel(Event::Handshake(_)))
+        })
+        .await?;
+    let done = need(done, "no handshake outcome")?;
+    if let ChannelEventKind::Channel(Event::Handshake(o)) = &done.event {
+        match &o.result {
+            HandshakeResult::ProtocolVersion(v) => timeline.say(format!(
+                "ground station ← {} {} (min {}, max {}) in MAVLink 2 after {} request(s): the vehicle speaks MAVLink 2",
+                ProtocolVersion::NAME,
+                v.version,
+                v.min_version,
+                v.max_version,
+                o.attempts
+            )),
+            other_result => {
+                return Err(other(format!(
+                    "demo step failed: handshake ended with {}",
+                    other_result.name()
+                )));
+            }
+        }
+    }
+    let v2 = ground
+        .wait(timeline, Duration::from_secs(3), |e| {
+            matches!(&e.event, ChannelEventKind::Channel(Event::Frame(rf))
+                if rf.frame.msg_id() == Heartbeat::ID && rf.frame.version() == Version::V2)
+        })
+        .await?;
+    need(v2, "the vehicle's heartbeats did not switch to MAVLink 2")?;
+    let _ = ground
+        .wait(timeline, Duration::from_millis(900), |_| false)
+        .await?;
+    // 3. Capabilities.
+    timeline.say("ground station → REQUEST_MESSAGE(AUTOPILOT_VERSION)");
+    ground
+        .send(ChannelCommand::Send {
+            dest: Dest::Peer(peer),
+            message: request(MavCmd::REQUEST_MESSAGE, AutopilotVersion::ID as f32),
+        })
+        .await?;
+    let av = ground
+        .wait(timeline, Duration::from_secs(3), |e| {
+            is_message(e, AutopilotVersion::ID)
+        })
+        .await?;
+    let av = need(av, "no AUTOPILOT_VERSION")?;
+    if let ChannelEventKind::Channel(Event::Frame(rf)) = &av.event {
+        let caps = AutopilotVersion::decode(rf.frame.payload()).capabilities;
+        timeline.say(format!(
+            "ground station ← AUTOPILOT_VERSION: MAV_PROTOCOL_CAPABILITY_MAVLINK2 {}",
+            if caps.0 & MavProtocolCapability::MAVLINK2.0 != 0 {
+                "set"
+            } else {
+                "NOT set"
+            }
+        ));
+    }
+    // 4. Signing.
+    let now_ts = signing::timestamp_from_unix_micros(clock::now().as_micros());
+    timeline.say(
+        "ground station → SETUP_SIGNING (key, timestamp) over the secure link; signs from now on",
+    );
+    ground
+        .send(ChannelCommand::Send {
+            dest: Dest::Peer(peer),
+            message: RawMessage::new(&SetupSigning {
+                target_system: 1,
+                target_component: 1,
+                secret_key: KEY,
+                initial_timestamp: now_ts,
+            }),
+        })
+        .await?;
+    ground
+        .send(ChannelCommand::SetSigning {
+            peer: Some(peer),
+            signing: Some(SigningConfig::new(SecretKey::new(KEY), 1)),
+        })
+        .await?;
+    let signed = ground
+        .wait(timeline, Duration::from_secs(3), |e| {
+            matches!(&e.event, ChannelEventKind::Channel(Event::Frame(rf))
+                if rf.frame.msg_id() == Heartbeat::ID
+                    && matches!(rf.auth, Authentication::Verified { .. }))
+        })
+        .await?;
+    need(signed, "no signed HEARTBEAT from the vehicle")?;
+    // 5. Signed traffic both ways.
+    timeline.say("ground station → REQUEST_MESSAGE(AUTOPILOT_VERSION), signed");
+    ground
+        .send(ChannelCommand::Send {
+            dest: Dest::Peer(peer),
+            message: request(MavCmd::REQUEST_MESSAGE, AutopilotVersion::ID as f32),
+        })
+        .await?;
+    let av = ground
+        .wait(timeline, Duration::from_secs(3), |e| {
+            matches!(&e.event, ChannelEventKind::Channel(Event::Frame(rf))
+                if rf.frame.msg_id() == AutopilotVersion::ID
+                    && matches!(rf.auth, Authentication::Verified { .. }))
+        })
+        .await?;
+    need(av, "no signed AUTOPILOT_VERSION")?;
+    timeline.say("ground station ← AUTOPILOT_VERSION, signed, signature verified");
+    // 6. Attacks from the ground link.
+    let captured = tokio::time::timeout(Duration::from_secs(1), tap.recv())
+        .await
+        .ok()
+        .flatten()
+        .ok_or_else(|| other("demo step failed: no signed command captured"))?;
+    let attacker = UdpSocket::bind("127.0.0.1:0").map_err(other)?;
+    timeline.say("attacker → replays the captured signed COMMAND_LONG, byte for byte");
+    attacker.send_to(&captured, radio_addr).map_err(other)?;
+    let _ = ground
+        .wait(timeline, Duration::from_millis(400), |_| false)
+        .await?;
+    timeline.say("attacker → forged COMMAND_LONG (ARM): wrong key, timestamp 100 days ahead");
+    attacker
+        .send_to(&forged_command()?, radio_addr)
+        .map_err(other)?;
+    let _ = ground
+        .wait(timeline, Duration::from_millis(400), |_| false)
+        .await?;
+    // 7. The genuine stream still flows.
+    timeline.say("ground station → REQUEST_MESSAGE(AUTOPILOT_VERSION), signed, after the attacks");
+    ground
+        .send(ChannelCommand::Send {
+            dest: Dest::Peer(peer),
+            message: request(MavCmd::REQUEST_MESSAGE, AutopilotVersion::ID as f32),
+        })
+        .await?;
+    let av = ground
+        .wait(timeline, Duration::from_secs(3), |e| {
+            matches!(&e.event, ChannelEventKind::Channel(Event::Frame(rf))
+                if rf.frame.msg_id() == AutopilotVersion::ID
+                    && matches!(rf.auth, Authentication::Verified { .. }))
+        })
+        .await?;
+    need(av, "the genuine stream was locked out")?;
+    timeline.say("ground station ← AUTOPILOT_VERSION: the genuine stream is still accepted");
+    Ok(())
+}
