@@ -224,17 +224,22 @@ fn version_name(v: Version) -> &'static str {
     }
 }
 
-/// A command addressed to us: (command, param1, confirmation, encoding), or `None`.
-fn command_for(frame: &mavstack_channel::OwnedFrame, sysid: u8) -> Option<(MavCmd, f32)> {
-    let ours = |t: u8| t == 0 || t == sysid;
+/// A command addressed to us (system `sysid`, component `compid` or broadcast):
+/// `(command, param1)`, or `None`.
+fn command_for(
+    frame: &mavstack_channel::OwnedFrame,
+    sysid: u8,
+    compid: u8,
+) -> Option<(MavCmd, f32)> {
+    let ours = |s: u8, c: u8| (s == 0 || s == sysid) && (c == 0 || c == compid);
     match frame.msg_id() {
         CommandLong::ID => {
             let c = CommandLong::decode(frame.payload());
-            ours(c.target_system).then_some((c.command, c.param1))
+            ours(c.target_system, c.target_component).then_some((c.command, c.param1))
         }
         CommandInt::ID => {
             let c = CommandInt::decode(frame.payload());
-            ours(c.target_system).then_some((c.command, c.param1))
+            ours(c.target_system, c.target_component).then_some((c.command, c.param1))
         }
         _ => None,
     }
@@ -308,7 +313,8 @@ pub(crate) async fn run_vehicle(
                 if rf.protocol_version_request.is_some() || rf.answered {
                     continue;
                 }
-                let Some((command, param1)) = command_for(&rf.frame, setup.sysid) else {
+                let Some((command, param1)) = command_for(&rf.frame, setup.sysid, setup.compid)
+                else {
                     continue;
                 };
                 let (sys, comp) = (rf.frame.sysid(), rf.frame.compid());
