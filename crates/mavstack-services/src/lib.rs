@@ -1,0 +1,186 @@
+//! Sans-IO MAVLink microservices, in both roles: heartbeat and peer tracking, the command
+//! protocol and the parameter protocol.
+//!
+//! Every service is a state machine that never reads a clock, never sleeps and never touches
+//! a socket. It works on *decoded* messages (the `common` dialect's
+//! [`MavMessage`]), not bytes, so it sits on top of a
+//! link layer such as `mavstack-channel`, whose accepted frames an adapter decodes and
+//! hands in, and whose `send` the adapter feeds with what the services emit:
+//!
+//! ```text
+//!              accepted frames (decoded)                       messages to send
+//!   channel ──► handle_message(now, from, &MavMessage) ─┐   ┌─► poll_transmit() -> Outgoing { target, message }
+//!                                                       ▼   │                         │
+//!   driver  ──► handle_timeout(now) ───────────────► [ service ] ──► poll_event()    ▼
+//!       ▲                                               │        (results, peers)  channel ──► link
+//!       └─────────── sleep until poll_timeout() ◄───────┘
+//! ```
+//!
+//! The contract, the same for every service (and collected in the [`Service`] trait):
+//!
+//! - [`Service::handle_message`]`(now, from, &msg)` for every decoded message received, with
+//!   the sender's [`Address`] (frame header sysid/compid). It returns whether the service
+//!   used the message; messages meant for other components are ignored.
+//! - [`Service::handle_timeout`]`(now)` when the deadline from
+//!   [`Service::poll_timeout`] has passed (calling it early is harmless).
+//! - [`Service::poll_transmit`] until `None` after each of the above and after each
+//!   request (`send`, `fetch_all`, `set`, ...): every [`Outgoing`] is one message to
+//!   send, with the [`Address`] it is for (`Address::BROADCAST` for broadcasts). The
+//!   services fill in `target_system`/`target_component` fields themselves.
+//! - Each service's `poll_event` (an inherent method, because every service has its own
+//!   event type) until `None`: results of requests, peers found and lost, values changed.
+//!
+//! Time is a [`mavstack_core::time::Instant`] (monotonic microseconds) chosen by the driver.
+//! Retries and timeouts follow the reference values collected in the project's protocol
+//! digest (§7): MAVSDK's 0.5 s command timeout with 3 retries and 3 s after IN_PROGRESS,
+//! a 3 s heartbeat timeout, parameter retries ×5.
+//!
+//! | module | messages | client role | server role |
+//! | --- | --- | --- | --- |
+//! | [`heartbeat`] | HEARTBEAT | [`heartbeat::Heartbeats`] peer table (new / lost / changed) | the same type emits our own HEARTBEAT |
+//! | [`command`] | COMMAND_LONG, COMMAND_INT, COMMAND_ACK | [`command::CommandClient`] | [`command::CommandServer`] |
+//! | [`param`] | PARAM_REQUEST_LIST/READ, PARAM_SET, PARAM_VALUE | [`param::ParamClient`] | [`param::ParamServer`] |
+//!
+//! Missions, message intervals and TIMESYNC are not implemented yet.
+//!
+//! # Features
+//!
+//! - `std` (default): links the standard library; nothing in the crate needs it. Without it
+//!   the crate is `no_std` and needs only `alloc` (for its tables and queues).
+//!
+//! # Example
+//!
+//! A command client and a server wired by hand:
+//!
+//! ```
+//! use mavstack_core::time::Instant;
+//! use mavstack_dialects::common::{CommandLong, MavCmd, MavResult};
+//! use mavstack_services::command::{
+//!     Command, CommandClient, CommandEvent, CommandHandler, CommandServer, Request, Response,
+//! };
+//! use mavstack_services::{Address, Service};
+//!
+//! struct Arm;
+//! impl CommandHandler for Arm {
+//!     fn handle_command(&mut self, _now: Instant, _request: &Request) -> Response {
+//!         Response::done(MavResult::ACCEPTED)
+//!     }
+//! }
+//!
+//! let gcs = Address::new(255, 190);
+//! let vehicle = Address::new(1, 1);
+//! let mut client = CommandClient::new(gcs, Default::default());
+//! let mut server = CommandServer::new(vehicle, Default::default(), Arm);
+//! let now = Instant::ZERO;
+//! let cmd = CommandLong { command: MavCmd::COMPONENT_ARM_DISARM, param1: 1.0, ..Default::default() };
+//! let handle = client.send(now, vehicle, Command::Long(cmd)).unwrap();
+//! while let Some(out) = client.poll_transmit() {
+//!     server.handle_message(now, gcs, &out.message);
+//! }
+//! while let Some(out) = server.poll_transmit() {
+//!     client.handle_message(now, vehicle, &out.message);
+//! }
+//! match client.poll_event() {
+//!     Some(CommandEvent::Finished { handle: h, result: Ok(ack) }) => {
+//!         assert_eq!(h, handle);
+//!         assert_eq!(ack.result, MavResult::ACCEPTED);
+//!     }
+//!     other => panic!("{other:?}"),
+//! }
+//! ```
+#![no_std]
+#![forbid(unsafe_code)]
+
+extern crate alloc;
+#[cfg(feature = "std")]
+extern crate std;
+
+pub mod command;
+pub mod heartbeat;
+pub mod param;
+
+use mavstack_core::time::Instant;
+use mavstack_dialects::common::MavMessage;
+
+/// A MAVLink system and component id pair: where a message came from or is going to.
+///
+/// `0` in either part is the broadcast id of that part.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Address {
+    /// The system id (`0` = every system).
+    pub system: u8,
+    /// The component id (`0` = every component).
+    pub component: u8,
+}
+
+impl Address {
+    /// Every component of every system.
+    pub const BROADCAST: Self = Self::new(0, 0);
+
+    /// The address `system`/`component`.
+    #[must_use]
+    pub const fn new(system: u8, component: u8) -> Self {
+        Self { system, component }
+    }
+
+    /// Whether a message addressed to `target` reaches `self` (a 0 part in `target` matches
+    /// any id).
+    ///
+    /// ```
+    /// use mavstack_services::Address;
+    /// let me = Address::new(1, 1);
+    /// assert!(me.is_reached_by(Address::new(1, 0)));
+    /// assert!(me.is_reached_by(Address::BROADCAST));
+    /// assert!(!me.is_reached_by(Address::new(2, 1)));
+    /// ```
+    #[must_use]
+    pub const fn is_reached_by(self, target: Self) -> bool {
+        (target.system == 0 || target.system == self.system)
+            && (target.component == 0 || target.component == self.component)
+    }
+}
+
+impl core::fmt::Display for Address {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{}/{}", self.system, self.component)
+    }
+}
+
+/// One message a service wants sent.
+#[derive(Clone, Debug, PartialEq)]
+#[must_use]
+pub struct Outgoing {
+    /// Whom it is for ([`Address::BROADCAST`] for broadcasts). Routing hint only: the
+    /// message's own `target_*` fields, if it has them, are already filled in.
+    pub target: Address,
+    /// The message.
+    pub message: MavMessage,
+}
+
+/// The sans-IO surface every service offers (see the crate docs for when to call what).
+pub trait Service {
+    /// Feeds one decoded message received from `from`. Returns whether the service used it.
+    fn handle_message(&mut self, now: Instant, from: Address, message: &MavMessage) -> bool;
+
+    /// Advances timers to `now`: retries, timeouts, periodic sends. Call it when
+    /// [`Service::poll_timeout`] has passed; calling it at other times is harmless.
+    fn handle_timeout(&mut self, now: Instant);
+
+    /// The next message to send, if any. Call until `None` after every `handle_*` call and
+    /// every request.
+    #[must_use]
+    fn poll_transmit(&mut self) -> Option<Outgoing>;
+
+    /// When [`Service::handle_timeout`] next needs to be called, if ever.
+    #[must_use]
+    fn poll_timeout(&self) -> Option<Instant>;
+}
+
+/// The earlier of two optional deadlines.
+fn earliest(a: Option<Instant>, b: Option<Instant>) -> Option<Instant> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, None) => a,
+        (None, b) => b,
+    }
+}
