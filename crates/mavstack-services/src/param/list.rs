@@ -43,6 +43,10 @@ pub struct Collecting {
     fruitless: u8,
     /// Whether anything new arrived since the last expiry.
     progressed: bool,
+    /// Indices re-requested and not answered yet (at most `rerequest_batch`).
+    outstanding: BTreeSet<u16>,
+    /// Whether the stream has ended and gaps are being re-requested.
+    rerequesting: bool,
 }
 
 /// Every value of the set, by index.
@@ -81,7 +85,13 @@ impl AwaitingCount {
     }
 
     /// The first value: the count is known, collecting starts.
-    fn on_value(self, now: Instant, v: Received, config: &ParamConfig) -> ListFetch {
+    fn on_value(
+        self,
+        now: Instant,
+        v: Received,
+        config: &ParamConfig,
+        out: &mut VecDeque<Outgoing>,
+    ) -> ListFetch {
         let count = usize::from(v.count);
         let c = Collecting {
             target: self.target,
@@ -90,8 +100,10 @@ impl AwaitingCount {
             deadline: now,
             fruitless: 0,
             progressed: false,
+            outstanding: BTreeSet::new(),
+            rerequesting: false,
         };
-        c.on_value(now, v, config)
+        c.on_value(now, v, config, out)
     }
 
     fn on_timeout(
@@ -125,7 +137,13 @@ impl Collecting {
         self.values.len()
     }
 
-    fn on_value(mut self, now: Instant, v: Received, config: &ParamConfig) -> ListFetch {
+    fn on_value(
+        mut self,
+        now: Instant,
+        v: Received,
+        config: &ParamConfig,
+        out: &mut VecDeque<Outgoing>,
+    ) -> ListFetch {
         if usize::from(v.count) != self.values.len() {
             // The set changed under us (ArduPilot can add parameters): start over with
             // the new count.
@@ -134,7 +152,7 @@ impl Collecting {
                 attempts: 1,
                 deadline: now,
             };
-            return again.on_value(now, v, config);
+            return again.on_value(now, v, config, out);
         }
         if let Some(slot) = self.values.get_mut(usize::from(v.index))
             && self.missing.remove(&v.index)
@@ -142,8 +160,17 @@ impl Collecting {
             *slot = Some((v.name, v.value));
             self.progressed = true;
         }
+        // An answered re-request frees its place for the next gap (a sliding window).
+        if self.outstanding.remove(&v.index) {
+            self.top_up(config, out);
+        }
         // The inactivity timer restarts with every value.
-        self.deadline = now + config.list_timeout;
+        self.deadline = now
+            + if self.rerequesting {
+                config.timeout
+            } else {
+                config.list_timeout
+            };
         if self.missing.is_empty() {
             let params = self.values.into_iter().flatten().collect();
             return ListFetch::Done(Done {
@@ -172,8 +199,30 @@ impl Collecting {
                 count: self.values.len(),
             });
         }
-        // Re-request the gaps, a batch at a time, by index (as QGC does).
-        for &index in self.missing.iter().take(config.rerequest_batch.max(1)) {
+        // Whatever was outstanding is presumed lost: re-request the gaps, a window at a
+        // time, by index (as QGC does).
+        self.outstanding.clear();
+        self.rerequesting = true;
+        self.top_up(config, out);
+        self.deadline = now + config.timeout;
+        Ok(ListFetch::Collecting(self))
+    }
+
+    /// Re-requests missing indices until `rerequest_batch` are outstanding.
+    fn top_up(&mut self, config: &ParamConfig, out: &mut VecDeque<Outgoing>) {
+        let room = config
+            .rerequest_batch
+            .max(1)
+            .saturating_sub(self.outstanding.len());
+        let next: Vec<u16> = self
+            .missing
+            .iter()
+            .filter(|i| !self.outstanding.contains(i))
+            .take(room)
+            .copied()
+            .collect();
+        for index in next {
+            self.outstanding.insert(index);
             out.push_back(Outgoing {
                 target: self.target,
                 message: MavMessage::ParamRequestRead(ParamRequestRead {
@@ -184,8 +233,6 @@ impl Collecting {
                 }),
             });
         }
-        self.deadline = now + config.timeout;
-        Ok(ListFetch::Collecting(self))
     }
 }
 
@@ -217,10 +264,16 @@ impl ListFetch {
         }
     }
 
-    pub(super) fn on_value(self, now: Instant, v: Received, config: &ParamConfig) -> Self {
+    pub(super) fn on_value(
+        self,
+        now: Instant,
+        v: Received,
+        config: &ParamConfig,
+        out: &mut VecDeque<Outgoing>,
+    ) -> Self {
         match self {
-            Self::AwaitingCount(s) => s.on_value(now, v, config),
-            Self::Collecting(s) => s.on_value(now, v, config),
+            Self::AwaitingCount(s) => s.on_value(now, v, config, out),
+            Self::Collecting(s) => s.on_value(now, v, config, out),
             Self::Done(s) => Self::Done(s),
         }
     }

@@ -377,6 +377,7 @@ impl ParamClient {
                         index: param.index,
                     },
                     &self.config,
+                    &mut self.out,
                 );
             }
             self.finish_lists();

@@ -1,0 +1,382 @@
+//! The parameter protocol in both roles, unit by unit and through the simulated link.
+
+mod util;
+
+use core::time::Duration;
+
+use mavstack_dialects::common::{MavMessage, MavParamType, ParamRequestRead, ParamSet};
+use mavstack_services::param::{
+    Encoding, Name, Param, ParamClient, ParamConfig, ParamError, ParamEvent, ParamHandle, ParamRef,
+    ParamRequestError, ParamServer, ParamServerEvent, Value, list::ListFetch,
+};
+use mavstack_services::{Address, Service};
+use util::{Knobs, Pair, T0};
+
+const GCS: Address = Address::new(255, 190);
+const VEHICLE: Address = Address::new(1, 1);
+
+fn name(s: &str) -> Name {
+    Name::new(s).unwrap()
+}
+
+/// A table of `n` parameters of every type, with values that C-cast carries exactly.
+fn table(n: usize, encoding: Encoding) -> ParamServer {
+    let mut s = ParamServer::new(VEHICLE, encoding);
+    for i in 0..n {
+        let k = i as i32;
+        let v = match i % 7 {
+            0 => Value::U8((k % 256) as u8),
+            1 => Value::I8((k % 100 - 50) as i8),
+            2 => Value::U16((k * 7 % 65_536) as u16),
+            3 => Value::I16((k - 500) as i16),
+            4 => Value::U32(k as u32 * 1_001),
+            5 => Value::I32(-k * 999),
+            _ => Value::F32(k as f32 * 0.25 - 3.5),
+        };
+        s.insert(name(&format!("PARAM_{i:05}")), v).unwrap();
+    }
+    s
+}
+
+type Sim = Pair<ParamClient, ParamServer>;
+
+fn sim(server: ParamServer, encoding: Encoding, knobs: Knobs, seed: u64) -> Sim {
+    Pair::new(
+        ParamClient::new(ParamConfig::default(), encoding),
+        GCS,
+        server,
+        VEHICLE,
+        knobs,
+        seed,
+    )
+}
+
+fn finished(c: &mut ParamClient) -> Vec<(ParamHandle, Result<Param, ParamError>)> {
+    core::iter::from_fn(|| c.poll_event())
+        .filter_map(|e| match e {
+            ParamEvent::Finished { handle, result } => Some((handle, result)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Fetches the whole list; returns it with the virtual time and messages it took.
+type ListResult = Result<Vec<(Name, Value)>, ParamError>;
+
+fn fetch(p: &mut Sim) -> (ListResult, Duration, u64) {
+    let start = p.now;
+    let m0 = p.messages();
+    p.a.fetch_all(p.now, VEHICLE).unwrap();
+    let mut result = None;
+    assert!(p.drive_until(Duration::from_secs(120), |c, _, _| {
+        while let Some(e) = c.poll_event() {
+            if let ParamEvent::List { target, result: r } = e {
+                assert_eq!(target, VEHICLE);
+                result = Some(r);
+            }
+        }
+        result.is_some()
+    }));
+    (result.unwrap(), p.now - start, p.messages() - m0)
+}
+
+fn check_fetch(n: usize, encoding: Encoding, knobs: Knobs, seed: u64) -> (Duration, u64) {
+    let mut p = sim(table(n, encoding), encoding, knobs, seed);
+    let (result, took, messages) = fetch(&mut p);
+    let got = result.unwrap();
+    let want: Vec<(Name, Value)> = p.b.iter().copied().collect();
+    assert_eq!(got.len(), want.len());
+    for (g, w) in got.iter().zip(&want) {
+        assert_eq!(g.0, w.0);
+        assert!(g.1.same_as(w.1), "{:?}: {:?} != {:?}", g.0, g.1, w.1);
+    }
+    assert!(p.a.list_state(VEHICLE).is_none());
+    (took, messages)
+}
+
+#[test]
+fn sim_fetch_1000_params_clean_and_under_loss() {
+    let (t, m) = check_fetch(1000, Encoding::Bytewise, Knobs::clean(), 1);
+    eprintln!("fetch 1000 params, clean link: {t:?} virtual, {m} messages");
+    assert_eq!(m, 1001);
+    assert!(t < Duration::from_millis(50));
+    for seed in [1, 2, 3, 4] {
+        let (t, m) = check_fetch(1000, Encoding::Bytewise, Knobs::hostile(), seed);
+        eprintln!(
+            "fetch 1000 params, 20% loss + 20% dup + jitter (seed {seed}): {t:?} virtual, {m} messages"
+        );
+        assert!(t < Duration::from_secs(10), "{t:?}");
+    }
+}
+
+#[test]
+fn sim_fetch_with_c_cast_like_ardupilot() {
+    check_fetch(200, Encoding::CCast, Knobs::hostile(), 9);
+}
+
+#[test]
+fn list_fetch_phases_are_types() {
+    let mut c = ParamClient::new(ParamConfig::default(), Encoding::Bytewise);
+    let mut s = table(10, Encoding::Bytewise);
+    c.fetch_all(T0, VEHICLE).unwrap();
+    assert_eq!(
+        c.fetch_all(T0, VEHICLE),
+        Err(ParamRequestError::ListBusy { target: VEHICLE })
+    );
+    assert!(matches!(
+        c.list_state(VEHICLE),
+        Some(ListFetch::AwaitingCount(_))
+    ));
+    let req = c.poll_transmit().unwrap();
+    assert!(
+        matches!(req.message, MavMessage::ParamRequestList(m) if (m.target_system, m.target_component) == (1, 1))
+    );
+    s.handle_message(T0, GCS, &req.message);
+    let values: Vec<_> = core::iter::from_fn(|| s.poll_transmit()).collect();
+    assert_eq!(values.len(), 10);
+    // Lose indices 3 and 7.
+    for (i, v) in values.iter().enumerate() {
+        if i != 3 && i != 7 {
+            c.handle_message(T0, VEHICLE, &v.message);
+        }
+    }
+    let Some(ListFetch::Collecting(col)) = c.list_state(VEHICLE) else {
+        panic!()
+    };
+    assert_eq!((col.count(), col.missing()), (10, 2));
+    // The inactivity timer re-requests exactly the gaps, by index.
+    let t = c.poll_timeout().unwrap();
+    assert_eq!(t, T0 + Duration::from_secs(2));
+    c.handle_timeout(t);
+    let asks: Vec<i16> = core::iter::from_fn(|| c.poll_transmit())
+        .map(|o| match o.message {
+            MavMessage::ParamRequestRead(r) => r.param_index,
+            _ => panic!(),
+        })
+        .collect();
+    assert_eq!(asks, [3, 7]);
+    for i in [3, 7] {
+        c.handle_message(t, VEHICLE, &values[i].message);
+    }
+    match c.poll_event() {
+        Some(ParamEvent::List {
+            result: Ok(list), ..
+        }) => assert_eq!(list.len(), 10),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn a_component_without_parameters_times_out() {
+    let mut p = sim(
+        ParamServer::new(VEHICLE, Encoding::Bytewise),
+        Encoding::Bytewise,
+        Knobs::clean(),
+        1,
+    );
+    let (result, took, messages) = fetch(&mut p);
+    assert_eq!(result, Err(ParamError::TimedOut { attempts: 6 }));
+    assert_eq!(messages, 6);
+    assert_eq!(took, Duration::from_secs(12));
+}
+
+#[test]
+fn sim_set_confirms_under_loss_and_keeps_types() {
+    for (encoding, seed) in [(Encoding::Bytewise, 5), (Encoding::CCast, 6)] {
+        let mut p = sim(table(50, encoding), encoding, Knobs::hostile(), seed);
+        let mut ok = 0;
+        for i in 0..50usize {
+            let n = name(&format!("PARAM_{i:05}"));
+            let stored = p.b.get(n).unwrap();
+            // Ask for a float; the server keeps the parameter's own type.
+            let want = Value::F32(i as f32 + 1.0)
+                .converted_to(stored.param_type())
+                .unwrap();
+            let h =
+                p.a.set(p.now, VEHICLE, n, Value::F32(i as f32 + 1.0))
+                    .unwrap();
+            let mut result = None;
+            assert!(p.drive_until(Duration::from_secs(10), |c, _, _| {
+                for (hh, r) in finished(c) {
+                    if hh == h {
+                        result = Some(r);
+                    }
+                }
+                result.is_some()
+            }));
+            let got = result.unwrap().unwrap();
+            assert!(got.value.same_as(want), "{got:?} vs {want:?}");
+            assert_eq!(got.value.param_type(), stored.param_type());
+            assert!(p.b.get(n).unwrap().same_as(want));
+            ok += 1;
+            p.drive_for(Duration::from_millis(100));
+        }
+        assert_eq!(ok, 50);
+    }
+}
+
+#[test]
+fn sim_read_by_name_and_index_under_loss() {
+    let mut p = sim(
+        table(30, Encoding::Bytewise),
+        Encoding::Bytewise,
+        Knobs::hostile(),
+        11,
+    );
+    let by_name =
+        p.a.read(p.now, VEHICLE, ParamRef::Name(name("PARAM_00012")));
+    let by_index = p.a.read(p.now, VEHICLE, ParamRef::Index(20));
+    let mut results = vec![];
+    assert!(p.drive_until(Duration::from_secs(10), |c, _, _| {
+        results.extend(finished(c));
+        results.len() == 2
+    }));
+    results.sort_by_key(|r| r.0);
+    assert_eq!((results[0].0, results[1].0), (by_name, by_index));
+    let a = results[0].1.unwrap();
+    assert_eq!((a.name, a.index, a.count), (name("PARAM_00012"), 12, 30));
+    let b = results[1].1.unwrap();
+    assert_eq!((b.name, b.index), (name("PARAM_00020"), 20));
+    assert!(b.value.same_as(p.b.get(name("PARAM_00020")).unwrap()));
+}
+
+#[test]
+fn unknown_names_get_no_answer_and_time_out() {
+    let mut p = sim(
+        table(3, Encoding::Bytewise),
+        Encoding::Bytewise,
+        Knobs::clean(),
+        1,
+    );
+    let h =
+        p.a.set(p.now, VEHICLE, name("NO_SUCH"), Value::I32(1))
+            .unwrap();
+    let r = p.a.read(p.now, VEHICLE, ParamRef::Index(99));
+    let mut results = vec![];
+    p.drive_until(Duration::from_secs(10), |c, _, _| {
+        results.extend(finished(c));
+        results.len() == 2
+    });
+    assert_eq!(
+        results,
+        [
+            (h, Err(ParamError::TimedOut { attempts: 6 })),
+            (r, Err(ParamError::TimedOut { attempts: 6 }))
+        ]
+    );
+    let events: Vec<_> = core::iter::from_fn(|| p.b.poll_event()).collect();
+    assert_eq!(events.len(), 12);
+    assert_eq!(
+        events[0],
+        ParamServerEvent::Unknown {
+            from: GCS,
+            name: Some(name("NO_SUCH"))
+        }
+    );
+    assert_eq!(
+        events[1],
+        ParamServerEvent::Unknown {
+            from: GCS,
+            name: None
+        }
+    );
+}
+
+#[test]
+fn a_set_the_target_refuses_ends_rejected() {
+    let mut c = ParamClient::new(ParamConfig::default(), Encoding::Bytewise);
+    let n = name("ARMING_CHECK");
+    let h = c.set(T0, VEHICLE, n, Value::I32(0)).unwrap();
+    assert_eq!(
+        c.set(T0, VEHICLE, n, Value::I32(0)),
+        Err(ParamRequestError::SetBusy {
+            target: VEHICLE,
+            name: n
+        })
+    );
+    let echo = MavMessage::ParamValue(mavstack_dialects::common::ParamValue {
+        param_id: n.to_field(),
+        param_value: Encoding::Bytewise.encode(Value::I32(1)),
+        param_type: MavParamType::INT32,
+        param_count: 1,
+        param_index: 0,
+    });
+    let mut sets = 0;
+    for _ in 0..10 {
+        sets += core::iter::from_fn(|| c.poll_transmit())
+            .filter(|o| matches!(o.message, MavMessage::ParamSet(ParamSet { param_value, .. }) if param_value.to_bits() == 0))
+            .count();
+        c.handle_message(T0, VEHICLE, &echo);
+    }
+    assert_eq!(sets, 6);
+    assert_eq!(
+        finished(&mut c),
+        [(
+            h,
+            Err(ParamError::Rejected {
+                value: Value::I32(1)
+            })
+        )]
+    );
+}
+
+#[test]
+fn server_answers_reads_by_name_and_broadcasts_sets() {
+    let mut s = table(5, Encoding::CCast);
+    let read = ParamRequestRead {
+        target_system: 1,
+        target_component: 1,
+        param_id: name("PARAM_00003").to_field(),
+        param_index: -1,
+    };
+    assert!(s.handle_message(T0, GCS, &MavMessage::ParamRequestRead(read)));
+    let out = s.poll_transmit().unwrap();
+    assert_eq!(out.target, GCS);
+    let MavMessage::ParamValue(v) = out.message else {
+        panic!()
+    };
+    assert_eq!(
+        (v.param_index, v.param_count, v.param_type),
+        (3, 5, MavParamType::INT16)
+    );
+    assert_eq!(v.param_value, -497.0);
+    // Not for us.
+    assert!(!s.handle_message(
+        T0,
+        GCS,
+        &MavMessage::ParamRequestRead(ParamRequestRead {
+            target_system: 2,
+            ..read
+        })
+    ));
+    // A set: converted to the stored type (INT16, rounded), broadcast, reported.
+    let set = ParamSet {
+        target_system: 1,
+        target_component: 1,
+        param_id: name("PARAM_00003").to_field(),
+        param_value: 12.6,
+        param_type: MavParamType::REAL32,
+    };
+    s.handle_message(T0, GCS, &MavMessage::ParamSet(set));
+    let out = s.poll_transmit().unwrap();
+    assert_eq!(out.target, Address::BROADCAST);
+    assert_eq!(s.get(name("PARAM_00003")), Some(Value::I16(13)));
+    assert_eq!(
+        s.poll_event(),
+        Some(ParamServerEvent::Changed {
+            from: GCS,
+            name: name("PARAM_00003"),
+            value: Value::I16(13)
+        })
+    );
+    // A local change is broadcast too, and unsolicited values reach the client as events.
+    assert_eq!(
+        s.set(name("PARAM_00000"), Value::F32(9.0)),
+        Ok(Value::U8(9))
+    );
+    let mut c = ParamClient::new(ParamConfig::default(), Encoding::CCast);
+    c.handle_message(T0, VEHICLE, &s.poll_transmit().unwrap().message);
+    assert!(
+        matches!(c.poll_event(), Some(ParamEvent::Value { from: VEHICLE, param }) if param.value == Value::U8(9))
+    );
+}
