@@ -175,7 +175,7 @@ impl Crc16 {
     }
 
     /// The checksum of `data[..len]`, computed with few branches: the first `len % 16` bytes
-    /// go in as one 16-byte block behind zeros (from [`PRESET`]), the rest 16 at a time. The
+    /// go in as one 16-byte block behind zeros (from a precomputed register), the rest 16 at a time. The
     /// lengths of frames vary from one to the next, so this beats a loop whose tail the CPU
     /// mispredicts. Bytes of `data` past `len` are read but never affect the result.
     ///
