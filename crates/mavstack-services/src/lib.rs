@@ -1,5 +1,5 @@
 //! Sans-IO MAVLink microservices, in both roles: heartbeat and peer tracking, the command
-//! protocol and the parameter protocol.
+//! protocol, the parameter protocol and the mission protocol.
 //!
 //! Every service is a state machine that never reads a clock, never sleeps and never touches
 //! a socket. It works on *decoded* messages (the `common` dialect's
@@ -40,8 +40,9 @@
 //! | [`heartbeat`] | HEARTBEAT | [`heartbeat::Heartbeats`] peer table (new / lost / changed) | the same type emits our own HEARTBEAT |
 //! | [`command`] | COMMAND_LONG, COMMAND_INT, COMMAND_ACK | [`command::CommandClient`] | [`command::CommandServer`] |
 //! | [`param`] | PARAM_REQUEST_LIST/READ, PARAM_SET, PARAM_VALUE | [`param::ParamClient`] | [`param::ParamServer`] |
+//! | [`mission`] | MISSION_COUNT, MISSION_REQUEST_INT, MISSION_ITEM_INT, MISSION_ACK, ... | [`mission::MissionClient`] | [`mission::MissionServer`] |
 //!
-//! Missions, message intervals and TIMESYNC are not implemented yet.
+//! Message intervals and TIMESYNC are not implemented yet.
 //!
 //! # Features
 //!
@@ -97,6 +98,7 @@ extern crate std;
 
 pub mod command;
 pub mod heartbeat;
+pub mod mission;
 pub mod param;
 
 use mavstack_core::time::Instant;

@@ -1,0 +1,363 @@
+//! The mission protocol in both roles, through the simulated link and unit by unit.
+
+mod util;
+
+use core::time::Duration;
+
+use mavstack_dialects::common::{
+    MavCmd, MavFrame, MavMessage, MavMissionResult, MavMissionType, MissionCount, MissionItemInt,
+    MissionRequestInt,
+};
+use mavstack_services::mission::{
+    MissionClient, MissionConfig, MissionError, MissionEvent, MissionServer, MissionServerEvent,
+    transfer::{Download, Upload},
+};
+use mavstack_services::{Address, Service};
+use util::{Knobs, Pair, T0};
+
+const GCS: Address = Address::new(255, 190);
+const VEHICLE: Address = Address::new(1, 1);
+
+fn items(n: usize) -> Vec<MissionItemInt> {
+    (0..n)
+        .map(|i| MissionItemInt {
+            frame: MavFrame::GLOBAL_RELATIVE_ALT_INT,
+            command: MavCmd::NAV_WAYPOINT,
+            autocontinue: 1,
+            x: 473_977_418 + i as i32 * 100,
+            y: 85_455_939 - i as i32 * 50,
+            z: 20.0 + i as f32,
+            param1: i as f32,
+            ..Default::default()
+        })
+        .collect()
+}
+
+type Sim = Pair<MissionClient, MissionServer>;
+
+/// The default config (5 retries) on a clean link; 10 retries on a lossy one: at 20 % loss
+/// each way a request/item round trip fails with p = 0.36, so 6 tries of one item all
+/// fail with p = 0.36^6 ≈ 0.2 %, and a 500-item download with the default would fail
+/// about two times in three. With 11 tries: 1.3e-5 per item.
+fn config(knobs: Knobs) -> MissionConfig {
+    if knobs.loss > 0.0 {
+        MissionConfig {
+            retries: 10,
+            ..MissionConfig::default()
+        }
+    } else {
+        MissionConfig::default()
+    }
+}
+
+fn sim(knobs: Knobs, seed: u64) -> Sim {
+    Pair::new(
+        MissionClient::new(GCS, config(knobs)),
+        GCS,
+        MissionServer::new(VEHICLE, config(knobs)),
+        VEHICLE,
+        knobs,
+        seed,
+    )
+}
+
+/// Drives until the client reports; returns the event, virtual time and messages.
+fn wait(p: &mut Sim) -> (MissionEvent, Duration, u64) {
+    let (t0, m0) = (p.now, p.messages());
+    let mut event = None;
+    assert!(p.drive_until(Duration::from_secs(600), |c, _, _| {
+        if event.is_none() {
+            event = c.poll_event();
+        }
+        event.is_some()
+    }));
+    // Let the last messages land (a final ACK, duplicates).
+    p.drive_for(Duration::from_millis(100));
+    (event.unwrap(), p.now - t0, p.messages() - m0)
+}
+
+fn same_items(got: &[MissionItemInt], want: &[MissionItemInt]) {
+    assert_eq!(got.len(), want.len());
+    for (i, (g, w)) in got.iter().zip(want).enumerate() {
+        assert_eq!(g.seq as usize, i);
+        assert_eq!(
+            (g.x, g.y, g.z, g.param1, g.command, g.frame),
+            (w.x, w.y, w.z, w.param1, w.command, w.frame)
+        );
+    }
+}
+
+fn upload_then_download(knobs: Knobs, seed: u64, n: usize, ty: MavMissionType) {
+    let mut p = sim(knobs, seed);
+    let plan = items(n);
+    p.a.upload(p.now, VEHICLE, ty, plan.clone()).unwrap();
+    let (e, up_t, up_m) = wait(&mut p);
+    assert_eq!(
+        e,
+        MissionEvent::Uploaded {
+            mission_type: ty,
+            result: Ok(())
+        }
+    );
+    same_items(p.b.plan(ty), &plan);
+    p.a.download(p.now, VEHICLE, ty).unwrap();
+    let (e, down_t, down_m) = wait(&mut p);
+    let MissionEvent::Downloaded {
+        mission_type,
+        result: Ok(got),
+    } = e
+    else {
+        panic!("{e:?}")
+    };
+    assert_eq!(mission_type, ty);
+    same_items(&got, &plan);
+    eprintln!(
+        "{n}-item {ty:?} (loss {}, seed {seed}): upload {up_t:?} / {up_m} messages, download {down_t:?} / {down_m} messages",
+        knobs.loss
+    );
+}
+
+#[test]
+fn sim_500_item_mission_clean_and_under_loss() {
+    upload_then_download(Knobs::clean(), 1, 500, MavMissionType::MISSION);
+    for seed in [1, 2, 3] {
+        upload_then_download(Knobs::hostile(), seed, 500, MavMissionType::MISSION);
+    }
+}
+
+#[test]
+fn sim_fence_and_rally_are_separate_plans() {
+    let mut p = sim(Knobs::hostile(), 4);
+    for (ty, n) in [
+        (MavMissionType::MISSION, 5),
+        (MavMissionType::FENCE, 7),
+        (MavMissionType::RALLY, 3),
+    ] {
+        p.a.upload(p.now, VEHICLE, ty, items(n)).unwrap();
+        assert_eq!(
+            wait(&mut p).0,
+            MissionEvent::Uploaded {
+                mission_type: ty,
+                result: Ok(())
+            }
+        );
+    }
+    assert_eq!(
+        (
+            p.b.plan(MavMissionType::MISSION).len(),
+            p.b.plan(MavMissionType::FENCE).len(),
+            p.b.plan(MavMissionType::RALLY).len()
+        ),
+        (5, 7, 3)
+    );
+    p.a.clear(p.now, VEHICLE, MavMissionType::FENCE).unwrap();
+    assert_eq!(
+        wait(&mut p).0,
+        MissionEvent::Cleared {
+            mission_type: MavMissionType::FENCE,
+            result: Ok(())
+        }
+    );
+    assert_eq!(
+        (
+            p.b.plan(MavMissionType::MISSION).len(),
+            p.b.plan(MavMissionType::FENCE).len()
+        ),
+        (5, 0)
+    );
+    p.a.download(p.now, VEHICLE, MavMissionType::FENCE).unwrap();
+    assert_eq!(
+        wait(&mut p).0,
+        MissionEvent::Downloaded {
+            mission_type: MavMissionType::FENCE,
+            result: Ok(vec![])
+        }
+    );
+    p.a.set_current(p.now, VEHICLE, 3).unwrap();
+    assert_eq!(
+        wait(&mut p).0,
+        MissionEvent::CurrentSet {
+            seq: 3,
+            result: Ok(())
+        }
+    );
+    assert_eq!(p.b.current(), 3);
+    p.a.clear(p.now, VEHICLE, MavMissionType::ALL).unwrap();
+    assert_eq!(
+        wait(&mut p).0,
+        MissionEvent::Cleared {
+            mission_type: MavMissionType::ALL,
+            result: Ok(())
+        }
+    );
+    assert!(
+        p.b.plan(MavMissionType::MISSION).is_empty() && p.b.plan(MavMissionType::RALLY).is_empty()
+    );
+}
+
+#[test]
+fn sim_cancelled_upload_leaves_the_stored_plan_unchanged() {
+    let mut p = sim(Knobs::clean(), 5);
+    p.a.upload(p.now, VEHICLE, MavMissionType::MISSION, items(4))
+        .unwrap();
+    wait(&mut p);
+    p.a.upload(p.now, VEHICLE, MavMissionType::MISSION, items(50))
+        .unwrap();
+    p.drive_until(Duration::from_secs(5), |c, _, _| {
+        matches!(c.upload_state(), Some(Upload::AwaitingRequest(s)) if s.count() == 50) && {
+            // Part-way through.
+            true
+        }
+    });
+    p.drive_for(Duration::from_millis(60));
+    assert!(p.b.is_receiving());
+    assert!(p.a.cancel());
+    assert_eq!(
+        p.a.poll_event(),
+        Some(MissionEvent::Uploaded {
+            mission_type: MavMissionType::MISSION,
+            result: Err(MissionError::Cancelled)
+        })
+    );
+    p.drive_for(Duration::from_secs(1));
+    assert!(!p.b.is_receiving());
+    assert_eq!(p.b.plan(MavMissionType::MISSION).len(), 4);
+    let events: Vec<_> = core::iter::from_fn(|| p.b.poll_event()).collect();
+    assert_eq!(
+        events.last(),
+        Some(&MissionServerEvent::UploadAbandoned {
+            mission_type: MavMissionType::MISSION
+        })
+    );
+    // The client is free again.
+    assert!(!p.a.is_busy());
+}
+
+#[test]
+fn sim_silent_client_makes_the_server_give_up_unchanged() {
+    let mut s = MissionServer::new(VEHICLE, MissionConfig::default());
+    s.handle_message(
+        T0,
+        GCS,
+        &MavMessage::MissionCount(MissionCount {
+            target_system: 1,
+            target_component: 1,
+            count: 3,
+            mission_type: MavMissionType::MISSION,
+        }),
+    );
+    let mut requests = 0;
+    while let Some(t) = s.poll_timeout() {
+        requests += core::iter::from_fn(|| s.poll_transmit()).count();
+        s.handle_timeout(t);
+    }
+    assert_eq!(requests, 6);
+    assert_eq!(
+        s.poll_event(),
+        Some(MissionServerEvent::UploadAbandoned {
+            mission_type: MavMissionType::MISSION
+        })
+    );
+    assert!(s.plan(MavMissionType::MISSION).is_empty());
+}
+
+#[test]
+fn no_vehicle_times_out_after_retries() {
+    let mut c = MissionClient::new(GCS, MissionConfig::default());
+    c.download(T0, VEHICLE, MavMissionType::MISSION).unwrap();
+    assert!(matches!(
+        c.download_state(),
+        Some(Download::AwaitingCount(_))
+    ));
+    assert!(
+        c.upload(T0, VEHICLE, MavMissionType::MISSION, vec![])
+            .is_err()
+    );
+    let mut sent = 0;
+    while let Some(t) = c.poll_timeout() {
+        sent += core::iter::from_fn(|| c.poll_transmit()).count();
+        c.handle_timeout(t);
+    }
+    assert_eq!(sent, 6);
+    assert_eq!(
+        c.poll_event(),
+        Some(MissionEvent::Downloaded {
+            mission_type: MavMissionType::MISSION,
+            result: Err(MissionError::TimedOut { attempts: 6 })
+        })
+    );
+}
+
+#[test]
+fn out_of_sequence_items_are_dropped_and_the_expected_one_requested() {
+    let mut s = MissionServer::new(VEHICLE, MissionConfig::default());
+    s.handle_message(
+        T0,
+        GCS,
+        &MavMessage::MissionCount(MissionCount {
+            target_system: 1,
+            target_component: 1,
+            count: 3,
+            mission_type: MavMissionType::RALLY,
+        }),
+    );
+    let _ = s.poll_transmit();
+    let mut item = items(3);
+    for (i, it) in item.iter_mut().enumerate() {
+        it.seq = i as u16;
+        it.target_system = 1;
+        it.target_component = 1;
+        it.mission_type = MavMissionType::RALLY;
+    }
+    s.handle_message(T0, GCS, &MavMessage::MissionItemInt(item[2]));
+    assert!(matches!(
+        s.poll_transmit().unwrap().message,
+        MavMessage::MissionRequestInt(MissionRequestInt { seq: 0, .. })
+    ));
+    for it in &item {
+        s.handle_message(T0, GCS, &MavMessage::MissionItemInt(*it));
+    }
+    let out: Vec<_> = core::iter::from_fn(|| s.poll_transmit())
+        .map(|o| o.message)
+        .collect();
+    assert!(
+        matches!(out.last(), Some(MavMessage::MissionAck(a)) if a.r#type == MavMissionResult::MAV_MISSION_ACCEPTED && a.mission_type == MavMissionType::RALLY)
+    );
+    assert_eq!(s.plan(MavMissionType::RALLY).len(), 3);
+    // The last item again (its ACK was lost): ACKed again, not stored twice.
+    s.handle_message(T0, GCS, &MavMessage::MissionItemInt(item[2]));
+    assert!(matches!(
+        s.poll_transmit().unwrap().message,
+        MavMessage::MissionAck(_)
+    ));
+    // An unsupported plan type.
+    s.handle_message(
+        T0,
+        GCS,
+        &MavMessage::MissionCount(MissionCount {
+            target_system: 1,
+            target_component: 1,
+            count: 3,
+            mission_type: MavMissionType(7),
+        }),
+    );
+    assert!(
+        matches!(s.poll_transmit().unwrap().message, MavMessage::MissionAck(a) if a.r#type == MavMissionResult::MAV_MISSION_UNSUPPORTED)
+    );
+}
+
+#[test]
+fn sim_rejection_ends_the_upload() {
+    let mut p = sim(Knobs::clean(), 6);
+    p.a.upload(p.now, VEHICLE, MavMissionType(7), items(2))
+        .unwrap();
+    assert_eq!(
+        wait(&mut p).0,
+        MissionEvent::Uploaded {
+            mission_type: MavMissionType(7),
+            result: Err(MissionError::Rejected {
+                result: MavMissionResult::MAV_MISSION_UNSUPPORTED
+            })
+        }
+    );
+}
