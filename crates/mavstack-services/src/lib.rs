@@ -1,5 +1,5 @@
 //! Sans-IO MAVLink microservices, in both roles: heartbeat and peer tracking, the command
-//! protocol, the parameter protocol and the mission protocol.
+//! protocol, the parameter and mission protocols, message rates, and TIMESYNC.
 //!
 //! Every service is a state machine that never reads a clock, never sleeps and never touches
 //! a socket. It works on *decoded* messages (the `common` dialect's
@@ -41,8 +41,8 @@
 //! | [`command`] | COMMAND_LONG, COMMAND_INT, COMMAND_ACK | [`command::CommandClient`] | [`command::CommandServer`] |
 //! | [`param`] | PARAM_REQUEST_LIST/READ, PARAM_SET, PARAM_VALUE | [`param::ParamClient`] | [`param::ParamServer`] |
 //! | [`mission`] | MISSION_COUNT, MISSION_REQUEST_INT, MISSION_ITEM_INT, MISSION_ACK, ... | [`mission::MissionClient`] | [`mission::MissionServer`] |
-//!
-//! Message intervals and TIMESYNC are not implemented yet.
+//! | [`stream`] | SET_MESSAGE_INTERVAL, REQUEST_MESSAGE, MESSAGE_INTERVAL | [`stream::Subscriptions`], [`stream::set_message_interval`], [`stream::request_message`] | [`stream::StreamScheduler`] |
+//! | [`timesync`] | TIMESYNC | [`timesync::Timesync`] (estimates the offset) | the same type answers requests |
 //!
 //! # Features
 //!
@@ -100,6 +100,8 @@ pub mod command;
 pub mod heartbeat;
 pub mod mission;
 pub mod param;
+pub mod stream;
+pub mod timesync;
 
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::MavMessage;
