@@ -98,3 +98,17 @@ pub trait MessageSet: Sized {
     #[must_use]
     fn message_info(&self) -> &'static MessageInfo;
 }
+
+/// Decodes `payload` as message `M` and wraps it in the message set `S`; what generated
+/// [`MessageSet::decode`] implementations call for each id.
+///
+/// Never inlined on purpose: each message gets one small function that writes straight into
+/// the caller's result, and the id dispatch stays a jump table of tail calls instead of one
+/// function holding every message's decoder (a frame of kilobytes, set up on every call).
+///
+/// # Errors
+/// Never; the `Result` is the shape of [`MessageSet::decode`].
+#[inline(never)]
+pub fn decode_as<S: From<M>, M: Message>(payload: &[u8]) -> Result<S, UnknownMessage> {
+    Ok(S::from(M::decode(payload)))
+}
