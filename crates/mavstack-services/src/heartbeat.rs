@@ -29,7 +29,8 @@ use core::time::Duration;
 
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::{
-    Heartbeat, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType,
+    AutopilotVersion, Heartbeat, MavAutopilot, MavMessage, MavModeFlag, MavProtocolCapability,
+    MavState, MavType,
 };
 
 use crate::{Address, Outgoing, Service, earliest};
@@ -92,6 +93,12 @@ pub struct Peer {
     /// The MAVLink version (1 or 2) of the frame its last heartbeat came in, when the
     /// caller told us ([`Heartbeats::handle_heartbeat`]).
     pub frame_version: Option<u8>,
+    /// Its MAV_PROTOCOL_CAPABILITY bits, once its AUTOPILOT_VERSION arrived
+    /// ([`Heartbeats::handle_autopilot_version`]).
+    pub capabilities: Option<MavProtocolCapability>,
+    /// Its `flight_sw_version` (major<<24 | minor<<16 | patch<<8 | type), from the same
+    /// message.
+    pub flight_sw_version: Option<u32>,
     /// When its last heartbeat arrived.
     pub last_seen: Instant,
 }
@@ -101,6 +108,14 @@ impl Peer {
     #[must_use]
     pub fn is_autopilot(&self) -> bool {
         self.autopilot != MavAutopilot::INVALID
+    }
+
+    /// Whether it advertised MAVLink 2 (capability bit MAVLINK2, 8192); `None` until its
+    /// AUTOPILOT_VERSION arrived.
+    #[must_use]
+    pub fn supports_mavlink2(&self) -> Option<bool> {
+        self.capabilities
+            .map(|c| c.0 & MavProtocolCapability::MAVLINK2.0 != 0)
     }
 
     /// Whether it reports itself armed.
@@ -134,7 +149,8 @@ impl Peer {
 pub enum HeartbeatEvent {
     /// A component was heard for the first time (or again after being lost).
     New(Peer),
-    /// A known component's type, autopilot, mode, status or frame version changed.
+    /// A known component's type, autopilot, mode, status, frame version, capabilities or
+    /// firmware version changed.
     Changed(Peer),
     /// No heartbeat from this component for the configured timeout; it left the table.
     Lost(Address),
@@ -189,7 +205,10 @@ impl Heartbeats {
         heartbeat: &Heartbeat,
         frame_version: Option<u8>,
     ) {
+        let known = self.peers.get(&from);
         let peer = Peer {
+            capabilities: known.and_then(|p| p.capabilities),
+            flight_sw_version: known.and_then(|p| p.flight_sw_version),
             address: from,
             mav_type: heartbeat.r#type,
             autopilot: heartbeat.autopilot,
@@ -209,6 +228,21 @@ impl Heartbeats {
         }
     }
 
+    /// Feeds one AUTOPILOT_VERSION from `from`: records its capabilities and firmware
+    /// version ([`HeartbeatEvent::Changed`] when they change). Returns whether `from` is a
+    /// known peer (messages from unknown ones are ignored).
+    pub fn handle_autopilot_version(&mut self, from: Address, version: &AutopilotVersion) -> bool {
+        let Some(peer) = self.peers.get_mut(&from) else {
+            return false;
+        };
+        let new = (Some(version.capabilities), Some(version.flight_sw_version));
+        if (peer.capabilities, peer.flight_sw_version) != new {
+            (peer.capabilities, peer.flight_sw_version) = new;
+            self.events.push_back(HeartbeatEvent::Changed(*peer));
+        }
+        true
+    }
+
     /// The next peer-table event, if any. Call until `None` after every `handle_*` call.
     #[must_use]
     pub fn poll_event(&mut self) -> Option<HeartbeatEvent> {
@@ -218,11 +252,13 @@ impl Heartbeats {
 
 impl Service for Heartbeats {
     fn handle_message(&mut self, now: Instant, from: Address, message: &MavMessage) -> bool {
-        if let MavMessage::Heartbeat(hb) = message {
-            self.handle_heartbeat(now, from, hb, None);
-            true
-        } else {
-            false
+        match message {
+            MavMessage::Heartbeat(hb) => {
+                self.handle_heartbeat(now, from, hb, None);
+                true
+            }
+            MavMessage::AutopilotVersion(v) => self.handle_autopilot_version(from, v),
+            _ => false,
         }
     }
 

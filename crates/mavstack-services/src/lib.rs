@@ -44,6 +44,24 @@
 //! | [`stream`] | SET_MESSAGE_INTERVAL, REQUEST_MESSAGE, MESSAGE_INTERVAL | [`stream::Subscriptions`], [`stream::set_message_interval`], [`stream::request_message`] | [`stream::StreamScheduler`] |
 //! | [`timesync`] | TIMESYNC | [`timesync::Timesync`] (estimates the offset) | the same type answers requests |
 //!
+//! # Limitations
+//!
+//! - Parameters: a list fetch addressed to component 0 collects every answering
+//!   component's values into one list; fetch per component instead. The server hands the
+//!   whole list out at once; pacing it to the link is the driver's job (drain
+//!   `poll_transmit` at a rate). The 64-bit parameter types are not carried.
+//! - Commands: a second command with the same id to the same target while the first is in
+//!   flight is refused ([`command::SendError::AlreadyInFlight`]) rather than queued, and
+//!   COMMAND_CANCEL is not sent.
+//! - Missions: the server does not accept uploads of the deprecated float MISSION_ITEM
+//!   (it answers MISSION_REQUEST with MISSION_ITEM_INT); one upload at a time (another peer
+//!   gets DENIED); no `opaque_id` (the vendored common.xml version has none); ArduPilot's
+//!   "seq 0 is home" is the caller's concern.
+//! - TIMESYNC: this dialect's TIMESYNC has no target fields, so answers are matched by
+//!   their `ts1`.
+//! - No adapter over `mavstack-channel` yet: a driver decodes accepted frames and encodes
+//!   [`Outgoing`] messages itself.
+//!
 //! # Features
 //!
 //! - `std` (default): links the standard library; nothing in the crate needs it. Without it

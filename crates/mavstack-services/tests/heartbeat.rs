@@ -4,7 +4,10 @@ mod util;
 
 use core::time::Duration;
 
-use mavstack_dialects::common::{Heartbeat, MavAutopilot, MavModeFlag, MavState, MavType};
+use mavstack_dialects::common::{
+    AutopilotVersion, Heartbeat, MavAutopilot, MavMessage, MavModeFlag, MavProtocolCapability,
+    MavState, MavType,
+};
 use mavstack_services::heartbeat::{HeartbeatConfig, HeartbeatEvent, Heartbeats};
 use mavstack_services::{Address, Service};
 use util::{Knobs, Pair};
@@ -128,6 +131,35 @@ fn frame_version_is_recorded_when_given() {
         matches!(e.as_slice(), [HeartbeatEvent::New(a), HeartbeatEvent::Changed(b)] if a.frame_version == Some(1) && b.frame_version == Some(2))
     );
     assert_eq!(g.peer(VEHICLE).unwrap().frame_version, Some(2));
+    // AUTOPILOT_VERSION adds capabilities; they survive later heartbeats.
+    assert_eq!(g.peer(VEHICLE).unwrap().supports_mavlink2(), None);
+    let version = AutopilotVersion {
+        capabilities: MavProtocolCapability(
+            MavProtocolCapability::MAVLINK2.0 | MavProtocolCapability::PARAM_ENCODE_BYTEWISE.0,
+        ),
+        flight_sw_version: 0x010E_0300,
+        ..Default::default()
+    };
+    assert!(g.handle_message(util::T0, VEHICLE, &MavMessage::AutopilotVersion(version)));
+    assert!(!g.handle_message(
+        util::T0,
+        Address::new(9, 1),
+        &MavMessage::AutopilotVersion(version)
+    ));
+    g.handle_heartbeat(util::T0, VEHICLE, &quad(), Some(2));
+    let p = g.peer(VEHICLE).unwrap();
+    assert_eq!(
+        (p.supports_mavlink2(), p.flight_sw_version),
+        (Some(true), Some(0x010E_0300))
+    );
+    assert_eq!(
+        mavstack_services::param::Encoding::from_capabilities(p.capabilities.unwrap().0),
+        Some(mavstack_services::param::Encoding::Bytewise)
+    );
+    assert!(matches!(
+        events(&mut g).as_slice(),
+        [HeartbeatEvent::Changed(_)]
+    ));
     // No own heartbeat configured: only the peer's timeout is a deadline.
     assert_eq!(g.poll_timeout(), Some(util::T0 + Duration::from_secs(3)));
 }
