@@ -27,7 +27,7 @@ use std::collections::{BTreeMap, VecDeque};
 
 use mavstack_channel::{
     Channel, CommandEncoding, CommonCrc, Config, ConfigError, Event, HandshakeMethod, LinkStats,
-    SigningConfig, Target,
+    LinkVersion, SigningConfig, Target,
 };
 use mavstack_core::parse::CrcExtra;
 use mavstack_core::time::Instant;
@@ -46,6 +46,8 @@ pub struct RawMessage {
     pub crc_extra: u8,
     payload: [u8; MAX_PAYLOAD_LEN],
     len: u8,
+    /// Length of the base (non-extension) fields: all a MAVLink 1 frame may carry.
+    base_len: u8,
 }
 
 impl RawMessage {
@@ -60,6 +62,7 @@ impl RawMessage {
             payload,
             // At most MAX_PAYLOAD_LEN (255): fits.
             len: u8::try_from(len).unwrap_or(u8::MAX),
+            base_len: u8::try_from(M::MIN_LEN.min(len)).unwrap_or(u8::MAX),
         }
     }
 
@@ -67,6 +70,12 @@ impl RawMessage {
     #[must_use]
     pub fn payload(&self) -> &[u8] {
         &self.payload[..usize::from(self.len)]
+    }
+
+    /// The base fields alone: what a MAVLink 1 frame carries (never extensions).
+    #[must_use]
+    pub fn base_payload(&self) -> &[u8] {
+        &self.payload[..usize::from(self.base_len)]
     }
 }
 
@@ -225,13 +234,12 @@ impl<L: CrcExtra + Clone + Send + 'static> ChannelProtocol<L> {
             self.fail(peer, format!("no link to {peer}"));
             return;
         };
-        match channel.send_raw(
-            now,
-            message.msg_id,
-            message.crc_extra,
-            message.payload(),
-            &mut buf,
-        ) {
+        let payload = if channel.version() == LinkVersion::Mavlink1 {
+            message.base_payload()
+        } else {
+            message.payload()
+        };
+        match channel.send_raw(now, message.msg_id, message.crc_extra, payload, &mut buf) {
             Ok(t) => match FrameBuf::new(&buf[..t.len]) {
                 Ok(frame) => self.outgoing.push_back((peer, frame)),
                 Err(e) => self.fail(peer, e.to_string()),
@@ -386,5 +394,55 @@ impl<L: CrcExtra + Clone + Send + 'static> Protocol for ChannelProtocol<L> {
         ChannelStats {
             links: self.channels.iter().map(|(&p, c)| (p, c.stats())).collect(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::{Framing, PeerAddr};
+    use mavstack_dialects::common::{CommandAck, MavCmd, MavResult};
+
+    fn peer() -> PeerInfo {
+        PeerInfo {
+            id: PeerId::new(1),
+            addr: PeerAddr::Udp("127.0.0.1:14550".parse().expect("address")),
+            framing: Framing::Datagram,
+        }
+    }
+
+    fn sent(protocol: &mut ChannelProtocol, message: RawMessage) -> Vec<u8> {
+        let now = Instant::from_secs(1_767_225_600);
+        protocol.handle_command(now, ChannelCommand::to_all(message));
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        let t = protocol.poll_transmit(now, &mut buf).expect("a frame");
+        buf[..t.len].to_vec()
+    }
+
+    #[test]
+    fn mavlink1_links_send_base_fields_only_and_mavlink2_links_the_extensions() {
+        let ack = RawMessage::new(&CommandAck {
+            command: MavCmd::REQUEST_MESSAGE,
+            result: MavResult::UNSUPPORTED,
+            progress: 7,
+            target_system: 255,
+            target_component: 190,
+            ..CommandAck::default()
+        });
+        let mut v1 = ChannelProtocol::new(Config::vehicle(1, 1)).expect("valid");
+        v1.handle_peer_added(Instant::ZERO, &peer());
+        let frame = sent(&mut v1, ack);
+        // MAVLink 1: 0xFE, payload of the 3 base bytes (command, result), no extensions.
+        assert_eq!((frame[0], frame[1]), (0xFE, 3));
+
+        let mut config = Config::vehicle(1, 1);
+        if let Some(policy) = config.vehicle_policy_mut() {
+            policy.version = mavstack_channel::VehicleVersion::Mavlink2;
+        }
+        let mut v2 = ChannelProtocol::new(config).expect("valid");
+        v2.handle_peer_added(Instant::ZERO, &peer());
+        let frame = sent(&mut v2, ack);
+        // MAVLink 2: the extensions travel (progress, result_param2, target ids: 10 bytes).
+        assert_eq!((frame[0], frame[1]), (0xFD, 10));
     }
 }
