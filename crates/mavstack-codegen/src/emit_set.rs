@@ -32,8 +32,7 @@ pub(crate) fn emit(unit: &Unit, plan: &Plan, opts: &Options) -> TokenStream {
         variants.push(quote!(#[doc = #doc] #name(#path),));
         infos.push(info_literal(m, &core));
         info_arms.push(quote!(#id => Some(&MESSAGES[#index]),));
-        decode_arms
-            .push(quote!(#id => #core::message::decode_as::<Self, #path>(payload),));
+        decode_arms.push(quote!(#id => #core::message::decode_as::<Self, #path>(payload),));
         encode_arms.push(quote!(Self::#name(m) => #core::Message::encode(m, out),));
         id_arms.push(quote!(Self::#name(_) => #id,));
         self_info_arms.push(quote!(Self::#name(_) => &MESSAGES[#index],));
