@@ -342,6 +342,32 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
     Ok(())
 }
 
+/// Asks the vehicle for AUTOPILOT_VERSION on the signed link and waits for a verified answer;
+/// `failure` names the step if none comes.
+async fn signed_autopilot_version(
+    timeline: &Timeline,
+    ground: &mut Ground,
+    peer: PeerId,
+    failure: &str,
+) -> Result<(), Failure> {
+    ground
+        .send(ChannelCommand::Send {
+            dest: Dest::Peer(peer),
+            message: request(MavCmd::REQUEST_MESSAGE, AutopilotVersion::ID as f32),
+        })
+        .await?;
+    let answer = ground
+        .wait(timeline, Duration::from_secs(3), |e| {
+            matches!(&e.event, ChannelEventKind::Channel(Event::Frame(rf))
+                if rf.frame.msg_id() == AutopilotVersion::ID
+                    && matches!(rf.auth, Authentication::Verified { .. }))
+        })
+        .await?;
+    answer
+        .map(drop)
+        .ok_or_else(|| other(format!("demo step failed: {failure}")))
+}
+
 async fn script(
     timeline: &Timeline,
     ground: &mut Ground,
@@ -465,20 +491,7 @@ async fn script(
     need(signed, "no signed HEARTBEAT from the vehicle")?;
     // 5. Signed traffic both ways.
     timeline.say("ground station → REQUEST_MESSAGE(AUTOPILOT_VERSION), signed");
-    ground
-        .send(ChannelCommand::Send {
-            dest: Dest::Peer(peer),
-            message: request(MavCmd::REQUEST_MESSAGE, AutopilotVersion::ID as f32),
-        })
-        .await?;
-    let av = ground
-        .wait(timeline, Duration::from_secs(3), |e| {
-            matches!(&e.event, ChannelEventKind::Channel(Event::Frame(rf))
-                if rf.frame.msg_id() == AutopilotVersion::ID
-                    && matches!(rf.auth, Authentication::Verified { .. }))
-        })
-        .await?;
-    need(av, "no signed AUTOPILOT_VERSION")?;
+    signed_autopilot_version(timeline, ground, peer, "no signed AUTOPILOT_VERSION").await?;
     timeline.say("ground station ← AUTOPILOT_VERSION, signed, signature verified");
     // 6. Attacks from the ground link.
     let captured = tokio::time::timeout(Duration::from_secs(1), tap.recv())
@@ -501,20 +514,7 @@ async fn script(
         .await?;
     // 7. The genuine stream still flows.
     timeline.say("ground station → REQUEST_MESSAGE(AUTOPILOT_VERSION), signed, after the attacks");
-    ground
-        .send(ChannelCommand::Send {
-            dest: Dest::Peer(peer),
-            message: request(MavCmd::REQUEST_MESSAGE, AutopilotVersion::ID as f32),
-        })
-        .await?;
-    let av = ground
-        .wait(timeline, Duration::from_secs(3), |e| {
-            matches!(&e.event, ChannelEventKind::Channel(Event::Frame(rf))
-                if rf.frame.msg_id() == AutopilotVersion::ID
-                    && matches!(rf.auth, Authentication::Verified { .. }))
-        })
-        .await?;
-    need(av, "the genuine stream was locked out")?;
+    signed_autopilot_version(timeline, ground, peer, "the genuine stream was locked out").await?;
     timeline.say("ground station ← AUTOPILOT_VERSION: the genuine stream is still accepted");
     Ok(())
 }

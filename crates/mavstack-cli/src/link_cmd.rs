@@ -178,6 +178,32 @@ async fn sleep_until_opt(at: Option<Instant>) {
     }
 }
 
+/// Why [`next_batch`] returned.
+enum Wake {
+    /// Events are in the batch.
+    Batch,
+    /// The ticker ticked.
+    Tick,
+    /// Stop: interrupted, out of time, or the link ended.
+    Done,
+}
+
+/// Waits for the next batch of events, a tick, or a reason to stop.
+async fn next_batch<P: mavstack_transport::Protocol>(
+    conn: &mut Connection<P>,
+    batch: &mut Vec<P::Event>,
+    stop: core::pin::Pin<&mut impl Future<Output = ()>>,
+    until: Option<Instant>,
+    ticker: &mut tokio::time::Interval,
+) -> Wake {
+    tokio::select! {
+        n = conn.recv_many(batch, 1024) => if n == 0 { Wake::Done } else { Wake::Batch },
+        () = stop => Wake::Done,
+        () = sleep_until_opt(until) => Wake::Done,
+        _ = ticker.tick() => Wake::Tick,
+    }
+}
+
 fn counts_of(stats: &FrameStats, bad_signature: u64) -> Counts {
     let mut counts = Counts::default();
     counts.parse.frames = stats.frames;
@@ -292,15 +318,10 @@ pub(crate) fn listen(args: &ListenArgs) -> Result<(), Failure> {
         let stop = interrupted();
         tokio::pin!(stop);
         'run: loop {
-            tokio::select! {
-                n = conn.recv_many(&mut batch, 1024) => {
-                    if n == 0 {
-                        break 'run;
-                    }
-                }
-                () = &mut stop => break 'run,
-                () = sleep_until_opt(until) => break 'run,
-                _ = redraw.tick(), if table.is_some() => {
+            match next_batch(&mut conn, &mut batch, stop.as_mut(), until, &mut redraw).await {
+                Wake::Batch => {}
+                Wake::Done => break 'run,
+                Wake::Tick => {
                     if let Some(t) = table.as_mut() {
                         t.draw(&dialect, &mut sink).context("writing output")?;
                     }
@@ -405,15 +426,10 @@ pub(crate) fn record(args: &RecordArgs) -> Result<(), Failure> {
         let write_failed =
             |e: io::Error| Failure::Other(anyhow!("writing {}: {e}", args.file.display()));
         'run: loop {
-            tokio::select! {
-                n = conn.recv_many(&mut batch, 1024) => {
-                    if n == 0 {
-                        break 'run;
-                    }
-                }
-                () = &mut stop => break 'run,
-                () = sleep_until_opt(until) => break 'run,
-                _ = flush.tick() => {
+            match next_batch(&mut conn, &mut batch, stop.as_mut(), until, &mut flush).await {
+                Wake::Batch => {}
+                Wake::Done => break 'run,
+                Wake::Tick => {
                     writer.flush_if_due().map_err(write_failed)?;
                     continue;
                 }
