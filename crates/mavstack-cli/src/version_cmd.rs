@@ -115,6 +115,12 @@ pub(crate) struct ProbeArgs {
     /// Send the requests as COMMAND_INT instead of COMMAND_LONG.
     #[arg(long)]
     command_int: bool,
+    /// Sign with this key (64 hex digits): talk to vehicles that accept only signed frames.
+    #[arg(long)]
+    key: Option<String>,
+    /// Signing link id (with `--key`).
+    #[arg(long, default_value_t = 0)]
+    link_id: u8,
     /// Our system id.
     #[arg(long, default_value_t = 255)]
     sysid: u8,
@@ -565,7 +571,12 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
     } else {
         CommandEncoding::Long
     };
-    let config = Config::ground_station(args.sysid, args.compid);
+    let mut config = Config::ground_station(args.sysid, args.compid);
+    config.signing = args
+        .key
+        .as_deref()
+        .map(|k| secret_key(k, "--key").map(|key| SigningConfig::new(key, args.link_id)))
+        .transpose()?;
     let protocol =
         ChannelProtocol::new(config).map_err(|e| Failure::Input(anyhow!("probe: {e}")))?;
     runtime()?.block_on(async {
