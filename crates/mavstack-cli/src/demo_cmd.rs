@@ -20,7 +20,6 @@
 use core::time::Duration;
 use std::net::UdpSocket;
 
-use anyhow::anyhow;
 use clap::Args;
 use mavstack_channel::{
     Authentication, CommandEncoding, Config, Event, HandshakeMethod, HandshakeResult,
@@ -40,28 +39,18 @@ use mavstack_transport::{ConnSpec, Connection, Dest, PeerId, clock};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
-use crate::Failure;
 use crate::link_cmd::runtime;
 use crate::version_cmd::{
     Autopilot, Log, VehicleSetup, open_radio_side, open_vehicle, run_radio, run_vehicle,
+    version_name,
 };
+use crate::{Failure, other};
 
 #[derive(Debug, Args)]
 pub(crate) struct DemoArgs {}
 
 /// The demo's signing key (a real deployment generates one per vehicle and keeps it secret).
 const KEY: [u8; 32] = *b"mavstack demo key: not a secret!";
-
-fn other(e: impl core::fmt::Display) -> Failure {
-    Failure::Other(anyhow!("{e}"))
-}
-
-fn version_name(v: Version) -> &'static str {
-    match v {
-        Version::V1 => "MAVLink 1",
-        Version::V2 => "MAVLink 2",
-    }
-}
 
 /// The timeline: lines from every actor, stamped with the time since the start.
 struct Timeline {

@@ -20,8 +20,8 @@ use mavstack_transport::{
 };
 use tokio::time::Instant;
 
-use crate::Failure;
 use crate::codec_cmd::{Counts, frame_line, parse_key};
+use crate::{Failure, other};
 
 /// The options every link command shares.
 #[derive(Debug, Args)]
@@ -102,12 +102,11 @@ pub(crate) struct ReplayArgs {
 
 /// Opens `conn` with the frame protocol over `dialect`'s CRC_EXTRA values.
 async fn open(
-    conn: &str,
+    spec: &ConnSpec,
     dialect: &Arc<Dialect>,
     keep_unknown: bool,
     mode: FileMode,
 ) -> Result<Connection<FrameProtocol<impl Fn(u32) -> Option<u8> + Send + 'static>>, Failure> {
-    let spec: ConnSpec = conn.parse().map_err(|e| Failure::Input(anyhow!("{e}")))?;
     let lookup = {
         let dialect = Arc::clone(dialect);
         move |id: u32| dialect.message(id).map(|m| m.crc_extra)
@@ -117,9 +116,9 @@ async fn open(
         .peer_events(false);
     let mut options = Options::default();
     options.file_mode = mode;
-    Connection::open_with(&spec, protocol, &options)
+    Connection::open_with(spec, protocol, &options)
         .await
-        .map_err(|e| Failure::Other(anyhow!("{e}")))
+        .map_err(other)
 }
 
 fn load_dialect(name: &str) -> Result<Arc<Dialect>, Failure> {
@@ -160,14 +159,21 @@ pub(crate) async fn interrupted() {
     }
 }
 
+/// A connection string, or a bad-input failure naming what is wrong with it.
+pub(crate) fn parse_spec(conn: &str) -> Result<ConnSpec, Failure> {
+    conn.parse().map_err(|e| Failure::Input(anyhow!("{e}")))
+}
+
+/// A number of seconds given as option `what`.
+pub(crate) fn seconds(s: f64, what: &str) -> Result<Duration, Failure> {
+    Duration::try_from_secs_f64(s)
+        .map_err(|_| Failure::Input(anyhow!("{what}: {s} is not a number of seconds")))
+}
+
 /// When a command with `--duration` must stop.
 fn deadline(duration: Option<f64>) -> Result<Option<Instant>, Failure> {
     duration
-        .map(|s| {
-            Duration::try_from_secs_f64(s)
-                .map(|d| Instant::now() + d)
-                .map_err(|_| Failure::Input(anyhow!("--duration: {s} is not a number of seconds")))
-        })
+        .map(|s| seconds(s, "--duration").map(|d| Instant::now() + d))
         .transpose()
 }
 
@@ -298,15 +304,16 @@ pub(crate) fn listen(args: &ListenArgs) -> Result<(), Failure> {
         })
         .collect::<Result<_, _>>()?;
     let until = deadline(args.duration)?;
+    let spec = parse_spec(&args.conn)?;
     let with_ts = matches!(
-        args.conn.parse::<ConnSpec>(),
-        Ok(ConnSpec::File {
+        spec,
+        ConnSpec::File {
             format: FileFormat::Tlog,
             ..
-        })
+        }
     );
     runtime()?.block_on(async {
-        let mut conn = open(&args.conn, &dialect, args.keep_unknown, FileMode::Read).await?;
+        let mut conn = open(&spec, &dialect, args.keep_unknown, FileMode::Read).await?;
         let stdout = io::stdout();
         let mut sink = io::BufWriter::with_capacity(1 << 16, stdout.lock());
         let mut counts = Counts::default();
@@ -372,9 +379,7 @@ pub(crate) fn listen(args: &ListenArgs) -> Result<(), Failure> {
             let counts = counts_of(&stats.protocol, counts.bad_signature);
             eprintln!("{}", counts.json());
         }
-        conn.close()
-            .await
-            .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+        conn.close().await.map_err(other)?;
         Ok(())
     })
 }
@@ -408,6 +413,7 @@ impl Status {
 }
 
 pub(crate) fn record(args: &RecordArgs) -> Result<(), Failure> {
+    let spec = parse_spec(&args.conn)?;
     let dialect = load_dialect(&args.dialect.dialect)?;
     let until = deadline(args.duration)?;
     let file = std::fs::File::create(&args.file)
@@ -415,7 +421,7 @@ pub(crate) fn record(args: &RecordArgs) -> Result<(), Failure> {
     let mut writer = tlog::Writer::new(io::BufWriter::with_capacity(1 << 16, file));
     runtime()?.block_on(async {
         // Unknown ids are recorded too: a recorder keeps everything that frames correctly.
-        let mut conn = open(&args.conn, &dialect, true, FileMode::Read).await?;
+        let mut conn = open(&spec, &dialect, true, FileMode::Read).await?;
         eprintln!("recording {} to {}", args.conn, args.file.display());
         let mut batch = Vec::with_capacity(1024);
         let mut flush = tokio::time::interval(Duration::from_millis(500));
@@ -452,9 +458,7 @@ pub(crate) fn record(args: &RecordArgs) -> Result<(), Failure> {
         writer.flush().map_err(write_failed)?;
         status.clear();
         eprintln!("recorded {recorded} frames to {}", args.file.display());
-        conn.close()
-            .await
-            .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+        conn.close().await.map_err(other)?;
         Ok(())
     })
 }
@@ -492,6 +496,7 @@ fn replay_frames(
 }
 
 pub(crate) fn replay(args: &ReplayArgs) -> Result<(), Failure> {
+    let spec = parse_spec(&args.conn)?;
     if !(args.speed >= 0.0 && args.speed.is_finite()) {
         return Err(Failure::Input(anyhow!(
             "--speed: {} is not a speed (0 or more)",
@@ -507,15 +512,12 @@ pub(crate) fn replay(args: &ReplayArgs) -> Result<(), Failure> {
         )));
     }
     runtime()?.block_on(async {
-        let conn = open(&args.conn, &dialect, false, FileMode::Write).await?;
+        let conn = open(&spec, &dialect, false, FileMode::Write).await?;
         let mut status = Status::new();
         let stop = interrupted();
         tokio::pin!(stop);
         // A server (udpin, tcpin) has no one to send to until a peer shows up.
-        let server = matches!(
-            args.conn.parse::<ConnSpec>(),
-            Ok(ConnSpec::UdpIn { .. } | ConnSpec::TcpIn { .. })
-        );
+        let server = matches!(spec, ConnSpec::UdpIn { .. } | ConnSpec::TcpIn { .. });
         if server && conn.peers().is_empty() {
             eprintln!("waiting for a peer on {}", args.conn);
             while conn.peers().is_empty() {
@@ -542,7 +544,7 @@ pub(crate) fn replay(args: &ReplayArgs) -> Result<(), Failure> {
                 }
                 tokio::select! {
                     r = conn.send(FrameCommand::to_all(*frame)) => {
-                        r.map_err(|e| Failure::Other(anyhow!("{e}")))?;
+                        r.map_err(other)?;
                     }
                     () = &mut stop => break 'run,
                 }
@@ -561,9 +563,7 @@ pub(crate) fn replay(args: &ReplayArgs) -> Result<(), Failure> {
             }
         }
         status.clear();
-        conn.close()
-            .await
-            .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+        conn.close().await.map_err(other)?;
         eprintln!("replayed {sent} frames");
         Ok(())
     })

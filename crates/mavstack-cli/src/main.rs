@@ -62,6 +62,11 @@ pub(crate) enum Failure {
     Other(anyhow::Error),
 }
 
+/// Any error as a failure (exit code 1), its message kept.
+pub(crate) fn other(e: impl core::fmt::Display) -> Failure {
+    Failure::Other(anyhow::anyhow!("{e}"))
+}
+
 impl From<anyhow::Error> for Failure {
     fn from(e: anyhow::Error) -> Self {
         Self::Other(e)

@@ -36,8 +36,8 @@ use mavstack_transport::{
 use tokio::sync::mpsc;
 use tokio::time::Instant;
 
-use crate::Failure;
-use crate::link_cmd::{interrupted, runtime};
+use crate::link_cmd::{interrupted, parse_spec, runtime, seconds};
+use crate::{Failure, other};
 
 /// The autopilot a simulated vehicle claims to be.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -143,17 +143,8 @@ pub(crate) struct RadioArgs {
     verbose: bool,
 }
 
-pub(crate) fn parse_spec(conn: &str) -> Result<ConnSpec, Failure> {
-    conn.parse().map_err(|e| Failure::Input(anyhow!("{e}")))
-}
-
 pub(crate) fn secret_key(hex: &str, what: &str) -> Result<SecretKey, Failure> {
     SecretKey::from_hex(hex).map_err(|e| Failure::Input(anyhow!("{what}: {e}")))
-}
-
-fn seconds(s: f64, what: &str) -> Result<Duration, Failure> {
-    Duration::try_from_secs_f64(s)
-        .map_err(|_| Failure::Input(anyhow!("{what}: {s} is not a number of seconds")))
 }
 
 /// The vehicle's settings, shared by `mavstack vehicle` and `mavstack demo`.
@@ -223,7 +214,7 @@ fn say(log: &Log, line: impl FnOnce() -> String) {
     }
 }
 
-fn version_name(v: Version) -> &'static str {
+pub(crate) fn version_name(v: Version) -> &'static str {
     match v {
         Version::V1 => "MAVLink 1",
         Version::V2 => "MAVLink 2",
@@ -268,9 +259,7 @@ pub(crate) async fn open_vehicle(
 ) -> Result<Connection<ChannelProtocol>, Failure> {
     let protocol = ChannelProtocol::new(setup.config())
         .map_err(|e| Failure::Input(anyhow!("vehicle configuration: {e}")))?;
-    Connection::open(spec, protocol)
-        .await
-        .map_err(|e| Failure::Other(anyhow!("{e}")))
+    Connection::open(spec, protocol).await.map_err(other)
 }
 
 /// Runs a simulated vehicle on `conn` (from [`open_vehicle`]) until `stop` resolves; returns
@@ -292,7 +281,7 @@ pub(crate) async fn run_vehicle(
             _ = beat.tick() => {
                 conn.send(ChannelCommand::to_all(RawMessage::new(&setup.heartbeat())))
                     .await
-                    .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+                    .map_err(other)?;
                 continue;
             }
             e = conn.recv() => match e {
@@ -340,14 +329,12 @@ pub(crate) async fn run_vehicle(
                         RawMessage::new(&setup.autopilot_version()),
                     ];
                     for m in reply {
-                        conn.send(send(dest, m))
-                            .await
-                            .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+                        conn.send(send(dest, m)).await.map_err(other)?;
                     }
                 } else {
                     conn.send(send(dest, ack(command, MavResult::UNSUPPORTED, sys, comp)))
                         .await
-                        .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+                        .map_err(other)?;
                 }
             }
             Event::VersionChanged { from, to, cause } => {
@@ -383,9 +370,7 @@ pub(crate) async fn run_vehicle(
         .into_iter()
         .map(|(_, stats)| stats)
         .collect();
-    conn.close()
-        .await
-        .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+    conn.close().await.map_err(other)?;
     Ok(links)
 }
 
@@ -463,10 +448,7 @@ struct Probe {
 
 impl Probe {
     async fn send(&self, command: ChannelCommand) -> Result<(), Failure> {
-        self.conn
-            .send(command)
-            .await
-            .map_err(|e| Failure::Other(anyhow!("{e}")))
+        self.conn.send(command).await.map_err(other)
     }
 
     /// Takes events until `until`, recording what they say.
@@ -580,9 +562,7 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
     let protocol =
         ChannelProtocol::new(config).map_err(|e| Failure::Input(anyhow!("probe: {e}")))?;
     runtime()?.block_on(async {
-        let conn = Connection::open(&spec, protocol)
-            .await
-            .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+        let conn = Connection::open(&spec, protocol).await.map_err(other)?;
         let mut probe = Probe {
             conn,
             systems: BTreeMap::new(),
@@ -604,11 +584,7 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
             probe.pump(next).await?;
         }
         if probe.systems.is_empty() {
-            probe
-                .conn
-                .close()
-                .await
-                .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+            probe.conn.close().await.map_err(other)?;
             return Err(Failure::Other(anyhow!(
                 "no system found on {} within {} s",
                 args.conn,
@@ -684,11 +660,7 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
         for (key, system) in &probe.systems {
             println!("{}", report(*key, system, method_name));
         }
-        probe
-            .conn
-            .close()
-            .await
-            .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+        probe.conn.close().await.map_err(other)?;
         Ok(())
     })
 }
@@ -706,7 +678,7 @@ pub(crate) async fn open_radio_side(spec: &ConnSpec) -> Result<RadioLink, Failur
             .peer_events(false),
     )
     .await
-    .map_err(|e| Failure::Other(anyhow!("{e}")))
+    .map_err(other)
 }
 
 /// Runs a semi-transparent radio between `side_a` (ground) and `side_b` (vehicle) until
@@ -774,17 +746,11 @@ pub(crate) async fn run_radio(
             let conn = if t.to == Side::A { &side_a } else { &side_b };
             conn.send(FrameCommand::to_all(frame))
                 .await
-                .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+                .map_err(other)?;
         }
     }
-    side_a
-        .close()
-        .await
-        .map_err(|e| Failure::Other(anyhow!("{e}")))?;
-    side_b
-        .close()
-        .await
-        .map_err(|e| Failure::Other(anyhow!("{e}")))?;
+    side_a.close().await.map_err(other)?;
+    side_b.close().await.map_err(other)?;
     Ok(())
 }
 
