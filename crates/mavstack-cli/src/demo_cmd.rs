@@ -264,6 +264,7 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
         signing: None,
         protocol_version: true,
         secure: true,
+        params: crate::sim::params::defaults(Autopilot::Ardupilot),
     };
     let any_port = |scheme: &str| -> Result<ConnSpec, Failure> {
         format!("{scheme}:127.0.0.1:0").parse().map_err(other)

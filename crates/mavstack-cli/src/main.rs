@@ -9,6 +9,7 @@ mod dialect_cmd;
 mod fast_count;
 mod json_frames;
 mod link_cmd;
+mod sim;
 mod version_cmd;
 
 use std::process::ExitCode;

@@ -1,7 +1,8 @@
 //! `mavstack vehicle`, `probe` and `radio`: the MAVLink version rules on real links.
 //!
-//! - `vehicle CONN`: a simulated vehicle: HEARTBEAT at 1 Hz, AUTOPILOT_VERSION on request,
-//!   the MAVLink 2 handshake answered (or refused, or ignored) by its link's channel, signing.
+//! - `vehicle CONN`: a simulated vehicle ([`crate::sim`]: parameters, missions, commands,
+//!   telemetry streams, a kinematic craft) behind the MAVLink 2 handshake, answered (or
+//!   refused, or ignored) by its link's channel, and signing.
 //! - `probe CONN`: the ground station's side: find the systems on a link, ask for
 //!   AUTOPILOT_VERSION, run the handshake, print one JSON report per system.
 //! - `radio CONN_A CONN_B`: a semi-transparent radio forwarding frames between a ground
@@ -20,13 +21,15 @@ use mavstack_channel::{
     Authentication, CommandEncoding, Config, Event, HandshakeMethod, HandshakeResult, LinkStats,
     Radio, RadioConfig, Side, SigningConfig, Target, VehicleVersion,
 };
-use mavstack_core::Message;
 use mavstack_core::signing::SecretKey;
 use mavstack_core::wire::{MAX_FRAME_LEN, Version};
+use mavstack_core::{Message, MessageSet};
 use mavstack_dialects::common::{
-    AutopilotVersion, CommandAck, CommandInt, CommandLong, Heartbeat, MavAutopilot, MavCmd,
-    MavModeFlag, MavProtocolCapability, MavResult, MavState, MavType,
+    AutopilotVersion, CommandLong, Heartbeat, MavAutopilot, MavCmd, MavMessage,
+    MavProtocolCapability, MavType,
 };
+use mavstack_services::Address;
+use mavstack_services::param::{Name, Value};
 use mavstack_transport::channel_protocol::{
     ChannelCommand, ChannelEvent, ChannelEventKind, ChannelProtocol, RawMessage,
 };
@@ -37,6 +40,7 @@ use tokio::sync::mpsc;
 use tokio::time::Instant;
 
 use crate::link_cmd::{interrupted, parse_spec, runtime, seconds};
+use crate::sim::{SimConfig, Vehicle, params};
 use crate::{Failure, other};
 
 /// The autopilot a simulated vehicle claims to be.
@@ -81,7 +85,12 @@ pub(crate) struct VehicleArgs {
     /// Treat the link as secure (a USB cable): accept SETUP_SIGNING on it.
     #[arg(long)]
     secure: bool,
-    /// Print what happens on the link (version changes, handshakes, rejections) to stderr.
+    /// Parameter table to serve instead of the flavour's defaults: one `NAME VALUE`,
+    /// `NAME,VALUE` or QGroundControl `SYSID COMPID NAME VALUE TYPE` line per parameter.
+    #[arg(long, value_name = "FILE")]
+    params: Option<String>,
+    /// Print what happens (link versions, handshakes, rejections, modes, parameter sets,
+    /// plans) to stderr.
     #[arg(long, short)]
     verbose: bool,
 }
@@ -157,6 +166,8 @@ pub(crate) struct VehicleSetup {
     pub(crate) signing: Option<SigningConfig>,
     pub(crate) protocol_version: bool,
     pub(crate) secure: bool,
+    /// The parameter table (the flavour's defaults unless a file replaced them).
+    pub(crate) params: Vec<(Name, Value)>,
 }
 
 impl VehicleSetup {
@@ -173,34 +184,12 @@ impl VehicleSetup {
         config
     }
 
-    fn heartbeat(&self) -> Heartbeat {
-        Heartbeat {
-            r#type: MavType::QUADROTOR,
-            autopilot: match self.autopilot {
-                Autopilot::Ardupilot => MavAutopilot::ARDUPILOTMEGA,
-                Autopilot::Px4 => MavAutopilot::PX4,
-            },
-            base_mode: MavModeFlag::CUSTOM_MODE_ENABLED,
-            custom_mode: 0,
-            system_status: MavState::STANDBY,
-            mavlink_version: 3,
-        }
-    }
-
-    fn autopilot_version(&self) -> AutopilotVersion {
-        let mut capabilities = MavProtocolCapability::MISSION_INT
-            | MavProtocolCapability::COMMAND_INT
-            | MavProtocolCapability::PARAM_ENCODE_BYTEWISE;
-        if self.version != VehicleVersion::Mavlink1Only {
-            capabilities |= MavProtocolCapability::MAVLINK2;
-        }
-        AutopilotVersion {
-            capabilities,
-            flight_sw_version: 0x0401_00ff,
-            vendor_id: 0x1209,
-            product_id: 0x5741,
-            uid: 0x6d61_7673_7461_636b,
-            ..AutopilotVersion::default()
+    fn sim(&self) -> SimConfig {
+        SimConfig {
+            own: Address::new(self.sysid, self.compid),
+            autopilot: self.autopilot,
+            mavlink2: self.version != VehicleVersion::Mavlink1Only,
+            params: self.params.clone(),
         }
     }
 }
@@ -221,37 +210,6 @@ pub(crate) fn version_name(v: Version) -> &'static str {
     }
 }
 
-/// A command addressed to us (system `sysid`, component `compid` or broadcast):
-/// `(command, param1)`, or `None`.
-fn command_for(
-    frame: &mavstack_channel::OwnedFrame,
-    sysid: u8,
-    compid: u8,
-) -> Option<(MavCmd, f32)> {
-    let ours = |s: u8, c: u8| (s == 0 || s == sysid) && (c == 0 || c == compid);
-    match frame.msg_id() {
-        CommandLong::ID => {
-            let c = CommandLong::decode(frame.payload());
-            ours(c.target_system, c.target_component).then_some((c.command, c.param1))
-        }
-        CommandInt::ID => {
-            let c = CommandInt::decode(frame.payload());
-            ours(c.target_system, c.target_component).then_some((c.command, c.param1))
-        }
-        _ => None,
-    }
-}
-
-fn ack(command: MavCmd, result: MavResult, to_sys: u8, to_comp: u8) -> RawMessage {
-    RawMessage::new(&CommandAck {
-        command,
-        result,
-        target_system: to_sys,
-        target_component: to_comp,
-        ..CommandAck::default()
-    })
-}
-
 /// Opens the vehicle's link.
 pub(crate) async fn open_vehicle(
     setup: &VehicleSetup,
@@ -260,6 +218,45 @@ pub(crate) async fn open_vehicle(
     let protocol = ChannelProtocol::new(setup.config())
         .map_err(|e| Failure::Input(anyhow!("vehicle configuration: {e}")))?;
     Connection::open(spec, protocol).await.map_err(other)
+}
+
+/// Where the services' messages go: the peers each address was last heard on.
+#[derive(Debug, Default)]
+pub(crate) struct Routes {
+    peers: BTreeMap<Address, PeerId>,
+}
+
+impl Routes {
+    /// Notes that `from` speaks on `peer`.
+    pub(crate) fn heard(&mut self, from: Address, peer: PeerId) {
+        self.peers.insert(from, peer);
+    }
+
+    /// Forgets a peer that went away.
+    pub(crate) fn forget(&mut self, peer: PeerId) {
+        self.peers.retain(|_, p| *p != peer);
+    }
+
+    /// The link(s) a message for `target` goes out on: the peer it was heard on, else all.
+    pub(crate) fn dest(&self, target: Address) -> Dest {
+        if target.system == 0 {
+            return Dest::All;
+        }
+        let exact = self.peers.get(&target).copied();
+        let same_system = || {
+            self.peers
+                .iter()
+                .find(|(a, _)| a.system == target.system)
+                .map(|(_, p)| *p)
+        };
+        exact.or_else(same_system).map_or(Dest::All, Dest::Peer)
+    }
+}
+
+/// The services' time: microseconds since `start`.
+pub(crate) fn service_time(start: Instant) -> mavstack_core::time::Instant {
+    let us = u64::try_from(start.elapsed().as_micros()).unwrap_or(u64::MAX);
+    mavstack_core::time::Instant::from_micros(us)
 }
 
 /// Runs a simulated vehicle on `conn` (from [`open_vehicle`]) until `stop` resolves; returns
@@ -272,16 +269,33 @@ pub(crate) async fn run_vehicle(
     tap: Option<mpsc::UnboundedSender<Vec<u8>>>,
     stop: impl Future<Output = ()>,
 ) -> Result<Vec<LinkStats>, Failure> {
-    let mut beat = tokio::time::interval(Duration::from_secs(1));
+    let start = Instant::now();
+    let mut sim = Vehicle::new(setup.sim(), service_time(start));
+    let mut routes = Routes::default();
+    say(&log, || {
+        format!(
+            "vehicle: {:?} flavour, {} parameters",
+            setup.autopilot,
+            sim.param_count()
+        )
+    });
     tokio::pin!(stop);
-    let send = |dest: Dest, message: RawMessage| ChannelCommand::Send { dest, message };
     loop {
+        while let Some(out) = sim.poll_transmit() {
+            let message = ChannelCommand::Send {
+                dest: routes.dest(out.target),
+                message: RawMessage::of(&out.message),
+            };
+            conn.send(message).await.map_err(other)?;
+        }
+        while let Some(line) = sim.poll_log() {
+            say(&log, || format!("vehicle: {line}"));
+        }
+        let wake = start + Duration::from_micros(sim.poll_timeout().as_micros());
         let event: ChannelEvent = tokio::select! {
             () = &mut stop => break,
-            _ = beat.tick() => {
-                conn.send(ChannelCommand::to_all(RawMessage::new(&setup.heartbeat())))
-                    .await
-                    .map_err(other)?;
+            () = tokio::time::sleep_until(wake) => {
+                sim.handle_timeout(service_time(start));
                 continue;
             }
             e = conn.recv() => match e {
@@ -290,11 +304,17 @@ pub(crate) async fn run_vehicle(
             },
         };
         let peer = event.peer;
-        let ChannelEventKind::Channel(event) = event.event else {
-            if let ChannelEventKind::CommandFailed(why) = event.event {
+        let event = match event.event {
+            ChannelEventKind::Channel(event) => event,
+            ChannelEventKind::CommandFailed(why) => {
                 say(&log, || format!("vehicle: {why}"));
+                continue;
             }
-            continue;
+            ChannelEventKind::PeerRemoved => {
+                routes.forget(peer);
+                continue;
+            }
+            _ => continue,
         };
         match event {
             Event::Frame(rf) => {
@@ -308,34 +328,26 @@ pub(crate) async fn run_vehicle(
                 if rf.protocol_version_request.is_some() || rf.answered {
                     continue;
                 }
-                let Some((command, param1)) = command_for(&rf.frame, setup.sysid, setup.compid)
-                else {
+                let from = Address::new(rf.frame.sysid(), rf.frame.compid());
+                routes.heard(from, peer);
+                let Ok(message) = MavMessage::decode(rf.frame.msg_id(), rf.frame.payload()) else {
                     continue;
                 };
-                let (sys, comp) = (rf.frame.sysid(), rf.frame.compid());
-                let wants_version = command == MavCmd::REQUEST_AUTOPILOT_CAPABILITIES
-                    || (command == MavCmd::REQUEST_MESSAGE
-                        && param1 == AutopilotVersion::ID as f32);
-                let dest = Dest::Peer(peer);
-                if wants_version {
+                if let MavMessage::CommandLong(CommandLong {
+                    command, param1, ..
+                }) = &message
+                    && (*command == MavCmd::REQUEST_AUTOPILOT_CAPABILITIES
+                        || (*command == MavCmd::REQUEST_MESSAGE
+                            && *param1 == AutopilotVersion::ID as f32))
+                {
                     say(&log, || {
                         format!(
                             "vehicle ← AUTOPILOT_VERSION requested ({})",
                             version_name(rf.frame.version())
                         )
                     });
-                    let reply = [
-                        ack(command, MavResult::ACCEPTED, sys, comp),
-                        RawMessage::new(&setup.autopilot_version()),
-                    ];
-                    for m in reply {
-                        conn.send(send(dest, m)).await.map_err(other)?;
-                    }
-                } else {
-                    conn.send(send(dest, ack(command, MavResult::UNSUPPORTED, sys, comp)))
-                        .await
-                        .map_err(other)?;
                 }
+                sim.handle_message(service_time(start), from, &message);
             }
             Event::VersionChanged { from, to, cause } => {
                 say(&log, || {
@@ -406,6 +418,10 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
     } else {
         VehicleVersion::StartMavlink1
     };
+    let params = match &args.params {
+        Some(path) => params::load(path).map_err(Failure::Input)?,
+        None => params::defaults(args.autopilot),
+    };
     let setup = VehicleSetup {
         sysid: args.sysid,
         compid: args.compid,
@@ -414,6 +430,7 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
         signing,
         protocol_version: !args.no_protocol_version,
         secure: args.secure,
+        params,
     };
     runtime()?.block_on(async {
         let log = stderr_log(args.verbose);
@@ -669,8 +686,7 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
 pub(crate) type RadioLink = Connection<FrameProtocol<fn(u32) -> Option<u8>>>;
 
 pub(crate) async fn open_radio_side(spec: &ConnSpec) -> Result<RadioLink, Failure> {
-    let lookup: fn(u32) -> Option<u8> =
-        mavstack_transport::frame::crc_extra_of::<mavstack_dialects::common::MavMessage>;
+    let lookup: fn(u32) -> Option<u8> = mavstack_transport::frame::crc_extra_of::<MavMessage>;
     Connection::open(
         spec,
         FrameProtocol::new(lookup)

@@ -14,10 +14,13 @@
 //! **Server** ([`CommandServer`]): answers every command addressed to it (or broadcast) by
 //! calling the caller's [`CommandHandler`], and ACKs with the result. Retries and
 //! duplicates are recognised and answered with the last ACK instead of running the
-//! command again: the same command (same kind, id and parameters, `confirmation` aside)
-//! from the same source within [`CommandServerConfig::dedup_window`] (3 s, longer than a
-//! client's whole retry span), or any instance of a command still in progress from that
-//! source. A handler that answers [`Response::in_progress`] finishes later through
+//! command again: a retry (the same command — kind, id and parameters — with COMMAND_LONG's
+//! `confirmation` above 0, or any COMMAND_INT, which has no counter) from the same source
+//! within [`CommandServerConfig::dedup_window`] (3 s, longer than a client's whole retry
+//! span); a copy of a first send (`confirmation` 0) only within
+//! [`CommandServerConfig::duplicate_window`] (a link duplicating the frame; later it is the
+//! request repeated on purpose, and runs again); and any instance of a command still in
+//! progress from that source. A handler that answers [`Response::in_progress`] finishes later through
 //! [`CommandServer::progress`] and [`CommandServer::finish`].
 
 use alloc::collections::VecDeque;
@@ -451,16 +454,20 @@ pub trait CommandHandler {
 /// Settings of a [`CommandServer`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct CommandServerConfig {
-    /// How long a finished command's ACK is remembered to answer retries and duplicates of
-    /// it (default 3 s, longer than a client's 4 × 0.5 s retry span). The same request
-    /// repeated on purpose within this window is answered from memory, not run again.
+    /// How long a finished command's ACK is remembered to answer retries of it (default
+    /// 3 s, longer than a client's 4 × 0.5 s retry span).
     pub dedup_window: Duration,
+    /// How long a COMMAND_LONG sent with `confirmation` 0 counts as a copy of the previous
+    /// identical one (default 50 ms): a frame duplicated by the link. Sent again later, it
+    /// is a new request and runs again (REQUEST_MESSAGE asked twice gets two answers).
+    pub duplicate_window: Duration,
 }
 
 impl Default for CommandServerConfig {
     fn default() -> Self {
         Self {
             dedup_window: Duration::from_secs(3),
+            duplicate_window: Duration::from_millis(50),
         }
     }
 }
@@ -538,11 +545,15 @@ impl<H: CommandHandler> CommandServer<H> {
             r.ack.result == MavResult::IN_PROGRESS || now.saturating_duration_since(r.at) < window
         });
         let id = command.id();
+        let first_send = matches!(command, Command::Long(c) if c.confirmation == 0);
+        let duplicate_window = self.config.duplicate_window;
         if let Some(r) = self.recent.iter().find(|r| {
             r.from == from
                 && r.command.id() == id
                 && r.command.is_int() == command.is_int()
-                && (r.ack.result == MavResult::IN_PROGRESS || r.command.same_request(command))
+                && (r.ack.result == MavResult::IN_PROGRESS
+                    || (r.command.same_request(command)
+                        && (!first_send || now.saturating_duration_since(r.at) < duplicate_window)))
         }) {
             self.out.push_back(Outgoing {
                 target: from,

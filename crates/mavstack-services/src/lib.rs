@@ -53,14 +53,17 @@
 //! - Commands: a second command with the same id to the same target while the first is in
 //!   flight is refused ([`command::SendError::AlreadyInFlight`]) rather than queued, and
 //!   COMMAND_CANCEL is not sent.
-//! - Missions: the server does not accept uploads of the deprecated float MISSION_ITEM
-//!   (it answers MISSION_REQUEST with MISSION_ITEM_INT); one upload at a time (another peer
+//! - Missions: the server takes uploads of the deprecated float MISSION_ITEM (converted
+//!   to MISSION_ITEM_INT) but answers MISSION_REQUEST with MISSION_ITEM_INT; one upload at a time (another peer
 //!   gets DENIED); no `opaque_id` (the vendored common.xml version has none); ArduPilot's
 //!   "seq 0 is home" is the caller's concern.
 //! - TIMESYNC: this dialect's TIMESYNC has no target fields, so answers are matched by
 //!   their `ts1`.
-//! - No adapter over `mavstack-channel` yet: a driver decodes accepted frames and encodes
-//!   [`Outgoing`] messages itself.
+//! - The adapter over a link is the caller's: decode each accepted frame with
+//!   `MavMessage::decode(frame.msg_id(), frame.payload())` and frame each [`Outgoing`]
+//!   message (`mavstack_transport::channel_protocol::RawMessage::of` does it for
+//!   `mavstack-channel` links; `mavstack vehicle` and the CLI's ground-station commands
+//!   are complete drivers).
 //!
 //! # Features
 //!

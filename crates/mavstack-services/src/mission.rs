@@ -28,8 +28,9 @@ use core::time::Duration;
 
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::{
-    MavMessage, MavMissionResult, MavMissionType, MissionAck, MissionClearAll, MissionCount,
-    MissionCurrent, MissionItemInt, MissionRequestInt, MissionRequestList, MissionSetCurrent,
+    MavFrame, MavMessage, MavMissionResult, MavMissionType, MissionAck, MissionClearAll,
+    MissionCount, MissionCurrent, MissionItem, MissionItemInt, MissionRequestInt,
+    MissionRequestList, MissionSetCurrent,
 };
 
 use crate::{Address, Outgoing, Service};
@@ -883,6 +884,18 @@ impl MissionServer {
         self.current
     }
 
+    /// Makes item `seq` of the mission current, as a vehicle does when it moves on to the
+    /// next item, and broadcasts MISSION_CURRENT. Returns whether `seq` is in the mission.
+    pub fn set_current(&mut self, seq: u16) -> bool {
+        if usize::from(seq) >= self.plans[0].len() {
+            return false;
+        }
+        self.current = seq;
+        let current = self.mission_current();
+        self.send(Address::BROADCAST, current);
+        true
+    }
+
     /// Whether an upload is in progress.
     #[must_use]
     pub fn is_receiving(&self) -> bool {
@@ -1020,6 +1033,49 @@ impl MissionServer {
     }
 }
 
+/// The MISSION_ITEM_INT equivalent of a float MISSION_ITEM: latitude and longitude of
+/// global frames scaled to degE7, local coordinates to metres × 10⁴ (as the protocol's INT
+/// frames carry them).
+fn item_int_of(item: &MissionItem) -> MissionItemInt {
+    let global = matches!(
+        item.frame,
+        MavFrame::GLOBAL
+            | MavFrame::GLOBAL_RELATIVE_ALT
+            | MavFrame::GLOBAL_TERRAIN_ALT
+            | MavFrame::GLOBAL_INT
+            | MavFrame::GLOBAL_RELATIVE_ALT_INT
+            | MavFrame::GLOBAL_TERRAIN_ALT_INT
+    );
+    let scale = |v: f32| {
+        let v = f64::from(v) * if global { 1e7 } else { 1e4 };
+        // Saturating: NaN becomes 0, out-of-range values clamp.
+        v as i32
+    };
+    let frame = match item.frame {
+        MavFrame::GLOBAL => MavFrame::GLOBAL_INT,
+        MavFrame::GLOBAL_RELATIVE_ALT => MavFrame::GLOBAL_RELATIVE_ALT_INT,
+        MavFrame::GLOBAL_TERRAIN_ALT => MavFrame::GLOBAL_TERRAIN_ALT_INT,
+        f => f,
+    };
+    MissionItemInt {
+        target_system: item.target_system,
+        target_component: item.target_component,
+        seq: item.seq,
+        frame,
+        command: item.command,
+        current: item.current,
+        autocontinue: item.autocontinue,
+        param1: item.param1,
+        param2: item.param2,
+        param3: item.param3,
+        param4: item.param4,
+        x: scale(item.x),
+        y: scale(item.y),
+        z: item.z,
+        mission_type: item.mission_type,
+    }
+}
+
 impl Service for MissionServer {
     fn handle_message(&mut self, now: Instant, from: Address, message: &MavMessage) -> bool {
         let own = self.own;
@@ -1031,6 +1087,12 @@ impl Service for MissionServer {
                 if for_me(own, item.target_system, item.target_component) =>
             {
                 self.on_item(now, from, item);
+            }
+            MavMessage::MissionItem(item)
+                if for_me(own, item.target_system, item.target_component) =>
+            {
+                // Older ground stations answer MISSION_REQUEST_INT with the float item.
+                self.on_item(now, from, &item_int_of(item));
             }
             MavMessage::MissionRequestList(m)
                 if for_me(own, m.target_system, m.target_component) =>

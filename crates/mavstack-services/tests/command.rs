@@ -275,6 +275,25 @@ fn acks_match_by_command_source_and_requester() {
 }
 
 #[test]
+fn a_first_send_repeated_later_is_a_new_request() {
+    let mut s = CommandServer::new(VEHICLE, Default::default(), Counter::default());
+    let cmd = CommandLong {
+        target_system: 1,
+        target_component: 1,
+        command: MavCmd::COMPONENT_ARM_DISARM,
+        param1: 7.0,
+        ..Default::default()
+    };
+    s.handle_message(T0, GCS, &MavMessage::CommandLong(cmd));
+    s.handle_message(
+        T0 + Duration::from_secs(1),
+        GCS,
+        &MavMessage::CommandLong(cmd),
+    );
+    assert_eq!(s.handler().runs[&7], 2);
+}
+
+#[test]
 fn duplicate_command_is_executed_once_and_acked_each_time() {
     let mut s = CommandServer::new(VEHICLE, Default::default(), Counter::default());
     let cmd = CommandLong {
@@ -285,8 +304,9 @@ fn duplicate_command_is_executed_once_and_acked_each_time() {
         param5: f32::NAN,
         ..Default::default()
     };
-    for (i, confirmation) in [0u8, 0, 1, 2].into_iter().enumerate() {
-        let t = T0 + Duration::from_millis(500 * i as u64);
+    // The first send, a copy of it the link duplicated, then two retries.
+    for (ms, confirmation) in [(0u64, 0u8), (20, 0), (500, 1), (1000, 2)] {
+        let t = T0 + Duration::from_millis(ms);
         assert!(s.handle_message(
             t,
             GCS,

@@ -361,3 +361,51 @@ fn sim_rejection_ends_the_upload() {
         }
     );
 }
+
+#[test]
+fn server_takes_float_mission_items_and_moves_current() {
+    use mavstack_dialects::common::MissionItem;
+    let mut s = MissionServer::new(VEHICLE, MissionConfig::default());
+    s.handle_message(
+        T0,
+        GCS,
+        &MavMessage::MissionCount(MissionCount {
+            target_system: 1,
+            target_component: 1,
+            count: 2,
+            ..Default::default()
+        }),
+    );
+    for seq in 0..2u16 {
+        let item = MissionItem {
+            target_system: 1,
+            target_component: 1,
+            seq,
+            frame: MavFrame::GLOBAL_RELATIVE_ALT,
+            x: -35.363_26,
+            y: 149.165_23,
+            z: 20.0 + f32::from(seq),
+            ..Default::default()
+        };
+        assert!(s.handle_message(T0, GCS, &MavMessage::MissionItem(item)));
+    }
+    let plan = s.plan(MavMissionType::MISSION);
+    assert_eq!(plan.len(), 2);
+    assert_eq!(plan[1].frame, MavFrame::GLOBAL_RELATIVE_ALT_INT);
+    // degE7 of the f32 the item carried (f32 holds ~7 significant digits).
+    assert!((plan[1].x + 353_632_600).abs() < 100, "{}", plan[1].x);
+    assert!((plan[1].y - 1_491_652_300).abs() < 100, "{}", plan[1].y);
+    assert_eq!(plan[1].z, 21.0);
+    let sent: Vec<_> = core::iter::from_fn(|| s.poll_transmit()).collect();
+    assert!(matches!(
+        sent.last().map(|o| &o.message),
+        Some(MavMessage::MissionAck(a)) if a.r#type == MavMissionResult::MAV_MISSION_ACCEPTED
+    ));
+    assert!(s.set_current(1));
+    assert_eq!(s.current(), 1);
+    assert!(!s.set_current(2));
+    assert!(matches!(
+        s.poll_transmit().map(|o| o.message),
+        Some(MavMessage::MissionCurrent(c)) if c.seq == 1 && c.total == 2
+    ));
+}

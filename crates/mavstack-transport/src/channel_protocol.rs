@@ -32,7 +32,7 @@ use mavstack_channel::{
 use mavstack_core::parse::CrcExtra;
 use mavstack_core::time::Instant;
 use mavstack_core::wire::MAX_FRAME_LEN;
-use mavstack_core::{MAX_PAYLOAD_LEN, Message};
+use mavstack_core::{MAX_PAYLOAD_LEN, Message, MessageSet};
 
 use crate::frame::FrameBuf;
 use crate::protocol::{Dest, PeerId, PeerInfo, Protocol, Transmit};
@@ -63,6 +63,30 @@ impl RawMessage {
             // At most MAX_PAYLOAD_LEN (255): fits.
             len: u8::try_from(len).unwrap_or(u8::MAX),
             base_len: u8::try_from(M::MIN_LEN.min(len)).unwrap_or(u8::MAX),
+        }
+    }
+
+    /// The encoding of a message of a whole message set (e.g. a dialect's `MavMessage`
+    /// enum): what a service emitted, ready for the channel.
+    ///
+    /// ```
+    /// use mavstack_dialects::common::{Heartbeat, MavMessage};
+    /// use mavstack_transport::channel_protocol::RawMessage;
+    /// let typed = RawMessage::new(&Heartbeat::default());
+    /// let dynamic = RawMessage::of(&MavMessage::Heartbeat(Heartbeat::default()));
+    /// assert_eq!(typed, dynamic);
+    /// ```
+    #[must_use]
+    pub fn of<S: MessageSet>(message: &S) -> Self {
+        let info = message.message_info();
+        let mut payload = [0u8; MAX_PAYLOAD_LEN];
+        let len = message.encode(&mut payload).min(MAX_PAYLOAD_LEN);
+        Self {
+            msg_id: info.id,
+            crc_extra: info.crc_extra,
+            payload,
+            len: u8::try_from(len).unwrap_or(u8::MAX),
+            base_len: info.min_len.min(u8::try_from(len).unwrap_or(u8::MAX)),
         }
     }
 

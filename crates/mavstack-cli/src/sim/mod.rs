@@ -1,0 +1,729 @@
+//! The simulated vehicle behind `mavstack vehicle` and `mavstack demo`, sans-IO.
+//!
+//! [`Vehicle`] puts the server roles of `mavstack-services` together around a kinematic
+//! craft ([`flight::Flight`]): a [`CommandServer`] whose handler flies the craft, a
+//! [`ParamServer`] with the flavour's table (or a file's), a [`MissionServer`] whose plan the
+//! craft flies in mission mode, a [`StreamScheduler`] for telemetry rates, and TIMESYNC. Like
+//! every service it takes decoded messages and the time, and hands out messages to send:
+//! the caller (`version_cmd::run_vehicle`) moves them over a `mavstack-channel` link.
+
+pub(crate) mod flight;
+pub(crate) mod modes;
+pub(crate) mod params;
+
+use core::time::Duration;
+use std::collections::VecDeque;
+
+use mavstack_core::Message;
+use mavstack_core::time::Instant;
+use mavstack_dialects::common::{
+    Attitude, AutopilotVersion, BatteryStatus, ExtendedSysState, GlobalPositionInt, GpsFixType,
+    GpsRawInt, Heartbeat, HomePosition, MavAutopilot, MavBatteryChargeState, MavBatteryFunction,
+    MavBatteryType, MavCmd, MavDataStream, MavMessage, MavMissionType, MavModeFlag,
+    MavProtocolCapability, MavResult, MavSeverity, MavState, MavSysStatusSensor, MavType,
+    MavVtolState, MissionCurrent, MissionItemReached, MissionState, RequestDataStream, Statustext,
+    SysStatus, VfrHud,
+};
+use mavstack_services::command::{Command, CommandHandler, CommandServer, Request, Response};
+use mavstack_services::mission::{MissionServer, MissionServerEvent};
+use mavstack_services::param::{Encoding, Name, ParamServer, ParamServerEvent, Value};
+use mavstack_services::stream::{Interval, StreamScheduler, request_message};
+use mavstack_services::timesync::{Timesync, TimesyncConfig};
+use mavstack_services::{Address, Outgoing, Service};
+
+use self::flight::{Flight, FlightEvent, HOME_AMSL, Position, Tuning};
+use self::modes::{Behaviour, Mode};
+use crate::version_cmd::Autopilot;
+
+/// How often the craft's model advances.
+const STEP: Duration = Duration::from_millis(50);
+
+/// What the vehicle is.
+#[derive(Clone, Debug)]
+pub(crate) struct SimConfig {
+    /// Its address.
+    pub(crate) own: Address,
+    /// Which autopilot it behaves like.
+    pub(crate) autopilot: Autopilot,
+    /// Whether it advertises MAVLink 2 in AUTOPILOT_VERSION.
+    pub(crate) mavlink2: bool,
+    /// Its parameter table.
+    pub(crate) params: Vec<(Name, Value)>,
+}
+
+/// The messages the vehicle streams and their default intervals (`None`: on request only).
+const STREAMS: &[(u32, Option<Duration>)] = &[
+    (Heartbeat::ID, Some(Duration::from_secs(1))),
+    (SysStatus::ID, Some(Duration::from_secs(1))),
+    (GpsRawInt::ID, Some(Duration::from_secs(1))),
+    (Attitude::ID, Some(Duration::from_millis(250))),
+    (GlobalPositionInt::ID, Some(Duration::from_millis(250))),
+    (MissionCurrent::ID, Some(Duration::from_secs(1))),
+    (VfrHud::ID, Some(Duration::from_millis(500))),
+    (BatteryStatus::ID, Some(Duration::from_secs(1))),
+    (AutopilotVersion::ID, None),
+    (HomePosition::ID, Some(Duration::from_secs(5))),
+    (ExtendedSysState::ID, Some(Duration::from_secs(1))),
+];
+
+/// The messages of each REQUEST_DATA_STREAM group the vehicle has (ArduPilot's grouping).
+fn data_stream(group: MavDataStream) -> &'static [u32] {
+    match group {
+        MavDataStream::EXTENDED_STATUS => &[SysStatus::ID, GpsRawInt::ID, MissionCurrent::ID],
+        MavDataStream::POSITION => &[GlobalPositionInt::ID],
+        MavDataStream::EXTRA1 => &[Attitude::ID],
+        MavDataStream::EXTRA2 => &[VfrHud::ID],
+        MavDataStream::EXTRA3 => &[BatteryStatus::ID, ExtendedSysState::ID],
+        MavDataStream::ALL => &[
+            SysStatus::ID,
+            GpsRawInt::ID,
+            MissionCurrent::ID,
+            GlobalPositionInt::ID,
+            Attitude::ID,
+            VfrHud::ID,
+            BatteryStatus::ID,
+            ExtendedSysState::ID,
+        ],
+        _ => &[],
+    }
+}
+
+/// The craft and its telemetry: the command handler of the vehicle.
+#[derive(Debug)]
+struct Craft {
+    autopilot: Autopilot,
+    mavlink2: bool,
+    flight: Flight,
+    streams: StreamScheduler,
+    /// Mission items made current by a command, for the mission server.
+    new_current: Option<u16>,
+}
+
+/// The numeric params of a command: p1–p4, latitude and longitude in degrees (`None` when
+/// not given), and p7/z.
+struct Params {
+    p: [f32; 4],
+    lat: Option<f64>,
+    lon: Option<f64>,
+    z: f32,
+}
+
+fn params_of(command: &Command) -> Params {
+    match command {
+        Command::Long(c) => {
+            let deg = |v: f32| (v.is_finite() && v != 0.0).then_some(f64::from(v));
+            Params {
+                p: [c.param1, c.param2, c.param3, c.param4],
+                lat: deg(c.param5),
+                lon: deg(c.param6),
+                z: c.param7,
+            }
+        }
+        Command::Int(c) => {
+            let deg = |v: i32| (v != 0 && v != i32::MAX).then_some(f64::from(v) / 1e7);
+            Params {
+                p: [c.param1, c.param2, c.param3, c.param4],
+                lat: deg(c.x),
+                lon: deg(c.y),
+                z: c.z,
+            }
+        }
+    }
+}
+
+impl Craft {
+    fn set_mode(&mut self, mode: Mode) {
+        self.flight.set_mode(mode);
+    }
+
+    fn mode_with(&self, behaviour: Behaviour) -> Mode {
+        modes::with_behaviour(self.autopilot, behaviour)
+    }
+
+    /// A take-off altitude from param7: relative for ArduPilot, above mean sea level for
+    /// PX4 (which also takes NaN for "the configured height").
+    fn takeoff_alt(&self, z: f32) -> Option<f32> {
+        if !z.is_finite() {
+            return None;
+        }
+        match self.autopilot {
+            Autopilot::Ardupilot => Some(z),
+            Autopilot::Px4 if z > HOME_AMSL - 100.0 => Some(z - HOME_AMSL),
+            Autopilot::Px4 => Some(z),
+        }
+    }
+
+    fn one_shot(&mut self, now: Instant, from: Address, msg_id: u32) -> Response {
+        let request = Request {
+            from,
+            command: request_message(msg_id, [0.0; 5]),
+        };
+        self.streams
+            .handle_command(now, &request)
+            .unwrap_or(Response::done(MavResult::FAILED))
+    }
+
+    fn heartbeat(&self) -> Heartbeat {
+        let mode = self.flight.mode();
+        let mut base = MavModeFlag::CUSTOM_MODE_ENABLED | MavModeFlag::STABILIZE_ENABLED;
+        if self.flight.is_armed() {
+            base |= MavModeFlag::SAFETY_ARMED;
+        }
+        if mode.behaviour != Behaviour::Manual {
+            base |= MavModeFlag::GUIDED_ENABLED;
+        }
+        if matches!(
+            mode.behaviour,
+            Behaviour::Mission | Behaviour::ReturnToLaunch | Behaviour::Land | Behaviour::Takeoff
+        ) {
+            base |= MavModeFlag::AUTO_ENABLED;
+        }
+        Heartbeat {
+            r#type: MavType::QUADROTOR,
+            autopilot: match self.autopilot {
+                Autopilot::Ardupilot => MavAutopilot::ARDUPILOTMEGA,
+                Autopilot::Px4 => MavAutopilot::PX4,
+            },
+            base_mode: base,
+            custom_mode: mode.custom_mode,
+            system_status: if self.flight.is_armed() {
+                MavState::ACTIVE
+            } else {
+                MavState::STANDBY
+            },
+            mavlink_version: 3,
+        }
+    }
+
+    fn autopilot_version(&self) -> AutopilotVersion {
+        let mut capabilities = MavProtocolCapability::MISSION_INT
+            | MavProtocolCapability::COMMAND_INT
+            | MavProtocolCapability::MISSION_FENCE
+            | MavProtocolCapability::MISSION_RALLY
+            | MavProtocolCapability::SET_POSITION_TARGET_GLOBAL_INT;
+        capabilities |= match self.autopilot {
+            Autopilot::Ardupilot => MavProtocolCapability::PARAM_ENCODE_C_CAST,
+            Autopilot::Px4 => MavProtocolCapability::PARAM_ENCODE_BYTEWISE,
+        };
+        if self.mavlink2 {
+            capabilities |= MavProtocolCapability::MAVLINK2;
+        }
+        AutopilotVersion {
+            capabilities,
+            flight_sw_version: 0x0401_00ff,
+            vendor_id: 0x1209,
+            product_id: 0x5741,
+            uid: 0x6d61_7673_7461_636b,
+            ..AutopilotVersion::default()
+        }
+    }
+
+    /// The message `msg_id` as the craft is now.
+    fn message(&self, now: Instant, msg_id: u32) -> Option<MavMessage> {
+        let f = &self.flight;
+        let boot_us = now.as_micros();
+        let boot_ms = u32::try_from(boot_us / 1000).unwrap_or(u32::MAX);
+        let here = f.position();
+        let [vn, ve, vd] = f.velocity();
+        let ground_speed = vn.hypot(ve);
+        let degrees = |rad: f32| rad.to_degrees().rem_euclid(360.0);
+        let e7 = |deg: f64| (deg * 1e7) as i32;
+        let amsl_mm = |rel: f32| ((rel + HOME_AMSL) * 1000.0) as i32;
+        let (left, volts, amps, used) = f.battery();
+        let percent = (left * 100.0).round() as i8;
+        Some(match msg_id {
+            Heartbeat::ID => MavMessage::Heartbeat(self.heartbeat()),
+            SysStatus::ID => {
+                let sensors = MavSysStatusSensor(
+                    MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_GYRO.0
+                        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_ACCEL.0
+                        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_MAG.0
+                        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE.0
+                        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_GPS.0
+                        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL.0
+                        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION.0
+                        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL.0
+                        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL.0
+                        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS.0
+                        | MavSysStatusSensor::MAV_SYS_STATUS_AHRS.0
+                        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_BATTERY.0
+                        | MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK.0,
+                );
+                MavMessage::SysStatus(SysStatus {
+                    onboard_control_sensors_present: sensors,
+                    onboard_control_sensors_enabled: sensors,
+                    onboard_control_sensors_health: sensors,
+                    load: 250,
+                    voltage_battery: (volts * 1000.0) as u16,
+                    current_battery: (amps * 100.0) as i16,
+                    battery_remaining: percent,
+                    ..SysStatus::default()
+                })
+            }
+            GpsRawInt::ID => MavMessage::GpsRawInt(GpsRawInt {
+                time_usec: boot_us,
+                fix_type: GpsFixType::GPS_FIX_TYPE_3D_FIX,
+                lat: e7(here.lat),
+                lon: e7(here.lon),
+                alt: amsl_mm(here.alt),
+                eph: 70,
+                epv: 120,
+                vel: (ground_speed * 100.0) as u16,
+                cog: (degrees(ve.atan2(vn)) * 100.0) as u16,
+                satellites_visible: 14,
+                ..GpsRawInt::default()
+            }),
+            Attitude::ID => {
+                let heading = f.heading();
+                // Lean into the direction of travel: pitch down for forward speed.
+                let (sin, cos) = heading.sin_cos();
+                let forward = vn * cos + ve * sin;
+                let right = -vn * sin + ve * cos;
+                MavMessage::Attitude(Attitude {
+                    time_boot_ms: boot_ms,
+                    roll: (right * 0.03).clamp(-0.5, 0.5),
+                    pitch: (-forward * 0.03).clamp(-0.5, 0.5),
+                    yaw: if heading > core::f32::consts::PI {
+                        heading - 2.0 * core::f32::consts::PI
+                    } else {
+                        heading
+                    },
+                    ..Attitude::default()
+                })
+            }
+            GlobalPositionInt::ID => MavMessage::GlobalPositionInt(GlobalPositionInt {
+                time_boot_ms: boot_ms,
+                lat: e7(here.lat),
+                lon: e7(here.lon),
+                alt: amsl_mm(here.alt),
+                relative_alt: (here.alt * 1000.0) as i32,
+                vx: (vn * 100.0) as i16,
+                vy: (ve * 100.0) as i16,
+                vz: (vd * 100.0) as i16,
+                hdg: (degrees(f.heading()) * 100.0) as u16,
+            }),
+            VfrHud::ID => MavMessage::VfrHud(VfrHud {
+                airspeed: ground_speed,
+                groundspeed: ground_speed,
+                heading: degrees(f.heading()) as i16,
+                throttle: if f.is_airborne() { 45 } else { 0 },
+                alt: here.alt + HOME_AMSL,
+                climb: -vd,
+            }),
+            MissionCurrent::ID => {
+                let total = u16::try_from(f.mission_len()).unwrap_or(u16::MAX);
+                let state = if total == 0 {
+                    MissionState::NO_MISSION
+                } else if f.mission_done() {
+                    MissionState::COMPLETE
+                } else if f.mode().behaviour == Behaviour::Mission && f.is_armed() {
+                    MissionState::ACTIVE
+                } else {
+                    MissionState::NOT_STARTED
+                };
+                MavMessage::MissionCurrent(MissionCurrent {
+                    seq: f.current_item(),
+                    total,
+                    mission_state: state,
+                    mission_mode: u8::from(f.mode().behaviour == Behaviour::Mission),
+                })
+            }
+            BatteryStatus::ID => {
+                let mut voltages = [u16::MAX; 10];
+                for cell in &mut voltages[..4] {
+                    *cell = (volts / 4.0 * 1000.0) as u16;
+                }
+                MavMessage::BatteryStatus(BatteryStatus {
+                    id: 0,
+                    battery_function: MavBatteryFunction::ALL,
+                    r#type: MavBatteryType::LIPO,
+                    temperature: i16::MAX,
+                    voltages,
+                    current_battery: (amps * 100.0) as i16,
+                    current_consumed: used as i32,
+                    energy_consumed: -1,
+                    battery_remaining: percent,
+                    charge_state: MavBatteryChargeState::OK,
+                    ..BatteryStatus::default()
+                })
+            }
+            AutopilotVersion::ID => MavMessage::AutopilotVersion(self.autopilot_version()),
+            HomePosition::ID => {
+                let home = f.home();
+                MavMessage::HomePosition(HomePosition {
+                    latitude: e7(home.lat),
+                    longitude: e7(home.lon),
+                    altitude: amsl_mm(home.alt),
+                    q: [1.0, 0.0, 0.0, 0.0],
+                    time_usec: boot_us,
+                    ..HomePosition::default()
+                })
+            }
+            ExtendedSysState::ID => MavMessage::ExtendedSysState(ExtendedSysState {
+                vtol_state: MavVtolState::UNDEFINED,
+                landed_state: f.landed_state(),
+            }),
+            _ => return None,
+        })
+    }
+
+    fn request_data_stream(&mut self, now: Instant, r: &RequestDataStream) {
+        let interval = if r.start_stop == 0 || r.req_message_rate == 0 {
+            Interval::Disabled
+        } else {
+            Interval::Every(Duration::from_secs(1) / u32::from(r.req_message_rate))
+        };
+        for &id in data_stream(r.req_stream_id) {
+            // Every id of the groups is supported.
+            let _ = self.streams.set_interval(now, id, interval);
+        }
+    }
+}
+
+impl CommandHandler for Craft {
+    fn handle_command(&mut self, now: Instant, request: &Request) -> Response {
+        let done = Response::done;
+        let accepted = done(MavResult::ACCEPTED);
+        let Params { p, lat, lon, z } = params_of(&request.command);
+        match request.command.id() {
+            MavCmd::SET_MESSAGE_INTERVAL | MavCmd::REQUEST_MESSAGE => self
+                .streams
+                .handle_command(now, request)
+                .unwrap_or(done(MavResult::FAILED)),
+            MavCmd::REQUEST_AUTOPILOT_CAPABILITIES => {
+                self.one_shot(now, request.from, AutopilotVersion::ID)
+            }
+            MavCmd::GET_HOME_POSITION => self.one_shot(now, request.from, HomePosition::ID),
+            MavCmd::COMPONENT_ARM_DISARM => {
+                // 21196 in param2 forces, as both autopilots define it.
+                match self.flight.arm(p[0] >= 0.5, p[1] == 21196.0) {
+                    Ok(()) => accepted,
+                    Err(_) => done(MavResult::DENIED),
+                }
+            }
+            MavCmd::NAV_TAKEOFF => match self.flight.takeoff(self.takeoff_alt(z)) {
+                Ok(()) => accepted,
+                Err(_) => done(MavResult::FAILED),
+            },
+            MavCmd::NAV_LAND => {
+                let land = self.mode_with(Behaviour::Land);
+                self.set_mode(land);
+                accepted
+            }
+            MavCmd::NAV_RETURN_TO_LAUNCH => {
+                let rtl = self.mode_with(Behaviour::ReturnToLaunch);
+                self.set_mode(rtl);
+                accepted
+            }
+            MavCmd::DO_SET_MODE => {
+                let custom = modes::custom_mode_of_command(self.autopilot, p[1], p[2]);
+                match modes::by_custom_mode(self.autopilot, custom) {
+                    Some(mode) => {
+                        self.set_mode(mode);
+                        accepted
+                    }
+                    None => done(MavResult::DENIED),
+                }
+            }
+            MavCmd::MISSION_START => {
+                let len = self.flight.mission_len();
+                if len == 0 {
+                    return done(MavResult::DENIED);
+                }
+                let first = if p[0] >= 1.0 && (p[0] as usize) < len {
+                    p[0] as u16
+                } else {
+                    u16::from(self.autopilot == Autopilot::Ardupilot && len > 1)
+                };
+                self.flight.set_current(first);
+                self.new_current = Some(first);
+                let mission = self.mode_with(Behaviour::Mission);
+                self.set_mode(mission);
+                accepted
+            }
+            MavCmd::DO_SET_MISSION_CURRENT => {
+                let seq = p[0];
+                if seq >= 0.0 && (seq as usize) < self.flight.mission_len() {
+                    self.flight.set_current(seq as u16);
+                    self.new_current = Some(seq as u16);
+                    accepted
+                } else {
+                    done(MavResult::DENIED)
+                }
+            }
+            MavCmd::DO_CHANGE_SPEED => {
+                self.flight.set_speed(p[1]);
+                accepted
+            }
+            MavCmd::DO_REPOSITION => {
+                if !self.flight.is_armed() {
+                    return done(MavResult::DENIED);
+                }
+                let alt = z.is_finite().then_some(z - HOME_AMSL);
+                self.flight.go_to(lat, lon, alt);
+                accepted
+            }
+            MavCmd::DO_SET_HOME => {
+                let here = self.flight.position();
+                let home = if p[0] >= 0.5 {
+                    here
+                } else {
+                    Position {
+                        lat: lat.unwrap_or(here.lat),
+                        lon: lon.unwrap_or(here.lon),
+                        alt: if z.is_finite() { z - HOME_AMSL } else { 0.0 },
+                    }
+                };
+                self.flight.set_home(home);
+                accepted
+            }
+            _ => done(MavResult::UNSUPPORTED),
+        }
+    }
+}
+
+/// The simulated vehicle; see the [module docs](self).
+#[derive(Debug)]
+pub(crate) struct Vehicle {
+    own: Address,
+    commands: CommandServer<Craft>,
+    params: ParamServer,
+    missions: MissionServer,
+    timesync: Timesync,
+    out: VecDeque<Outgoing>,
+    log: VecDeque<String>,
+    next_step: Instant,
+}
+
+impl Vehicle {
+    /// A vehicle on the ground at home, disarmed, at time `now`.
+    pub(crate) fn new(config: SimConfig, now: Instant) -> Self {
+        let encoding = match config.autopilot {
+            Autopilot::Ardupilot => Encoding::CCast,
+            Autopilot::Px4 => Encoding::Bytewise,
+        };
+        let mut params = ParamServer::new(config.own, encoding);
+        for (name, value) in config.params {
+            // A table from `params::load` has fewer than 65,535 entries.
+            let _ = params.insert(name, value);
+        }
+        let mut streams = StreamScheduler::new();
+        for &(id, interval) in STREAMS {
+            streams.support(id, interval);
+        }
+        let craft = Craft {
+            autopilot: config.autopilot,
+            mavlink2: config.mavlink2,
+            flight: Flight::new(config.autopilot, Tuning::default()),
+            streams,
+            new_current: None,
+        };
+        let mut vehicle = Self {
+            own: config.own,
+            commands: CommandServer::new(config.own, Default::default(), craft),
+            params,
+            missions: MissionServer::new(config.own, Default::default()),
+            timesync: Timesync::new(TimesyncConfig {
+                interval: None,
+                ..TimesyncConfig::default()
+            }),
+            out: VecDeque::new(),
+            log: VecDeque::new(),
+            next_step: now,
+        };
+        vehicle.retune();
+        vehicle
+    }
+
+    fn craft(&mut self) -> &mut Craft {
+        self.commands.handler_mut()
+    }
+
+    /// A parameter's value as `f32`, if the table has it.
+    fn param(&self, name: &str) -> Option<f32> {
+        let name = Name::new(name).ok()?;
+        self.params.get(name).map(|v| v.as_f64() as f32)
+    }
+
+    /// Takes the craft's speeds, altitudes and battery size from the parameter table.
+    fn retune(&mut self) {
+        let mut t = Tuning::default();
+        let positive = |v: Option<f32>| v.filter(|v| v.is_finite() && *v > 0.0);
+        let autopilot = self.commands.handler().autopilot;
+        match autopilot {
+            Autopilot::Ardupilot => {
+                let cm = |v: Option<f32>| positive(v).map(|v| v / 100.0);
+                t.cruise = cm(self.param("WPNAV_SPEED")).unwrap_or(t.cruise);
+                t.climb = cm(self.param("WPNAV_SPEED_UP")).unwrap_or(t.climb);
+                t.descent = cm(self.param("WPNAV_SPEED_DN")).unwrap_or(t.descent);
+                t.land = cm(self.param("LAND_SPEED")).unwrap_or(t.land);
+                t.rtl_alt = cm(self.param("RTL_ALT")).unwrap_or(t.rtl_alt);
+                t.takeoff_alt = cm(self.param("PILOT_TKOFF_ALT")).unwrap_or(t.takeoff_alt);
+                t.capacity_mah = positive(self.param("BATT_CAPACITY")).unwrap_or(t.capacity_mah);
+            }
+            Autopilot::Px4 => {
+                t.cruise = positive(self.param("MPC_XY_CRUISE")).unwrap_or(t.cruise);
+                t.climb = positive(self.param("MPC_Z_VEL_MAX_UP")).unwrap_or(t.climb);
+                t.descent = positive(self.param("MPC_Z_VEL_MAX_DN")).unwrap_or(t.descent);
+                t.land = positive(self.param("MPC_LAND_SPEED")).unwrap_or(t.land);
+                t.rtl_alt = positive(self.param("RTL_RETURN_ALT")).unwrap_or(t.rtl_alt);
+                t.takeoff_alt = positive(self.param("MIS_TAKEOFF_ALT")).unwrap_or(t.takeoff_alt);
+                t.capacity_mah = positive(self.param("BAT1_CAPACITY")).unwrap_or(t.capacity_mah);
+            }
+        }
+        self.craft().flight.set_tuning(t);
+    }
+
+    /// Feeds one decoded message from `from`.
+    pub(crate) fn handle_message(&mut self, now: Instant, from: Address, message: &MavMessage) {
+        let own = self.own;
+        match message {
+            MavMessage::SetMode(m) if m.target_system == own.system => {
+                let autopilot = self.commands.handler().autopilot;
+                if let Some(mode) = modes::by_custom_mode(autopilot, m.custom_mode) {
+                    self.craft().set_mode(mode);
+                }
+            }
+            MavMessage::RequestDataStream(r)
+                if own.is_reached_by(Address::new(r.target_system, r.target_component)) =>
+            {
+                self.craft().request_data_stream(now, r);
+            }
+            _ => {}
+        }
+        self.commands.handle_message(now, from, message);
+        self.params.handle_message(now, from, message);
+        self.missions.handle_message(now, from, message);
+        self.timesync.handle_message(now, from, message);
+        self.settle(now);
+    }
+
+    /// Advances the model and every timer to `now`.
+    pub(crate) fn handle_timeout(&mut self, now: Instant) {
+        while self.next_step <= now {
+            self.craft().flight.step(STEP.as_secs_f64());
+            self.next_step += STEP;
+        }
+        self.commands.handle_timeout(now);
+        self.params.handle_timeout(now);
+        self.missions.handle_timeout(now);
+        self.timesync.handle_timeout(now);
+        self.settle(now);
+    }
+
+    /// Carries what one part did over to the others, and queues what is due.
+    fn settle(&mut self, now: Instant) {
+        while let Some(e) = self.params.poll_event() {
+            if let ParamServerEvent::Changed { from, name, value } = e {
+                self.log
+                    .push_back(format!("param {name} = {} (set by {from})", value.as_f64()));
+                self.retune();
+            }
+        }
+        while let Some(e) = self.missions.poll_event() {
+            match e {
+                MissionServerEvent::PlanChanged {
+                    mission_type,
+                    count,
+                } => {
+                    self.log
+                        .push_back(format!("{mission_type:?} plan stored: {count} items"));
+                    if mission_type == MavMissionType::MISSION {
+                        let plan = self.missions.plan(MavMissionType::MISSION).to_vec();
+                        self.craft().flight.set_mission(&plan);
+                    }
+                }
+                MissionServerEvent::CurrentChanged { seq } => {
+                    self.craft().flight.set_current(seq);
+                }
+                MissionServerEvent::UploadAbandoned { mission_type } => {
+                    self.log
+                        .push_back(format!("{mission_type:?} upload abandoned"));
+                }
+                _ => {}
+            }
+        }
+        if let Some(seq) = self.craft().new_current.take() {
+            self.missions.set_current(seq);
+        }
+        while let Some(e) = self.craft().flight.poll_event() {
+            match e {
+                FlightEvent::ItemReached(seq) => {
+                    self.broadcast(MavMessage::MissionItemReached(MissionItemReached { seq }))
+                }
+                FlightEvent::CurrentChanged(seq) => {
+                    self.missions.set_current(seq);
+                }
+                FlightEvent::Text(text) => {
+                    let mut field = [0u8; 50];
+                    let n = text.len().min(50);
+                    field[..n].copy_from_slice(&text.as_bytes()[..n]);
+                    self.broadcast(MavMessage::Statustext(Statustext {
+                        severity: MavSeverity::INFO,
+                        text: field,
+                        ..Statustext::default()
+                    }));
+                    self.log.push_back(text);
+                }
+            }
+        }
+        loop {
+            let craft = self.commands.handler_mut();
+            let Some(due) = craft.streams.poll_due(now) else {
+                break;
+            };
+            if let Some(message) = craft.message(now, due.msg_id) {
+                self.out.push_back(Outgoing {
+                    target: due.target,
+                    message,
+                });
+            }
+        }
+    }
+
+    fn broadcast(&mut self, message: MavMessage) {
+        self.out.push_back(Outgoing {
+            target: Address::BROADCAST,
+            message,
+        });
+    }
+
+    /// The next message to send.
+    pub(crate) fn poll_transmit(&mut self) -> Option<Outgoing> {
+        if let Some(o) = self.commands.poll_transmit() {
+            return Some(o);
+        }
+        if let Some(o) = self.commands.handler_mut().streams.poll_transmit() {
+            return Some(o);
+        }
+        self.out
+            .pop_front()
+            .or_else(|| self.params.poll_transmit())
+            .or_else(|| self.missions.poll_transmit())
+            .or_else(|| self.timesync.poll_transmit())
+    }
+
+    /// When [`Vehicle::handle_timeout`] is next due.
+    pub(crate) fn poll_timeout(&self) -> Instant {
+        [
+            self.commands.handler().streams.poll_timeout(),
+            self.commands.poll_timeout(),
+            self.params.poll_timeout(),
+            self.missions.poll_timeout(),
+            self.timesync.poll_timeout(),
+        ]
+        .into_iter()
+        .flatten()
+        .fold(self.next_step, Instant::min)
+    }
+
+    /// The next line of what happened (mode changes, parameter sets, plans stored).
+    pub(crate) fn poll_log(&mut self) -> Option<String> {
+        self.log.pop_front()
+    }
+
+    /// The parameter table's size.
+    pub(crate) fn param_count(&self) -> usize {
+        self.params.len()
+    }
+}

@@ -1,0 +1,235 @@
+//! The simulated vehicle's parameter table: each flavour's defaults, and parameter files.
+//!
+//! A parameter file has one parameter per line, in any of the formats ground stations
+//! save: `NAME VALUE` (MAVProxy), `NAME,VALUE` (Mission Planner) or QGroundControl's
+//! tab-separated `SYSID COMPID NAME VALUE TYPE`. `#` starts a comment. Without a type, a
+//! value written as an integer (`12`, `-3`) is an INT32 and any other (`12.0`, `1e3`) a
+//! REAL32.
+
+use anyhow::{Context, anyhow, bail};
+use mavstack_dialects::common::MavParamType;
+use mavstack_services::param::{Name, Value};
+
+use crate::version_cmd::Autopilot;
+
+/// ArduPilot Copter's names, types and defaults (a representative subset).
+const ARDUPILOT: &[(&str, Value)] = &[
+    ("SYSID_THISMAV", Value::I16(1)),
+    ("SYSID_MYGCS", Value::I16(255)),
+    ("FORMAT_VERSION", Value::I16(120)),
+    ("FRAME_CLASS", Value::I8(1)),
+    ("FRAME_TYPE", Value::I8(1)),
+    ("ARMING_CHECK", Value::I32(1)),
+    ("DISARM_DELAY", Value::I8(10)),
+    ("PILOT_TKOFF_ALT", Value::F32(0.0)),
+    ("WPNAV_SPEED", Value::F32(500.0)),
+    ("WPNAV_SPEED_UP", Value::F32(250.0)),
+    ("WPNAV_SPEED_DN", Value::F32(150.0)),
+    ("WPNAV_RADIUS", Value::F32(200.0)),
+    ("LAND_SPEED", Value::I16(50)),
+    ("RTL_ALT", Value::I32(1500)),
+    ("RTL_SPEED", Value::I16(0)),
+    ("LOIT_SPEED", Value::F32(1250.0)),
+    ("ANGLE_MAX", Value::I16(3000)),
+    ("BATT_MONITOR", Value::I8(4)),
+    ("BATT_CAPACITY", Value::I32(5000)),
+    ("BATT_LOW_VOLT", Value::F32(14.0)),
+    ("FENCE_ENABLE", Value::I8(0)),
+    ("FENCE_ALT_MAX", Value::F32(100.0)),
+    ("FENCE_RADIUS", Value::F32(300.0)),
+    ("FS_THR_ENABLE", Value::I8(1)),
+    ("FS_GCS_ENABLE", Value::I8(0)),
+    ("MOT_SPIN_ARM", Value::F32(0.1)),
+    ("MOT_SPIN_MIN", Value::F32(0.15)),
+    ("ATC_RAT_RLL_P", Value::F32(0.135)),
+    ("ATC_RAT_PIT_P", Value::F32(0.135)),
+    ("ATC_RAT_YAW_P", Value::F32(0.18)),
+    ("COMPASS_USE", Value::I8(1)),
+    ("GPS_TYPE", Value::I8(1)),
+    ("SERIAL0_BAUD", Value::I32(115)),
+    ("SR0_POSITION", Value::I16(4)),
+    ("SR0_EXTRA1", Value::I16(4)),
+];
+
+/// PX4's names, types and defaults (a representative subset; PX4 uses only INT32/REAL32).
+const PX4: &[(&str, Value)] = &[
+    ("SYS_AUTOSTART", Value::I32(4001)),
+    ("SYS_HITL", Value::I32(0)),
+    ("MAV_SYS_ID", Value::I32(1)),
+    ("MAV_COMP_ID", Value::I32(1)),
+    ("MAV_TYPE", Value::I32(2)),
+    ("COM_ARM_WO_GPS", Value::I32(1)),
+    ("COM_DISARM_LAND", Value::F32(2.0)),
+    ("COM_RC_IN_MODE", Value::I32(1)),
+    ("MIS_TAKEOFF_ALT", Value::F32(2.5)),
+    ("MPC_XY_CRUISE", Value::F32(5.0)),
+    ("MPC_Z_VEL_MAX_UP", Value::F32(3.0)),
+    ("MPC_Z_VEL_MAX_DN", Value::F32(1.5)),
+    ("MPC_LAND_SPEED", Value::F32(0.7)),
+    ("NAV_ACC_RAD", Value::F32(2.0)),
+    ("NAV_DLL_ACT", Value::I32(0)),
+    ("RTL_RETURN_ALT", Value::F32(30.0)),
+    ("RTL_DESCEND_ALT", Value::F32(10.0)),
+    ("BAT1_CAPACITY", Value::F32(5000.0)),
+    ("BAT1_N_CELLS", Value::I32(4)),
+    ("BAT1_V_CHARGED", Value::F32(4.2)),
+    ("BAT1_V_EMPTY", Value::F32(3.5)),
+    ("GF_ACTION", Value::I32(2)),
+    ("GF_MAX_HOR_DIST", Value::F32(0.0)),
+    ("GF_MAX_VER_DIST", Value::F32(0.0)),
+    ("MC_ROLLRATE_P", Value::F32(0.15)),
+    ("MC_PITCHRATE_P", Value::F32(0.15)),
+    ("MC_YAWRATE_P", Value::F32(0.2)),
+    ("CAL_ACC0_ID", Value::I32(1_310_988)),
+    ("CAL_GYRO0_ID", Value::I32(1_310_988)),
+    ("CAL_MAG0_ID", Value::I32(197_388)),
+    ("SENS_BOARD_ROT", Value::I32(0)),
+    ("EKF2_HGT_REF", Value::I32(1)),
+];
+
+/// A flavour's default table.
+pub(crate) fn defaults(autopilot: Autopilot) -> Vec<(Name, Value)> {
+    let table = match autopilot {
+        Autopilot::Ardupilot => ARDUPILOT,
+        Autopilot::Px4 => PX4,
+    };
+    table
+        .iter()
+        // The names above are valid (checked by a test).
+        .filter_map(|&(name, value)| Name::new(name).ok().map(|n| (n, value)))
+        .collect()
+}
+
+/// A parameter file's table, in file order (a name given twice keeps its last value).
+///
+/// # Errors
+/// A line that is not a parameter, naming the file and line.
+pub(crate) fn load(path: &str) -> anyhow::Result<Vec<(Name, Value)>> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {path}"))?;
+    parse(&text).map_err(|e| anyhow!("{path}:{e}"))
+}
+
+/// Parses a parameter file's text; errors are `LINE: what`.
+pub(crate) fn parse(text: &str) -> anyhow::Result<Vec<(Name, Value)>> {
+    let mut table: Vec<(Name, Value)> = Vec::new();
+    for (i, raw) in text.lines().enumerate() {
+        let line = raw.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let (name, value) = parse_line(line).map_err(|e| anyhow!("{}: {e}", i + 1))?;
+        match table.iter_mut().find(|(n, _)| *n == name) {
+            Some(slot) => slot.1 = value,
+            None => table.push((name, value)),
+        }
+    }
+    if table.len() >= usize::from(u16::MAX) {
+        bail!(
+            "{} parameters: at most 65,534 fit the protocol",
+            table.len()
+        );
+    }
+    Ok(table)
+}
+
+fn parse_line(line: &str) -> anyhow::Result<(Name, Value)> {
+    let tabbed: Vec<&str> = line.split('\t').map(str::trim).collect();
+    let (name, value, ty) = if tabbed.len() == 5 {
+        // QGroundControl: SYSID COMPID NAME VALUE TYPE.
+        let ty: u8 = tabbed[4]
+            .parse()
+            .map_err(|_| anyhow!("type {:?} is not a MAV_PARAM_TYPE number", tabbed[4]))?;
+        (tabbed[2], tabbed[3], Some(MavParamType(ty)))
+    } else {
+        let fields: Vec<&str> = line
+            .split(|c: char| c == ',' || c.is_whitespace())
+            .filter(|f| !f.is_empty())
+            .collect();
+        match fields.as_slice() {
+            [name, value] => (*name, *value, None),
+            _ => bail!("expected NAME VALUE, NAME,VALUE or a QGroundControl line, got {line:?}"),
+        }
+    };
+    let name = Name::new(name).map_err(|e| anyhow!("parameter name {name:?}: {e}"))?;
+    let number: f64 = value
+        .parse()
+        .map_err(|_| anyhow!("value {value:?} of {name} is not a number"))?;
+    if !number.is_finite() {
+        bail!("value {value:?} of {name} is not finite");
+    }
+    let written_as_integer = value
+        .bytes()
+        .all(|b| b.is_ascii_digit() || b == b'-' || b == b'+');
+    let ty = ty.unwrap_or(if written_as_integer {
+        MavParamType::INT32
+    } else {
+        MavParamType::REAL32
+    });
+    let value = typed(number, ty)
+        .ok_or_else(|| anyhow!("value {value} of {name} does not fit type {ty:?}"))?;
+    Ok((name, value))
+}
+
+/// `number` as a value of type `ty`, if it is exactly representable (any finite number
+/// for REAL32).
+fn typed(number: f64, ty: MavParamType) -> Option<Value> {
+    if ty == MavParamType::REAL32 {
+        return Some(Value::F32(number as f32));
+    }
+    if number.fract() != 0.0 {
+        return None;
+    }
+    // Integral and finite: `as i64` is exact below 2^63, the range checks do the rest.
+    let n = number as i64;
+    Some(match ty {
+        MavParamType::UINT8 => Value::U8(u8::try_from(n).ok()?),
+        MavParamType::INT8 => Value::I8(i8::try_from(n).ok()?),
+        MavParamType::UINT16 => Value::U16(u16::try_from(n).ok()?),
+        MavParamType::INT16 => Value::I16(i16::try_from(n).ok()?),
+        MavParamType::UINT32 => Value::U32(u32::try_from(n).ok()?),
+        MavParamType::INT32 => Value::I32(i32::try_from(n).ok()?),
+        _ => return None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_default_name_is_valid() {
+        assert_eq!(defaults(Autopilot::Ardupilot).len(), ARDUPILOT.len());
+        assert_eq!(defaults(Autopilot::Px4).len(), PX4.len());
+    }
+
+    #[test]
+    fn reads_the_three_file_formats() {
+        let table = parse(
+            "# saved by hand\nRTL_ALT 2000\nWPNAV_SPEED,750.5\nANGLE 30.0\n1\t1\tFENCE_ENABLE\t1\t2\n\nRTL_ALT 2500\n",
+        )
+        .expect("valid");
+        let got: Vec<(String, Value)> = table
+            .iter()
+            .map(|(n, v)| (n.as_str().to_owned(), *v))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                ("RTL_ALT".to_owned(), Value::I32(2500)),
+                ("WPNAV_SPEED".to_owned(), Value::F32(750.5)),
+                ("ANGLE".to_owned(), Value::F32(30.0)),
+                ("FENCE_ENABLE".to_owned(), Value::I8(1)),
+            ]
+        );
+    }
+
+    #[test]
+    fn errors_name_the_line() {
+        let e = parse("A 1\nB x\n").expect_err("bad value");
+        assert_eq!(e.to_string(), "2: value \"x\" of B is not a number");
+        let e = parse("THIS_NAME_IS_FAR_TOO_LONG 1\n").expect_err("long name");
+        assert!(e.to_string().starts_with("1: parameter name"), "{e}");
+        let e = parse("1\t1\tX\t300\t2\n").expect_err("INT8 overflow");
+        assert!(e.to_string().contains("does not fit"), "{e}");
+    }
+}

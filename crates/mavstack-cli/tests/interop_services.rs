@@ -1,0 +1,70 @@
+//! `mavstack vehicle` as pymavlink 2.4.50's mavutil ground station sees it (issue 6, "How it
+//! is checked"): parameters, waypoints, commands, message intervals and a flown mission, over
+//! loopback UDP.
+//!
+//! Each test runs one scenario of `tests-interop/gcs_pymavlink.py`, which starts the vehicle
+//! and plays the ground station with pymavlink's own ardupilotmega dialect in MAVLink 2:
+//!
+//! - `params`, `params_px4`: a 60-parameter file served whole (count, index, name, type and
+//!   value as pymavlink decodes them: C-cast for ArduPilot, bytewise for PX4), read by name
+//!   and index, set and read back;
+//! - `waypoints`: a 12-item mission through pymavlink's `MAVWPLoader`, a 4-item fence, both
+//!   downloaded field by field, MISSION_SET_CURRENT, MISSION_CLEAR_ALL;
+//! - `commands`: arm, DO_SET_MODE, take-off with a deduplicated retry, disarm refused in the
+//!   air, an unsupported command, land and disarm;
+//! - `intervals`: SET_MESSAGE_INTERVAL with the rate measured, MESSAGE_INTERVAL, turning a
+//!   stream off, REQUEST_MESSAGE(HOME_POSITION), REQUEST_DATA_STREAM;
+//! - `mission`: a PX4-flavoured vehicle flies an uploaded mission (items reached in order,
+//!   lands at the last waypoint, disarms, battery drained).
+//!
+//! Never skipped: without pymavlink 2.4.50 they fail.
+
+mod support;
+
+use std::ffi::OsStr;
+
+use support::{require_pymavlink, run_script};
+
+fn scenario(name: &str) {
+    require_pymavlink();
+    let bin = env!("CARGO_BIN_EXE_mavstack");
+    let out = run_script(
+        "gcs_pymavlink.py",
+        &[OsStr::new(name), OsStr::new("--mavstack"), OsStr::new(bin)],
+    );
+    assert!(
+        out.lines()
+            .any(|l| l.starts_with(name) && l.ends_with(" ok")),
+        "{out}"
+    );
+}
+
+#[test]
+fn params_ardupilot() {
+    scenario("params");
+}
+
+#[test]
+fn params_px4() {
+    scenario("params_px4");
+}
+
+#[test]
+fn waypoints() {
+    scenario("waypoints");
+}
+
+#[test]
+fn commands() {
+    scenario("commands");
+}
+
+#[test]
+fn intervals() {
+    scenario("intervals");
+}
+
+#[test]
+fn mission_flight() {
+    scenario("mission");
+}

@@ -1,0 +1,443 @@
+#!/usr/bin/env python3
+"""`mavstack vehicle` driven by pymavlink 2.4.50's mavutil as the ground station, over loopback
+UDP: parameters, waypoints, commands, message intervals and a flown mission.
+
+Usage: gcs_pymavlink.py SCENARIO --mavstack BIN
+
+pymavlink uses its own ardupilotmega dialect (from the wheel) and MAVLink 2 (MAVLINK20=1); the
+vehicle runs on `udpout` towards pymavlink's `udpin`. Every expectation is checked on what
+pymavlink decoded. Exit 0 with "<scenario>: ... ok", or 1 with FAIL lines.
+
+Scenarios:
+  params      --params FILE of 60 parameters of four types: PARAM_REQUEST_LIST returns every one
+              (count, index, name, value as pymavlink decodes C-cast values); read by name and by
+              index; PARAM_SET of an INT and a REAL answered with the new value and kept (read back);
+              PX4 flavour: the same file's INT values come bytewise-encoded (struct reinterpretation)
+  waypoints   pymavlink's MAVWPLoader: upload 12 items (MISSION_COUNT, answer each MISSION_REQUEST /
+              MISSION_REQUEST_INT), MISSION_ACK accepted; download: same items field by field;
+              MISSION_SET_CURRENT 3 -> MISSION_CURRENT 3; fence upload/download (mission_type 1);
+              MISSION_CLEAR_ALL -> count 0
+  commands    arm (400) -> ACK ACCEPTED and HEARTBEAT armed; DO_SET_MODE GUIDED (4) -> custom_mode 4;
+              NAV_TAKEOFF 12 m -> relative_alt climbs past 10 m; DISARM in the air -> DENIED;
+              a retry with confirmation 1 -> one ACK, no second effect; unknown command ->
+              UNSUPPORTED; NAV_LAND -> lands and disarms (HEARTBEAT, EXTENDED_SYS_STATE)
+  intervals   SET_MESSAGE_INTERVAL ATTITUDE 50 ms -> ~20 Hz measured; REQUEST_MESSAGE(244, 30) ->
+              MESSAGE_INTERVAL 50000; -1 -> ATTITUDE stops; REQUEST_MESSAGE(242) -> HOME_POSITION at
+              the SITL home; REQUEST_DATA_STREAM(POSITION, 10 Hz) -> GLOBAL_POSITION_INT ~10 Hz
+  mission     --autopilot px4: upload take-off, two waypoints, land; arm; DO_SET_MODE AUTO.MISSION;
+              MISSION_ITEM_REACHED 0..3 in order, MISSION_CURRENT follows, the vehicle lands at
+              the last waypoint and disarms; battery drains
+"""
+
+import argparse
+import math
+import os
+import socket
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+
+os.environ["MAVLINK20"] = "1"
+os.environ.setdefault("MAVLINK_DIALECT", "ardupilotmega")
+from pymavlink import mavutil, mavwp  # noqa: E402
+
+M = mavutil.mavlink
+HOME = (-35.363261, 149.165230)
+FAILS = []
+
+
+def fail(msg):
+    FAILS.append(msg)
+    print("FAIL:", msg, flush=True)
+
+
+def check(cond, msg):
+    if not cond:
+        fail(msg)
+    return cond
+
+
+def free_port():
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+class Session:
+    """A vehicle process and a pymavlink ground station talking to it."""
+
+    def __init__(self, binary, *vehicle_args):
+        port = free_port()
+        self.gcs = mavutil.mavlink_connection(
+            f"udpin:127.0.0.1:{port}", source_system=255, source_component=190
+        )
+        self.proc = subprocess.Popen(
+            [binary, "vehicle", f"udpout:127.0.0.1:{port}", *vehicle_args],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+        )
+        hb = self.gcs.wait_heartbeat(timeout=10)
+        if hb is None:
+            self.close()
+            raise SystemExit("FAIL: no HEARTBEAT from the vehicle within 10 s")
+        self.target = (hb.get_srcSystem(), hb.get_srcComponent())
+        # A MAVLink 2 frame switches the vehicle's link to MAVLink 2.
+        self.gcs.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+
+    def close(self):
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+        self.gcs.close()
+
+    def recv(self, types, timeout=3.0, cond=None):
+        deadline = time.time() + timeout
+        while time.time() < deadline:
+            m = self.gcs.recv_match(type=types, blocking=True, timeout=deadline - time.time())
+            if m is None:
+                return None
+            if cond is None or cond(m):
+                return m
+        return None
+
+    def command(self, cmd, *params, confirmation=0, wait=True):
+        p = list(params) + [0.0] * (7 - len(params))
+        self.gcs.mav.command_long_send(*self.target, cmd, confirmation, *p)
+        if not wait:
+            return None
+        return self.recv("COMMAND_ACK", cond=lambda a: a.command == cmd)
+
+    def heartbeat(self, cond, timeout=5.0):
+        return self.recv(
+            "HEARTBEAT", timeout, lambda h: h.get_srcSystem() == self.target[0] and cond(h)
+        )
+
+
+def write_params(path):
+    """60 parameters: INT (some negative), REAL, values exact in float."""
+    rows = []
+    for i in range(20):
+        rows.append((f"TEST_INT_{i:02d}", -5000 + 517 * i))
+    for i in range(20):
+        rows.append((f"TEST_REAL_{i:02d}", 0.25 * i - 3.5))
+    for i in range(20):
+        rows.append((f"TEST_BIG_{i:02d}", 100000 + 3 * i))
+    with open(path, "w") as f:
+        f.write("# written by gcs_pymavlink.py\n")
+        for name, value in rows:
+            f.write(f"{name} {value}\n")
+    return rows
+
+
+def bytewise(value, param_type):
+    """What a bytewise-encoded INT32 reads as when the float is taken at face value."""
+    if param_type == M.MAV_PARAM_TYPE_REAL32:
+        return value
+    return struct.unpack("<f", struct.pack("<i", int(value)))[0]
+
+
+def scenario_params(binary, autopilot):
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "params.parm")
+        rows = write_params(path)
+        s = Session(binary, "--autopilot", autopilot, "--params", path)
+        try:
+            s.gcs.mav.param_request_list_send(*s.target)
+            got = {}
+            deadline = time.time() + 10
+            while time.time() < deadline and len(got) < len(rows):
+                m = s.recv("PARAM_VALUE", 2.0)
+                if m is None:
+                    break
+                check(m.param_count == len(rows), f"param_count {m.param_count} != {len(rows)}")
+                got[m.param_id] = (m.param_index, m.param_value, m.param_type)
+            check(len(got) == len(rows), f"received {len(got)} of {len(rows)} parameters")
+            for i, (name, value) in enumerate(rows):
+                if name not in got:
+                    fail(f"{name} missing")
+                    continue
+                index, raw, ty = got[name]
+                want_ty = M.MAV_PARAM_TYPE_INT32 if isinstance(value, int) else M.MAV_PARAM_TYPE_REAL32
+                check(index == i, f"{name}: index {index} != {i}")
+                check(ty == want_ty, f"{name}: type {ty} != {want_ty}")
+                want = float(value) if autopilot == "ardupilot" else bytewise(value, ty)
+                check(raw == want or (math.isnan(raw) and math.isnan(want)),
+                      f"{name}: value {raw!r} != {want!r}")
+            # Read by name and by index.
+            s.gcs.mav.param_request_read_send(*s.target, b"TEST_REAL_05", -1)
+            m = s.recv("PARAM_VALUE", 3.0, lambda m: m.param_id == "TEST_REAL_05")
+            check(m is not None and m.param_value == -2.25 and m.param_index == 25,
+                  f"read by name: {m}")
+            s.gcs.mav.param_request_read_send(*s.target, b"", 7)
+            m = s.recv("PARAM_VALUE", 3.0, lambda m: m.param_index == 7)
+            check(m is not None and m.param_id == "TEST_INT_07", f"read by index: {m}")
+            # Set an INT and a REAL; the answer carries the new value; read back.
+            s.gcs.param_set_send("TEST_REAL_03", 42.5, M.MAV_PARAM_TYPE_REAL32)
+            m = s.recv("PARAM_VALUE", 3.0, lambda m: m.param_id == "TEST_REAL_03")
+            check(m is not None and m.param_value == 42.5, f"set REAL: {m}")
+            if autopilot == "ardupilot":
+                s.gcs.param_set_send("TEST_INT_02", 1234, M.MAV_PARAM_TYPE_INT32)
+                want = 1234.0
+            else:
+                s.gcs.mav.param_set_send(*s.target, b"TEST_INT_02", bytewise(1234, 6), 6)
+                want = bytewise(1234, 6)
+            m = s.recv("PARAM_VALUE", 3.0, lambda m: m.param_id == "TEST_INT_02")
+            check(m is not None and m.param_value == want, f"set INT: {m}")
+            s.gcs.mav.param_request_read_send(*s.target, b"TEST_INT_02", -1)
+            m = s.recv("PARAM_VALUE", 3.0, lambda m: m.param_id == "TEST_INT_02")
+            check(m is not None and m.param_value == want, f"read back: {m}")
+        finally:
+            s.close()
+    return f"{len(rows)} params fetched, read by name/index, set x2 ({autopilot})"
+
+
+def make_items(target, count, mission_type=0):
+    items = []
+    for seq in range(count):
+        items.append(M.MAVLink_mission_item_int_message(
+            target[0], target[1], seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+            M.MAV_CMD_NAV_WAYPOINT if mission_type == 0 else M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION,
+            0, 1, 1.5 * seq, 2.0, 0.0, float("nan") if seq == 5 else 0.0,
+            int((HOME[0] + 0.0001 * seq) * 1e7), int((HOME[1] - 0.0001 * seq) * 1e7),
+            10.0 + seq, mission_type))
+    return items
+
+
+def upload(s, items, mission_type=0):
+    s.gcs.mav.mission_count_send(*s.target, len(items), mission_type)
+    sent = set()
+    deadline = time.time() + 15
+    while time.time() < deadline:
+        m = s.recv(["MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"], 3.0)
+        if m is None:
+            fail("upload: no request/ack within 3 s")
+            return False
+        if m.get_type() == "MISSION_ACK":
+            check(m.type == M.MAV_MISSION_ACCEPTED, f"upload ack {m.type}")
+            check(sent == set(range(len(items))), f"requested {sorted(sent)}")
+            return m.type == M.MAV_MISSION_ACCEPTED
+        check(m.mission_type == mission_type, f"request for type {m.mission_type}")
+        sent.add(m.seq)
+        s.gcs.mav.send(items[m.seq])
+    fail("upload did not finish")
+    return False
+
+
+def download(s, mission_type=0):
+    s.gcs.mav.mission_request_list_send(*s.target, mission_type)
+    c = s.recv("MISSION_COUNT", 3.0)
+    if not check(c is not None, "no MISSION_COUNT"):
+        return []
+    out = []
+    for seq in range(c.count):
+        s.gcs.mav.mission_request_int_send(*s.target, seq, mission_type)
+        m = s.recv("MISSION_ITEM_INT", 3.0, lambda m, seq=seq: m.seq == seq)
+        if not check(m is not None, f"no item {seq}"):
+            return out
+        out.append(m)
+    s.gcs.mav.mission_ack_send(*s.target, M.MAV_MISSION_ACCEPTED, mission_type)
+    return out
+
+
+FIELDS = ["seq", "frame", "command", "autocontinue", "param1", "param2", "param3", "param4",
+          "x", "y", "z", "mission_type"]
+
+
+def same_items(sent, got, what):
+    check(len(sent) == len(got), f"{what}: {len(got)} items back of {len(sent)}")
+    for a, b in zip(sent, got):
+        for f in FIELDS:
+            va, vb = getattr(a, f), getattr(b, f)
+            same = va == vb or (isinstance(va, float) and math.isnan(va) and math.isnan(vb))
+            check(same, f"{what} item {a.seq} {f}: sent {va!r} got {vb!r}")
+
+
+def scenario_waypoints(binary):
+    s = Session(binary)
+    try:
+        items = make_items(s.target, 12)
+        # MAVWPLoader holds the plan as pymavlink's own mission tools do.
+        loader = mavwp.MAVWPLoader(target_system=s.target[0], target_component=s.target[1])
+        for it in items:
+            loader.add(it)
+        check(loader.count() == 12, "loader count")
+        upload(s, [loader.wp(i) for i in range(loader.count())])
+        same_items(items, download(s), "mission")
+        s.gcs.mav.mission_set_current_send(*s.target, 3)
+        m = s.recv("MISSION_CURRENT", 3.0, lambda m: m.seq == 3)
+        check(m is not None, "MISSION_CURRENT 3 after MISSION_SET_CURRENT")
+        fence = make_items(s.target, 4, mission_type=1)
+        upload(s, fence, mission_type=1)
+        same_items(fence, download(s, 1), "fence")
+        same_items(items, download(s), "mission after fence upload")
+        s.gcs.mav.mission_clear_all_send(*s.target, 0)
+        a = s.recv("MISSION_ACK", 3.0)
+        check(a is not None and a.type == M.MAV_MISSION_ACCEPTED, f"clear ack {a}")
+        s.gcs.mav.mission_request_list_send(*s.target, 0)
+        c = s.recv("MISSION_COUNT", 3.0)
+        check(c is not None and c.count == 0, f"count after clear {c}")
+    finally:
+        s.close()
+    return "12-item mission and 4-item fence uploaded/downloaded, set current, cleared"
+
+
+def scenario_commands(binary):
+    s = Session(binary, "--autopilot", "ardupilot")
+    try:
+        a = s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+        check(a is not None and a.result == M.MAV_RESULT_ACCEPTED, f"arm ack {a}")
+        check(s.heartbeat(lambda h: h.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED) is not None,
+              "no armed HEARTBEAT")
+        a = s.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4)
+        check(a is not None and a.result == M.MAV_RESULT_ACCEPTED, f"mode ack {a}")
+        check(s.heartbeat(lambda h: h.custom_mode == 4) is not None, "no GUIDED HEARTBEAT")
+        a = s.command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 12)
+        check(a is not None and a.result == M.MAV_RESULT_ACCEPTED, f"takeoff ack {a}")
+        # A retry of the same command (confirmation 1) is answered, not run again.
+        a = s.command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 12, confirmation=1)
+        check(a is not None and a.result == M.MAV_RESULT_ACCEPTED, f"retry ack {a}")
+        m = s.recv("GLOBAL_POSITION_INT", 12.0, lambda m: m.relative_alt > 10000)
+        check(m is not None, "never climbed past 10 m")
+        a = s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0)
+        check(a is not None and a.result == M.MAV_RESULT_DENIED, f"disarm in the air: {a}")
+        a = s.command(M.MAV_CMD_DO_FLIGHTTERMINATION, 1)
+        check(a is not None and a.result == M.MAV_RESULT_UNSUPPORTED, f"unknown command: {a}")
+        a = s.command(M.MAV_CMD_NAV_LAND)
+        check(a is not None and a.result == M.MAV_RESULT_ACCEPTED, f"land ack {a}")
+        check(s.heartbeat(lambda h: h.custom_mode == 9) is not None, "no LAND HEARTBEAT")
+        e = s.recv("EXTENDED_SYS_STATE", 5.0,
+                   lambda e: e.landed_state == M.MAV_LANDED_STATE_LANDING)
+        check(e is not None, "never LANDING")
+        hb = s.heartbeat(lambda h: not h.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED, 40.0)
+        check(hb is not None, "did not land and disarm")
+        m = s.recv("GLOBAL_POSITION_INT", 3.0)
+        check(m is not None and abs(m.relative_alt) < 100, f"not on the ground: {m}")
+    finally:
+        s.close()
+    return "arm, GUIDED, takeoff 12 m, retry deduplicated, disarm refused aloft, land, disarm"
+
+
+def rate(s, msg_type, seconds):
+    start = time.time()
+    n = 0
+    while time.time() - start < seconds:
+        if s.recv(msg_type, start + seconds - time.time()) is not None:
+            n += 1
+    return n / seconds
+
+
+def scenario_intervals(binary):
+    s = Session(binary)
+    try:
+        a = s.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, 30, 50000)
+        check(a is not None and a.result == M.MAV_RESULT_ACCEPTED, f"interval ack {a}")
+        hz = rate(s, "ATTITUDE", 2.0)
+        check(16 <= hz <= 24, f"ATTITUDE at {hz:.1f} Hz, asked 20")
+        a = s.command(M.MAV_CMD_REQUEST_MESSAGE, 244, 30)
+        m = s.recv("MESSAGE_INTERVAL", 3.0, lambda m: m.message_id == 30)
+        check(m is not None and m.interval_us == 50000, f"MESSAGE_INTERVAL {m}")
+        a = s.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, 30, -1)
+        check(a is not None and a.result == M.MAV_RESULT_ACCEPTED, f"disable ack {a}")
+        s.recv("HEARTBEAT", 1.0)
+        s.gcs.recv_match(type="ATTITUDE", blocking=False)
+        time.sleep(0.3)
+        while s.gcs.recv_match(type="ATTITUDE", blocking=False) is not None:
+            pass
+        check(s.recv("ATTITUDE", 1.5) is None, "ATTITUDE still streaming after -1")
+        a = s.command(M.MAV_CMD_REQUEST_MESSAGE, 242)
+        check(a is not None and a.result == M.MAV_RESULT_ACCEPTED, f"request ack {a}")
+        h = s.recv("HOME_POSITION", 3.0)
+        check(h is not None and abs(h.latitude / 1e7 - HOME[0]) < 1e-6
+              and abs(h.longitude / 1e7 - HOME[1]) < 1e-6, f"HOME_POSITION {h}")
+        s.gcs.mav.request_data_stream_send(*s.target, M.MAV_DATA_STREAM_POSITION, 10, 1)
+        hz = rate(s, "GLOBAL_POSITION_INT", 2.0)
+        check(8 <= hz <= 12, f"GLOBAL_POSITION_INT at {hz:.1f} Hz, asked 10")
+    finally:
+        s.close()
+    return "SET_MESSAGE_INTERVAL 20 Hz measured, MESSAGE_INTERVAL, off, HOME_POSITION, data stream"
+
+
+def scenario_mission(binary):
+    s = Session(binary, "--autopilot", "px4")
+    try:
+        t = s.target
+        north = lambda metres: int((HOME[0] + metres / 111319.49) * 1e7)  # noqa: E731
+        lon = int(HOME[1] * 1e7)
+        frame = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+        items = [
+            M.MAVLink_mission_item_int_message(*t, 0, frame, M.MAV_CMD_NAV_TAKEOFF, 0, 1,
+                                               0, 0, 0, float("nan"), north(0), lon, 8.0, 0),
+            M.MAVLink_mission_item_int_message(*t, 1, frame, M.MAV_CMD_NAV_WAYPOINT, 0, 1,
+                                               0, 0, 0, float("nan"), north(15), lon, 8.0, 0),
+            M.MAVLink_mission_item_int_message(*t, 2, frame, M.MAV_CMD_NAV_WAYPOINT, 0, 1,
+                                               0, 0, 0, float("nan"), north(30), lon, 6.0, 0),
+            M.MAVLink_mission_item_int_message(*t, 3, frame, M.MAV_CMD_NAV_LAND, 0, 1,
+                                               0, 0, 0, float("nan"), north(30), lon, 0.0, 0),
+        ]
+        upload(s, items)
+        b0 = s.recv("BATTERY_STATUS", 3.0)
+        a = s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+        check(a is not None and a.result == M.MAV_RESULT_ACCEPTED, f"arm {a}")
+        a = s.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 4)
+        check(a is not None and a.result == M.MAV_RESULT_ACCEPTED, f"AUTO.MISSION {a}")
+        reached = []
+        currents = set()
+        deadline = time.time() + 60
+        while time.time() < deadline and len(reached) < 4:
+            m = s.recv(["MISSION_ITEM_REACHED", "MISSION_CURRENT"], 5.0)
+            if m is None:
+                break
+            if m.get_type() == "MISSION_ITEM_REACHED":
+                reached.append(m.seq)
+            else:
+                currents.add(m.seq)
+        check(reached == [0, 1, 2, 3], f"MISSION_ITEM_REACHED {reached}")
+        check({1, 2, 3} <= currents, f"MISSION_CURRENT seen {sorted(currents)}")
+        hb = s.heartbeat(lambda h: not h.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED, 10.0)
+        check(hb is not None, "not disarmed after landing")
+        p = s.recv("GLOBAL_POSITION_INT", 3.0)
+        if check(p is not None, "no position"):
+            metres = (p.lat / 1e7 - HOME[0]) * 111319.49
+            check(abs(metres - 30) < 1.5 and abs(p.relative_alt) < 100,
+                  f"landed {metres:.1f} m north at {p.relative_alt} mm")
+        b1 = s.recv("BATTERY_STATUS", 3.0)
+        check(b0 is not None and b1 is not None and b1.current_consumed > b0.current_consumed
+              and b1.battery_remaining <= b0.battery_remaining, f"battery {b0} -> {b1}")
+    finally:
+        s.close()
+    return "4-item PX4 mission flown: reached 0..3, landed 30 m north, disarmed, battery drained"
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("scenario")
+    ap.add_argument("--mavstack", required=True)
+    args = ap.parse_args()
+    scenarios = {
+        "params": lambda b: scenario_params(b, "ardupilot"),
+        "params_px4": lambda b: scenario_params(b, "px4"),
+        "waypoints": scenario_waypoints,
+        "commands": scenario_commands,
+        "intervals": scenario_intervals,
+        "mission": scenario_mission,
+    }
+    if args.scenario not in scenarios:
+        print(f"unknown scenario {args.scenario}; one of {', '.join(scenarios)}", file=sys.stderr)
+        return 2
+    started = time.time()
+    summary = scenarios[args.scenario](args.mavstack)
+    if FAILS:
+        return 1
+    print(f"{args.scenario}: {summary} ({time.time() - started:.1f} s) ok")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
