@@ -1,11 +1,25 @@
 #!/usr/bin/env bash
-# Sets up the peers the tests compare against, idempotently:
-#   .venv/ — a Python virtualenv with pymavlink 2.4.50 from PyPI (the reference implementation).
+# Sets up the peers the tests compare against, idempotently (quiet when nothing changes):
+#   .venv/ — a Python virtualenv with, from PyPI, pinned:
+#     pymavlink 2.4.50   the reference implementation (kept at 2.4.50: constraints file);
+#     MAVProxy 1.8.75    ground station, headless: installed without its GUI/map dependencies
+#                        (vtk, opencv, matplotlib, wxPython...), plus what its console needs;
+#     mavsdk 4.1.0       MAVSDK's native Python binding (ctypes over the bundled libcmavsdk.so);
+#     mavsdk-grpc 4.0.5  MAVSDK's gRPC wrapper (import mavsdk_grpc) with its bundled
+#                        mavsdk_server binary (mavsdk_grpc/bin/mavsdk_server).
 # Prints the python to use (also exported by scripts/test.sh as MAVSTACK_PYTHON).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="${MAVSTACK_VENV:-$root/.venv}"
 want=2.4.50
+# name==version of every package we install, dependencies included (nothing floats).
+pins=(
+    "pymavlink==$want" "lxml==6.1.3" "fastcrc==0.5.0"
+    "pyserial==3.5" "pexpect==4.9.0" "ptyprocess==0.7.0" "defusedxml==0.7.1" "pynmeagps==1.1.8"
+    "mavsdk==4.1.0"
+    "mavsdk-grpc==4.0.5" "grpcio==1.85.1" "protobuf==6.33.6" "typing_extensions==4.16.0"
+)
+nodeps=("MAVProxy==1.8.75")
 if ! command -v python3 >/dev/null; then
     echo "setup-peers: python3 not found (Debian: apt-get install python3 python3-venv)" >&2
     exit 1
@@ -17,8 +31,39 @@ if [ ! -x "$venv/bin/python" ]; then
         python3 -m venv "$venv"
     fi
 fi
-have="$("$venv/bin/python" -c 'from importlib.metadata import version; print(version("pymavlink"))' 2>/dev/null || true)"
-if [ "$have" != "$want" ]; then
-    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "pymavlink==$want" >&2
+# Which pins are missing or at another version (empty when all are in place).
+missing() {
+    "$venv/bin/python" - "$@" <<'PY'
+import sys
+from importlib.metadata import version, PackageNotFoundError
+for pin in sys.argv[1:]:
+    name, want = pin.split("==")
+    try:
+        have = version(name)
+    except PackageNotFoundError:
+        have = None
+    if have != want:
+        print(pin)
+PY
+}
+if [ -n "$(missing "${pins[@]}" "${nodeps[@]}")" ]; then
+    pip=("$venv/bin/python" -m pip install --quiet --disable-pip-version-check)
+    constraints="$(mktemp)"
+    trap 'rm -f "$constraints"' EXIT
+    printf '%s\n' "${pins[@]}" > "$constraints"
+    "${pip[@]}" -c "$constraints" "${pins[@]}" >&2
+    # MAVProxy's declared dependencies pull in the GUI stack and would float pymavlink: its
+    # headless needs (pymavlink, pyserial, defusedxml, pynmeagps) are pinned above.
+    "${pip[@]}" --no-deps "${nodeps[@]}" >&2
+    left="$(missing "${pins[@]}" "${nodeps[@]}")"
+    if [ -n "$left" ]; then
+        echo "setup-peers: not installed as pinned: $left" >&2
+        exit 1
+    fi
+fi
+server="$("$venv/bin/python" -c 'import os, mavsdk_grpc.bin as b; print(os.path.join(os.path.dirname(b.__file__), "mavsdk_server"))')"
+if [ ! -x "$server" ]; then
+    echo "setup-peers: mavsdk-grpc has no executable mavsdk_server at $server" >&2
+    exit 1
 fi
 echo "$venv/bin/python"

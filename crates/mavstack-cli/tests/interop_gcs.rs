@@ -1,0 +1,108 @@
+//! Real ground-station software from PyPI against `mavstack vehicle` over loopback UDP.
+//!
+//! Each test runs one script of `tests-interop/` with the Python that `scripts/setup-peers.sh`
+//! prepares (`$MAVSTACK_PYTHON`, else `.venv/bin/python`), which starts the mavstack binary
+//! as the vehicle and drives the client through a whole exchange:
+//!
+//! - `gcs_mavproxy.py`: MAVProxy 1.8.75, headless in a pseudo-terminal: parameter fetch
+//!   (count = the vehicle's param_count, the `--params` file's values), set and read back,
+//!   mission download, upload of a QGC WPL 110 file and download again (compared), arm, and
+//!   `signing setup` on a `--secure` vehicle followed by a fetch that only signed frames can
+//!   complete (and every vehicle frame in MAVProxy's log signed with its key);
+//! - `gcs_mavsdk.py --api native`: MAVSDK's native Python binding `mavsdk` 4.1.0 (ctypes over
+//!   libcmavsdk);
+//! - `gcs_mavsdk.py --api grpc`: `mavsdk-grpc` 4.0.5 with its bundled `mavsdk_server`;
+//!   both against `--autopilot px4`: connect, telemetry (position at home, battery, armed,
+//!   flight mode), parameters (all / get / set), mission upload and download, arm, takeoff
+//!   and land, inside a network namespace of their own (`unshare -n`) because mavsdk_server
+//!   listens for gRPC on every interface.
+//!
+//! Never skipped: a client that is not installed fails the test. The scenarios run one at a
+//! time (they time a flying vehicle against the wall clock).
+
+mod support;
+
+use std::ffi::OsStr;
+use std::process::Command;
+use std::sync::{Mutex, OnceLock};
+
+use support::{python, require_pymavlink, run_script, text};
+
+/// The ground stations and their pinned releases (scripts/setup-peers.sh installs them).
+const CLIENTS: [(&str, &str); 3] = [
+    ("MAVProxy", "1.8.75"),
+    ("mavsdk", "4.1.0"),
+    ("mavsdk-grpc", "4.0.5"),
+];
+
+/// Fails (never skips) unless every client is installed at its pinned version; checked once.
+fn require_clients() {
+    static CHECKED: OnceLock<Result<(), String>> = OnceLock::new();
+    let checked = CHECKED.get_or_init(|| {
+        let probe = "import sys; from importlib.metadata import version; \
+                     import pexpect, mavsdk, mavsdk_grpc; \
+                     print(' '.join(n + '==' + version(n) for n in sys.argv[1:]))";
+        let names: Vec<&str> = CLIENTS.iter().map(|(n, _)| *n).collect();
+        let py = python();
+        let out = Command::new(&py)
+            .args(["-c", probe])
+            .args(&names)
+            .output()
+            .map_err(|e| format!("cannot run python {}: {e}", py.display()))?;
+        if !out.status.success() {
+            return Err(format!(
+                "python {} lacks a ground station: {}",
+                py.display(),
+                text(&out.stderr).trim()
+            ));
+        }
+        let want: Vec<String> = CLIENTS.iter().map(|(n, v)| format!("{n}=={v}")).collect();
+        let have = text(&out.stdout).trim().to_owned();
+        if have != want.join(" ") {
+            return Err(format!(
+                "python {} has {have}, want {}",
+                py.display(),
+                want.join(" ")
+            ));
+        }
+        Ok(())
+    });
+    if let Err(e) = checked {
+        panic!("ground-station interop needs the clients (run scripts/setup-peers.sh): {e}");
+    }
+}
+
+fn run(name: &str, args: &[&str]) -> String {
+    static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+    let _turn = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    require_pymavlink();
+    require_clients();
+    let bin = env!("CARGO_BIN_EXE_mavstack");
+    let mut all: Vec<&OsStr> = args.iter().map(OsStr::new).collect();
+    all.extend([OsStr::new("--mavstack"), OsStr::new(bin)]);
+    let out = run_script(name, &all);
+    let last = out.lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with('{') && last.contains("\"ok\": true"),
+        "{name}: no success summary:\n{out}"
+    );
+    println!("{last}");
+    out
+}
+
+#[test]
+fn mavproxy_params_missions_arm_and_signing() {
+    run("gcs_mavproxy.py", &[]);
+}
+
+#[test]
+fn mavsdk_native_binding_flies_a_session() {
+    run("gcs_mavsdk.py", &["--api", "native"]);
+}
+
+#[test]
+fn mavsdk_grpc_with_mavsdk_server_flies_a_session() {
+    run("gcs_mavsdk.py", &["--api", "grpc"]);
+}

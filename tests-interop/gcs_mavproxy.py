@@ -1,0 +1,457 @@
+#!/usr/bin/env python3
+"""MAVProxy 1.8.75 (the real ground station, from PyPI) against `mavstack vehicle` on loopback UDP.
+
+    gcs_mavproxy.py [--mavstack BIN] [--keep DIR]
+    gcs_mavproxy.py --bench N_PARAMS N_ITEMS [--loss 0.2] [--seed 1] [--mavstack BIN]
+
+The vehicle (`BIN vehicle udpout:127.0.0.1:PORT --secure --params FILE`, BIN from --mavstack or
+$MAVSTACK_BIN) sends to MAVProxy listening on `--master=udpin:127.0.0.1:PORT`. MAVProxy runs
+headless in a pseudo-terminal (pexpect) with `set param_ftp 0` (the parameter protocol, not
+MAVFTP) and the modules signing, wp, param, arm, mode, cmdlong; its own console lines are what
+is checked, plus its telemetry log (every frame it received, signature bytes included):
+
+ 1. connect: "Detected vehicle 1:1";
+ 2. param fetch: "Received N parameters" where N is the vehicle's param_count, `param status`
+    "Have N/N params", `param save` writes N lines holding every name/value of the --params file;
+ 3. param set + read back: a REAL32 and an INT32 parameter set, then fetched one by one
+    (PARAM_REQUEST_READ) and printed with the new value; `param set` of the same names shows
+    them in a second full fetch too;
+ 4. wp list (download of what the vehicle holds);
+ 5. wp load of a generated QGC WPL 110 file (MISSION_COUNT, MISSION_REQUEST(_INT), MISSION_ITEM_INT,
+    MISSION_ACK ACCEPTED), then wp save (a second download) compared item by item;
+ 6. arm throttle: COMMAND_ACK ACCEPTED, "ARMED", and an armed HEARTBEAT in the log; disarm;
+ 7. signing setup KEY (SETUP_SIGNING, accepted by a `--secure` vehicle), then `set allow_unsigned 0`
+    and a full param fetch again (only signed frames reach MAVProxy now), and the log shows the
+    vehicle's frames signed from then on with MAVProxy's key (checked with pymavlink's signing).
+
+Prints one JSON line with timings on success, exits 1 with the reason (and MAVProxy's and the
+vehicle's last output) on any failure.
+
+--bench: a vehicle with N_PARAMS extra parameters (a generated --params file) and MAVProxy,
+directly and through tests-interop/lossy_relay.py dropping --loss of the datagrams each way
+(seeded): time to fetch every parameter, upload N_ITEMS mission items (retried when MAVProxy
+gives up: it never resends MISSION_COUNT) and download them again; JSON with both runs.
+"""
+
+import argparse
+import hashlib
+import os
+import re
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from gcs_common import (  # noqa: E402
+    Failure,
+    Timer,
+    Vehicle,
+    compare_missions,
+    fail,
+    free_udp_port,
+    mavstack_bin,
+    read_qgc_wpl,
+    run_main,
+    survey_mission,
+    write_params_file,
+    write_qgc_wpl,
+)
+
+try:
+    import pexpect
+except ImportError as e:  # never skip: a missing client is a failure
+    print(f"gcs_mavproxy: FAILED: pexpect is not installed ({e}); run scripts/setup-peers.sh",
+          file=sys.stderr)
+    sys.exit(1)
+
+MODULES = "signing,wp,param,arm,mode,cmdlong"
+PASSPHRASE = "mavstack-interop"
+TEST_PARAMS = {
+    "GCS_TEST_INT": 42,
+    "GCS_TEST_REAL": 1.5,
+    "GCS_TEST_NEG": -7,
+    "GCS_TEST_BIG": 123456,
+    "GCS_TEST_SMALL": 0.125,
+}
+
+
+def mavproxy_exe():
+    exe = os.path.join(os.path.dirname(sys.executable), "mavproxy.py")
+    if not os.path.exists(exe):
+        fail(f"MAVProxy is not installed next to {sys.executable} (no {exe}); "
+             "run scripts/setup-peers.sh")
+    return exe
+
+
+class MavProxy:
+    """MAVProxy in a pty: send console commands, wait for console lines."""
+
+    def __init__(self, master, workdir, vehicle, extra=()):
+        self.workdir = workdir
+        self.vehicle = vehicle
+        self.out_path = os.path.join(workdir, "mavproxy.out")
+        self.out = open(self.out_path, "w")
+        self.state = os.path.join(workdir, "state")
+        os.makedirs(self.state, exist_ok=True)
+        env = dict(os.environ, HOME=workdir, TERM="dumb", PYTHONUNBUFFERED="1")
+        args = [
+            f"--master={master}",
+            f"--state-basedir={self.state}",
+            "--aircraft=gcs",
+            f"--default-modules={MODULES}",
+            "--cmd=set param_ftp 0",
+            *extra,
+        ]
+        self.p = pexpect.spawn(sys.executable, [mavproxy_exe(), *args], cwd=workdir, env=env,
+                               encoding="utf-8", codec_errors="replace", timeout=30,
+                               maxread=65536, searchwindowsize=None)
+        self.p.logfile_read = self.out
+
+    def tail(self, n=3000):
+        self.out.flush()
+        with open(self.out_path, errors="replace") as f:
+            return f.read()[-n:]
+
+    def drain(self):
+        """Forget output so far, so that a new command's answer cannot match stale lines."""
+        while True:
+            try:
+                self.p.read_nonblocking(65536, timeout=0.05)
+            except pexpect.TIMEOUT:
+                return
+            except pexpect.EOF:
+                fail(f"MAVProxy exited:\n{self.tail()}")
+
+    def cmd(self, line):
+        self.drain()
+        self.p.sendline(line)
+
+    def expect(self, patterns, timeout, what):
+        """Waits for the first of the regex patterns; returns (index, match)."""
+        if isinstance(patterns, str):
+            patterns = [patterns]
+        try:
+            i = self.p.expect(patterns, timeout=timeout)
+        except pexpect.TIMEOUT:
+            self.vehicle.check_alive()
+            fail(f"{what}: MAVProxy did not print /{'/ or /'.join(patterns)}/ within {timeout} s\n"
+                 f"--- MAVProxy output (tail) ---\n{self.tail()}\n"
+                 f"--- vehicle log (tail) ---\n{self.vehicle.log(1500)}")
+        except pexpect.EOF:
+            fail(f"{what}: MAVProxy exited\n{self.tail()}")
+        return i, self.p.match
+
+    def tlog(self):
+        for dirpath, _, files in os.walk(self.state):
+            for f in files:
+                if f.endswith(".tlog") and not f.endswith(".raw"):
+                    return os.path.join(dirpath, f)
+        fail(f"MAVProxy wrote no telemetry log under {self.state}")
+
+    def close(self):
+        if self.p.isalive():
+            self.p.terminate(force=True)
+        self.out.close()
+
+
+def fetch_all(mp, timeout, what):
+    mp.cmd("param fetch")
+    t = time.monotonic()
+    _, m = mp.expect(r"Received (\d+) parameters\r?\n", timeout, what)
+    return int(m.group(1)), round(time.monotonic() - t, 3)
+
+
+def param_read_back(mp, name, want, what):
+    mp.cmd(f"param fetch {name}")
+    pat = rf"\n{name} = (-?[0-9.e+-]+)\r?\n"
+    _, m = mp.expect(pat, 15, what)
+    got = float(m.group(1))
+    if abs(got - want) > 1e-6 * max(1.0, abs(want)):
+        fail(f"{what}: {name} read back as {got}, expected {want}")
+    return got
+
+
+def read_param_file(path):
+    out = {}
+    with open(path) as f:
+        for line in f:
+            a = line.split()
+            if len(a) >= 2 and not a[0].startswith("#"):
+                out[a[0]] = float(a[1])
+    return out
+
+
+def upload(mp, path, n, timeout, attempts=1):
+    """`wp load`; returns (seconds, attempts used) once the vehicle's MISSION_ACK is ACCEPTED.
+    MAVProxy never resends MISSION_COUNT (nor notices a lost final MISSION_ACK), so on a lossy
+    link the whole upload is started again."""
+    t = time.monotonic()
+    for attempt in range(1, attempts + 1):
+        mp.cmd(f"wp load {path}")
+        mp.expect(rf"Loaded {n} waypoints from", 10, "wp load: reading the file")
+        if attempt == attempts:
+            _, m = mp.expect(r"Got MISSION_ACK: MISSION: (\w+)", timeout,
+                             f"wp load: MISSION_ACK for {n} items (attempt {attempt})")
+        else:
+            try:
+                mp.p.expect(r"Got MISSION_ACK: MISSION: (\w+)", timeout=timeout)
+                m = mp.p.match
+            except pexpect.TIMEOUT:
+                continue
+        if m.group(1) != "ACCEPTED":
+            fail(f"wp load: the vehicle answered MISSION_ACK {m.group(1)} to {n} items")
+        return round(time.monotonic() - t, 3), attempt
+    fail("unreachable")
+
+
+def download(mp, path, n, timeout):
+    if os.path.exists(path):
+        os.remove(path)
+    mp.cmd(f"wp save {path}")
+    t = time.monotonic()
+    _, m = mp.expect(rf"Saved (\d+) waypoints to {re.escape(path)}", timeout,
+                     f"wp save: download of {n} items")
+    if int(m.group(1)) != n:
+        fail(f"wp save: downloaded {m.group(1)} items, expected {n}")
+    return round(time.monotonic() - t, 3)
+
+
+def tlog_frames(path):
+    """(timestamp_us, raw frame bytes) of every frame in a MAVProxy tlog, with pymavlink's parse."""
+    from pymavlink import mavutil
+
+    mlog = mavutil.mavlink_connection(path, dialect="common", robust_parsing=True)
+    while True:
+        m = mlog.recv_msg()
+        if m is None:
+            return
+        yield m
+
+
+def check_signed_tail(tlog, setup_wall, key):
+    """Every vehicle frame logged after setup_wall (plus a margin) is MAVLink 2 with a valid
+    signature under key; returns (signed, unsigned-before) counts."""
+    signed, after_unsigned, before = 0, [], 0
+    for m in tlog_frames(tlog):
+        if m.get_srcSystem() != 1 or m.get_type() == "BAD_DATA":
+            continue
+        buf = bytes(m.get_msgbuf())
+        ts = getattr(m, "_timestamp", 0)
+        is_signed = len(buf) > 12 and buf[0] == 0xFD and (buf[2] & 1)
+        if ts < setup_wall:
+            before += 1
+            continue
+        if ts < setup_wall + 1.0:
+            continue  # frames in flight when the key arrived
+        if not is_signed:
+            after_unsigned.append(m.get_type())
+            continue
+        # signature = first 6 bytes of sha256(key + frame-without-signature-bytes... + link+ts)
+        sig = buf[-13:]
+        digest = hashlib.sha256(key + buf[:-6]).digest()[:6]
+        if digest != sig[7:]:
+            fail(f"signing: a {m.get_type()} from the vehicle has a signature that does not "
+                 f"verify with MAVProxy's key (link {sig[0]}, timestamp "
+                 f"{int.from_bytes(sig[1:7], 'little')})")
+        signed += 1
+    if after_unsigned:
+        fail(f"signing: {len(after_unsigned)} unsigned frames from the vehicle after SETUP_SIGNING "
+             f"(first: {after_unsigned[:5]})")
+    if signed == 0:
+        fail("signing: no signed frame from the vehicle in MAVProxy's log after SETUP_SIGNING")
+    return signed, before
+
+
+def heartbeat_armed(tlog):
+    for m in tlog_frames(tlog):
+        if m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1 and m.base_mode & 128:
+            return True
+    return False
+
+
+def full(binary, keep):
+    timer = Timer()
+    work = keep or tempfile.mkdtemp(prefix="gcs-mavproxy-")
+    os.makedirs(work, exist_ok=True)
+    params_file = os.path.join(work, "vehicle.parm")
+    write_params_file(params_file, TEST_PARAMS)
+    port = free_udp_port()
+    vehicle = Vehicle(binary, f"udpout:127.0.0.1:{port}", ["--secure", "--params", params_file],
+                      work)
+    mp = None
+    summary = {}
+    try:
+        t = time.monotonic()
+        mp = MavProxy(f"udpin:127.0.0.1:{port}", work, vehicle)
+        mp.expect(r"Detected vehicle 1:1", 20, "connect")
+        summary["connect_s"] = timer.mark("connect", t)
+
+        # 2. parameters
+        n, secs = fetch_all(mp, 30, "param fetch")
+        summary.update(params=n, param_fetch_s=secs)
+        mp.cmd("param status")
+        _, m = mp.expect(r"Have (\d+)/(\d+) params", 10, "param status")
+        if not (int(m.group(1)) == int(m.group(2)) == n):
+            fail(f"param status: {m.group(0)!r} after 'Received {n} parameters'")
+        saved = os.path.join(work, "fetched.parm")
+        mp.cmd(f"param save {saved}")
+        _, m = mp.expect(r"Saved (\d+) parameters to", 10, "param save")
+        if int(m.group(1)) != n:
+            fail(f"param save wrote {m.group(1)} parameters, the vehicle reports {n}")
+        values = read_param_file(saved)
+        for name, want in TEST_PARAMS.items():
+            if name not in values:
+                fail(f"param fetch: {name} from --params is not among the {n} parameters")
+            if abs(values[name] - want) > 1e-6 * max(1, abs(want)):
+                fail(f"param fetch: {name} = {values[name]}, the --params file says {want}")
+        for std in ("SYSID_THISMAV", "ARMING_CHECK"):
+            if std not in values:
+                fail(f"param fetch: the ArduPilot-style vehicle has no {std}")
+
+        # 3. set + read back
+        t = time.monotonic()
+        for name, new in (("GCS_TEST_REAL", 2.25), ("GCS_TEST_INT", 7), ("RTL_ALT", 2500)):
+            if name not in values:
+                fail(f"param set: {name} is not a vehicle parameter")
+            mp.cmd(f"param set {name} {new}")
+            time.sleep(0.3)
+            param_read_back(mp, name, new, f"param set {name} {new}")
+        summary["param_set_readback_s"] = timer.mark("param_set", t)
+
+        # 4. wp list (download whatever the vehicle holds)
+        t = time.monotonic()
+        mp.cmd("wp list")
+        _, m = mp.expect(r"Requesting (\d+) waypoints", 15, "wp list")
+        before = int(m.group(1))
+        if before:
+            mp.expect(r"Saved \d+ waypoints to", 20, "wp list: items")
+        summary.update(wp_list_before=before, wp_list_s=timer.mark("wp_list", t))
+
+        # 5. wp load + compare
+        items = survey_mission(12)
+        mission = os.path.join(work, "mission.txt")
+        write_qgc_wpl(mission, items)
+        secs, _ = upload(mp, mission, len(items), 20)
+        back = os.path.join(work, "downloaded.txt")
+        dsecs = download(mp, back, len(items), 20)
+        compare_missions(read_qgc_wpl(mission), read_qgc_wpl(back), "wp load/save")
+        summary.update(wp_items=len(items), wp_upload_s=secs, wp_download_s=dsecs)
+
+        # 6. arm
+        t = time.monotonic()
+        mp.cmd("arm throttle")
+        mp.expect(r"Got COMMAND_ACK: COMPONENT_ARM_DISARM: ACCEPTED", 10, "arm throttle: ACK")
+        mp.expect(r"\bARMED", 10, "arm throttle: armed HEARTBEAT")
+        summary["arm_s"] = timer.mark("arm", t)
+        mp.cmd("disarm")
+        mp.expect(r"Got COMMAND_ACK: COMPONENT_ARM_DISARM: ACCEPTED", 10, "disarm: ACK")
+        mp.expect(r"DISARMED", 10, "disarm: disarmed HEARTBEAT")
+
+        # 7. signing
+        t = time.monotonic()
+        setup_wall = time.time()
+        mp.cmd(f"signing setup {PASSPHRASE}")
+        mp.expect(r"Setup signing key", 10, "signing setup")
+        time.sleep(1.5)
+        mp.cmd("set allow_unsigned 0")
+        n2, secs = fetch_all(mp, 30, "param fetch over the signed link (allow_unsigned 0)")
+        if n2 != n:
+            fail(f"signed param fetch: {n2} parameters, {n} before")
+        summary.update(signed_param_fetch_s=secs, signing_s=timer.mark("signing", t))
+        mp.cmd("param show GCS_TEST_REAL")
+        mp.expect(r"GCS_TEST_REAL\s+2\.25", 10, "signed: the value set before")
+        time.sleep(1.0)
+        vehicle.check_alive()
+        mp.close()
+        tlog = mp.tlog()
+        key = hashlib.sha256(PASSPHRASE.encode()).digest()
+        signed, before_frames = check_signed_tail(tlog, setup_wall, key)
+        if not heartbeat_armed(tlog):
+            fail("arm: no HEARTBEAT with MAV_MODE_FLAG_SAFETY_ARMED in MAVProxy's log")
+        summary.update(frames_before_signing=before_frames, signed_frames=signed)
+    finally:
+        if mp is not None:
+            mp.close()
+        vehicle.stop()
+    return summary
+
+
+def bench_run(binary, n_params, n_items, loss, seed, work):
+    from lossy_relay import LossyRelay
+
+    params = {f"BENCH_P{i:05d}": (i if i % 2 else i + 0.5) for i in range(n_params)}
+    params_file = os.path.join(work, "bench.parm")
+    write_params_file(params_file, params)
+    gcs_port = free_udp_port()
+    relay = None
+    if loss > 0:
+        relay = LossyRelay(("127.0.0.1", 0), ("127.0.0.1", gcs_port), loss=loss, seed=seed).start()
+        vport = relay.listen_port
+    else:
+        vport = gcs_port
+    vehicle = Vehicle(binary, f"udpout:127.0.0.1:{vport}", ["--params", params_file], work)
+    mp = None
+    res = {"loss": loss, "seed": seed}
+    try:
+        mp = MavProxy(f"udpin:127.0.0.1:{gcs_port}", work, vehicle)
+        mp.expect(r"Detected vehicle 1:1", 30, "connect")
+        budget = 60 + n_params * (0.2 if loss else 0.02)
+        n, secs = fetch_all(mp, budget, f"param fetch of {n_params}+ parameters")
+        if n < n_params:
+            fail(f"bench: the vehicle reports {n} parameters, the --params file has {n_params}")
+        res.update(params=n, param_fetch_s=secs)
+        items = survey_mission(n_items)
+        mission = os.path.join(work, "bench-mission.txt")
+        write_qgc_wpl(mission, items)
+        secs, attempts = upload(mp, mission, len(items), 30 + n_items * (0.1 if loss else 0.02),
+                                attempts=10 if loss else 1)
+        back = os.path.join(work, "bench-downloaded.txt")
+        dsecs = download(mp, back, len(items), 60 + n_items * (0.2 if loss else 0.02))
+        compare_missions(read_qgc_wpl(mission), read_qgc_wpl(back), "bench mission")
+        res.update(items=len(items), wp_upload_s=secs, wp_upload_attempts=attempts,
+                   wp_download_s=dsecs)
+        vehicle.check_alive()
+    finally:
+        if mp is not None:
+            mp.close()
+        vehicle.stop()
+        if relay is not None:
+            relay.stop()
+            res["relay"] = relay.stats
+    return res
+
+
+def bench(binary, n_params, n_items, losses, seed, keep):
+    runs = []
+    for loss in losses:
+        work = tempfile.mkdtemp(prefix=f"gcs-mavproxy-bench-{loss}-", dir=keep)
+        runs.append(bench_run(binary, n_params, n_items, loss, seed, work))
+    return {"bench": runs}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--mavstack", help="the mavstack binary (default $MAVSTACK_BIN)")
+    ap.add_argument("--keep", help="work directory to keep (default: a fresh temporary one)")
+    ap.add_argument("--bench", nargs=2, type=int, metavar=("N_PARAMS", "N_ITEMS"))
+    ap.add_argument("--loss", type=float, action="append",
+                    help="bench: loss rates to run (default 0 and 0.2)")
+    ap.add_argument("--seed", type=int, default=1)
+    args = ap.parse_args()
+
+    def body():
+        binary = mavstack_bin(args.mavstack)
+        if args.bench:
+            return bench(binary, *args.bench, args.loss or [0.0, 0.2], args.seed, args.keep)
+        return full(binary, args.keep)
+
+    run_main("gcs_mavproxy", body)
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except Failure as e:
+        print(f"gcs_mavproxy: FAILED: {e}", file=sys.stderr)
+        sys.exit(1)
