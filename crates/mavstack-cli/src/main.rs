@@ -7,8 +7,10 @@ mod codec_cmd;
 mod demo_cmd;
 mod dialect_cmd;
 mod fast_count;
+mod gcs_cmd;
 mod json_frames;
 mod link_cmd;
+mod mission_file;
 mod sim;
 mod version_cmd;
 
@@ -52,6 +54,19 @@ enum Command {
     Probe(version_cmd::ProbeArgs),
     /// A semi-transparent radio between a ground station (A) and a vehicle (B).
     Radio(version_cmd::RadioArgs),
+    /// Parameters of a remote system: list (and save), get, set.
+    Param {
+        #[command(subcommand)]
+        action: gcs_cmd::ParamAction,
+    },
+    /// Mission, fence and rally plans of a remote system: download, upload, clear.
+    Mission {
+        #[command(subcommand)]
+        action: gcs_cmd::MissionAction,
+    },
+    /// Send a command (arm, takeoff, mode, any MAV_CMD) and print its acknowledgement.
+    #[command(name = "command")]
+    Cmd(gcs_cmd::CommandArgs),
 }
 
 /// A failure with the exit code it maps to.
@@ -97,6 +112,9 @@ fn main() -> ExitCode {
         Command::Vehicle(args) => version_cmd::vehicle(&args),
         Command::Probe(args) => version_cmd::probe(&args),
         Command::Radio(args) => version_cmd::radio(&args),
+        Command::Param { action } => gcs_cmd::param(action),
+        Command::Mission { action } => gcs_cmd::mission(action),
+        Command::Cmd(args) => gcs_cmd::command(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

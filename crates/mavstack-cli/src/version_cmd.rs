@@ -314,6 +314,14 @@ pub(crate) async fn run_vehicle(
                 routes.forget(peer);
                 continue;
             }
+            ChannelEventKind::PeerAdded(_) => {
+                let hello = ChannelCommand::Send {
+                    dest: Dest::Peer(peer),
+                    message: RawMessage::of(&sim.heartbeat()),
+                };
+                conn.send(hello).await.map_err(other)?;
+                continue;
+            }
             _ => continue,
         };
         match event {

@@ -17,10 +17,10 @@
 //! command again: a retry (the same command — kind, id and parameters — with COMMAND_LONG's
 //! `confirmation` above 0, or any COMMAND_INT, which has no counter) from the same source
 //! within [`CommandServerConfig::dedup_window`] (3 s, longer than a client's whole retry
-//! span); a copy of a first send (`confirmation` 0) only within
-//! [`CommandServerConfig::duplicate_window`] (a link duplicating the frame; later it is the
-//! request repeated on purpose, and runs again); and any instance of a command still in
-//! progress from that source. A handler that answers [`Response::in_progress`] finishes later through
+//! span); a copy of a first send (`confirmation` 0) only right after it (nothing else from
+//! that source in between) and within [`CommandServerConfig::duplicate_window`] (a link
+//! duplicating the frame; otherwise it is the request repeated on purpose, and runs
+//! again); and any instance of a command still in progress from that source. A handler that answers [`Response::in_progress`] finishes later through
 //! [`CommandServer::progress`] and [`CommandServer::finish`].
 
 use alloc::collections::VecDeque;
@@ -547,13 +547,18 @@ impl<H: CommandHandler> CommandServer<H> {
         let id = command.id();
         let first_send = matches!(command, Command::Long(c) if c.confirmation == 0);
         let duplicate_window = self.config.duplicate_window;
-        if let Some(r) = self.recent.iter().find(|r| {
+        // A copy the link made follows its original directly: nothing else from that
+        // source came in between.
+        let latest_from = self.recent.iter().rposition(|r| r.from == from);
+        if let Some((_, r)) = self.recent.iter().enumerate().find(|&(i, r)| {
             r.from == from
                 && r.command.id() == id
                 && r.command.is_int() == command.is_int()
                 && (r.ack.result == MavResult::IN_PROGRESS
                     || (r.command.same_request(command)
-                        && (!first_send || now.saturating_duration_since(r.at) < duplicate_window)))
+                        && (!first_send
+                            || (Some(i) == latest_from
+                                && now.saturating_duration_since(r.at) < duplicate_window))))
         }) {
             self.out.push_back(Outgoing {
                 target: from,

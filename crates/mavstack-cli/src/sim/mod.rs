@@ -722,6 +722,12 @@ impl Vehicle {
         self.log.pop_front()
     }
 
+    /// Our HEARTBEAT as of now, for a peer that just appeared (it need not wait for the
+    /// next one of the stream).
+    pub(crate) fn heartbeat(&self) -> MavMessage {
+        MavMessage::Heartbeat(self.commands.handler().heartbeat())
+    }
+
     /// The parameter table's size.
     pub(crate) fn param_count(&self) -> usize {
         self.params.len()

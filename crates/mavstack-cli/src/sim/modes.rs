@@ -71,10 +71,11 @@ const ARDUPILOT: &[Mode] = &[
 const PX4: &[Mode] = &[
     px4("MANUAL", 1, 0, Behaviour::Manual),
     px4("ALTCTL", 2, 0, Behaviour::Manual),
+    // AUTO.LOITER ("Hold") first: the mode PX4 holds position in after take-off.
+    px4("AUTO.LOITER", 4, 3, Behaviour::Hold),
     px4("POSCTL", 3, 0, Behaviour::Hold),
     px4("AUTO.READY", 4, 1, Behaviour::Hold),
     px4("AUTO.TAKEOFF", 4, 2, Behaviour::Takeoff),
-    px4("AUTO.LOITER", 4, 3, Behaviour::Hold),
     px4("AUTO.MISSION", 4, 4, Behaviour::Mission),
     px4("AUTO.RTL", 4, 5, Behaviour::ReturnToLaunch),
     px4("AUTO.LAND", 4, 6, Behaviour::Land),
@@ -97,6 +98,16 @@ pub(crate) fn by_custom_mode(autopilot: Autopilot, custom_mode: u32) -> Option<M
         .iter()
         .copied()
         .find(|m| m.custom_mode == custom_mode)
+}
+
+/// The mode with this name (case-insensitive; PX4 names also without the `AUTO.` prefix).
+pub(crate) fn by_name(autopilot: Autopilot, name: &str) -> Option<Mode> {
+    modes(autopilot).iter().copied().find(|m| {
+        m.name.eq_ignore_ascii_case(name)
+            || m.name
+                .strip_prefix("AUTO.")
+                .is_some_and(|short| short.eq_ignore_ascii_case(name))
+    })
 }
 
 /// The first mode of a flavour with `behaviour`.
@@ -123,14 +134,27 @@ pub(crate) fn custom_mode_of_command(autopilot: Autopilot, param2: f32, param3: 
     }
 }
 
+/// MAV_CMD_DO_SET_MODE's param2 and param3 for a mode (the inverse of
+/// [`custom_mode_of_command`]).
+pub(crate) fn command_params(autopilot: Autopilot, mode: Mode) -> (f32, f32) {
+    match autopilot {
+        Autopilot::Ardupilot => (mode.custom_mode as f32, 0.0),
+        Autopilot::Px4 => (
+            ((mode.custom_mode >> 16) & 0xff) as f32,
+            ((mode.custom_mode >> 24) & 0xff) as f32,
+        ),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn px4_modes_pack_main_and_sub_mode() {
-        let mission = with_behaviour(Autopilot::Px4, Behaviour::Mission);
+        let mission = by_name(Autopilot::Px4, "mission").expect("AUTO.MISSION");
         assert_eq!(mission.custom_mode, 0x0404_0000);
+        assert_eq!(command_params(Autopilot::Px4, mission), (4.0, 4.0));
         assert_eq!(
             custom_mode_of_command(Autopilot::Px4, 4.0, 4.0),
             mission.custom_mode
@@ -139,7 +163,7 @@ mod tests {
 
     #[test]
     fn ardupilot_modes_are_plain_numbers() {
-        let guided = with_behaviour(Autopilot::Ardupilot, Behaviour::Guided);
+        let guided = by_name(Autopilot::Ardupilot, "guided").expect("GUIDED");
         assert_eq!(guided.custom_mode, 4);
         assert_eq!(
             by_custom_mode(Autopilot::Ardupilot, 6).map(|m| m.name),

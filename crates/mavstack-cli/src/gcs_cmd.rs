@@ -1,0 +1,979 @@
+//! `mavstack param`, `mission` and `command`: ground-station operations against a remote
+//! system, run by the clients of `mavstack-services` over a `mavstack-channel` link.
+//!
+//! Each command opens the link, waits for the target's HEARTBEAT (the first autopilot heard,
+//! or `--target-system`), runs the MAVLink 2 handshake when the target still speaks
+//! MAVLink 1, sends our own HEARTBEAT every second, then drives one service client until its
+//! operation ends. Results are printed for people, or as JSON with `--json`.
+
+use core::time::Duration;
+use std::io::Write as _;
+
+use anyhow::anyhow;
+use clap::{Args, Subcommand, ValueEnum};
+use mavstack_channel::{CommandEncoding, Config, Event, HandshakeMethod, SigningConfig, Target};
+use mavstack_core::MessageSet;
+use mavstack_core::wire::Version;
+use mavstack_dialects::common::{
+    CommandInt, CommandLong, GlobalPositionInt, Heartbeat, MavAutopilot, MavCmd, MavFrame,
+    MavMessage, MavMissionType, MavModeFlag, MavParamType, MavResult,
+};
+use mavstack_services::command::{Command, CommandClient, CommandError, CommandEvent};
+use mavstack_services::heartbeat::HeartbeatConfig;
+use mavstack_services::mission::{MissionClient, MissionEvent};
+use mavstack_services::param::{Encoding, Name, Param, ParamClient, ParamEvent, ParamRef, Value};
+use mavstack_services::{Address, Service};
+use mavstack_transport::channel_protocol::{
+    ChannelCommand, ChannelEventKind, ChannelProtocol, RawMessage,
+};
+use mavstack_transport::{Connection, Dest, PeerId};
+use serde_json::json;
+use tokio::time::Instant;
+
+use crate::link_cmd::{parse_spec, runtime};
+use crate::mission_file;
+use crate::sim::modes;
+use crate::version_cmd::{Autopilot, secret_key, service_time};
+use crate::{Failure, other};
+
+/// How to reach the remote system (shared by `param`, `mission` and `command`).
+#[derive(Debug, Args)]
+pub(crate) struct RemoteArgs {
+    /// The ground station's side of the link: udpin:HOST:PORT waits for the vehicle,
+    /// udpout:HOST:PORT reaches one listening there, tcp:HOST:PORT, serial:DEV:BAUD.
+    conn: String,
+    /// The system to talk to (default: the first autopilot heard).
+    #[arg(long)]
+    target_system: Option<u8>,
+    /// The component to talk to (default: the one whose HEARTBEAT was heard).
+    #[arg(long)]
+    target_component: Option<u8>,
+    /// Seconds to wait for the target's HEARTBEAT.
+    #[arg(long, default_value_t = 10.0)]
+    timeout: f64,
+    /// Our system id.
+    #[arg(long, default_value_t = 255)]
+    sysid: u8,
+    /// Our component id.
+    #[arg(long, default_value_t = 190)]
+    compid: u8,
+    /// Sign with this key (64 hex digits), for vehicles that accept only signed frames.
+    #[arg(long)]
+    key: Option<String>,
+    /// Signing link id (with `--key`).
+    #[arg(long, default_value_t = 0)]
+    link_id: u8,
+    /// Print results as JSON (one object per line).
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Debug, Subcommand)]
+pub(crate) enum ParamAction {
+    /// Fetch every parameter (PARAM_REQUEST_LIST, missing ones re-requested).
+    List {
+        #[command(flatten)]
+        remote: RemoteArgs,
+        /// Also save them as `NAME VALUE` lines (what `mavstack vehicle --params` reads).
+        #[arg(long, value_name = "FILE")]
+        save: Option<String>,
+    },
+    /// Read parameters by name.
+    Get {
+        #[command(flatten)]
+        remote: RemoteArgs,
+        /// Parameter names.
+        #[arg(required = true)]
+        names: Vec<String>,
+    },
+    /// Set a parameter (its type is read from the target first) and confirm the new value.
+    Set {
+        #[command(flatten)]
+        remote: RemoteArgs,
+        /// Parameter name.
+        name: String,
+        /// New value.
+        #[arg(allow_negative_numbers = true)]
+        value: f64,
+    },
+}
+
+/// Which plan.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub(crate) enum PlanType {
+    /// The mission.
+    Mission,
+    /// The geofence.
+    Fence,
+    /// Rally points.
+    Rally,
+}
+
+impl PlanType {
+    fn mav(self) -> MavMissionType {
+        match self {
+            Self::Mission => MavMissionType::MISSION,
+            Self::Fence => MavMissionType::FENCE,
+            Self::Rally => MavMissionType::RALLY,
+        }
+    }
+}
+
+#[derive(Debug, Subcommand)]
+pub(crate) enum MissionAction {
+    /// Download a plan; write it to FILE (`.json`: JSON, else QGC WPL 110) or print it.
+    Download {
+        #[command(flatten)]
+        remote: RemoteArgs,
+        /// Where to save it (printed when absent: WPL, or JSON with --json).
+        file: Option<String>,
+        /// Which plan.
+        #[arg(long = "type", value_enum, default_value = "mission")]
+        plan: PlanType,
+    },
+    /// Upload a plan from FILE (`.json`: JSON, else QGC WPL 110).
+    Upload {
+        #[command(flatten)]
+        remote: RemoteArgs,
+        /// The plan.
+        file: String,
+        /// Which plan.
+        #[arg(long = "type", value_enum, default_value = "mission")]
+        plan: PlanType,
+    },
+    /// Clear a plan (`--type all` is not offered: clear each).
+    Clear {
+        #[command(flatten)]
+        remote: RemoteArgs,
+        /// Which plan.
+        #[arg(long = "type", value_enum, default_value = "mission")]
+        plan: PlanType,
+    },
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct CommandArgs {
+    #[command(flatten)]
+    remote: RemoteArgs,
+    /// `arm`, `disarm`, `takeoff [ALT]`, `land`, `rtl`, `mode NAME`, `mission-start`, or a
+    /// MAV_CMD name (`NAV_TAKEOFF`, `MAV_CMD_NAV_TAKEOFF`) or number.
+    name: String,
+    /// The command's parameters in order (`nan` allowed); the shortcuts take their own.
+    #[arg(allow_negative_numbers = true)]
+    params: Vec<String>,
+    /// Send COMMAND_INT (params 5 and 6 given in degrees, sent as degE7) instead of
+    /// COMMAND_LONG.
+    #[arg(long)]
+    int: bool,
+    /// With `--int`: the MAV_FRAME of params 5–7.
+    #[arg(long, default_value_t = 6)]
+    frame: u8,
+    /// With `disarm`: force it even in the air (param2 = 21196).
+    #[arg(long)]
+    force: bool,
+}
+
+/// An open link to the target, with the driver loop every operation runs in.
+pub(crate) struct Remote {
+    conn: Connection<ChannelProtocol>,
+    start: Instant,
+    peer: PeerId,
+    target: Address,
+    autopilot: MavAutopilot,
+    heartbeat: RawMessage,
+    next_beat: Instant,
+    /// The target's home altitude above mean sea level, once a GLOBAL_POSITION_INT came.
+    home_amsl: Option<f32>,
+}
+
+fn decode(event: &ChannelEventKind) -> Option<(Address, Version, MavMessage)> {
+    let ChannelEventKind::Channel(Event::Frame(rf)) = event else {
+        return None;
+    };
+    let msg = MavMessage::decode(rf.frame.msg_id(), rf.frame.payload()).ok()?;
+    Some((
+        Address::new(rf.frame.sysid(), rf.frame.compid()),
+        rf.frame.version(),
+        msg,
+    ))
+}
+
+impl Remote {
+    /// Opens the link and waits for the target.
+    pub(crate) async fn connect(args: &RemoteArgs) -> Result<Self, Failure> {
+        let spec = parse_spec(&args.conn)?;
+        let mut config = Config::ground_station(args.sysid, args.compid);
+        if let Some(key) = &args.key {
+            config.signing = Some(SigningConfig::new(secret_key(key, "--key")?, args.link_id));
+        }
+        let protocol = ChannelProtocol::new(config)
+            .map_err(|e| Failure::Input(anyhow!("ground station configuration: {e}")))?;
+        let conn = Connection::open(&spec, protocol).await.map_err(other)?;
+        let wait = crate::link_cmd::seconds(args.timeout, "--timeout")?;
+        Self::find(
+            conn,
+            args.target_system,
+            args.target_component,
+            wait,
+            &args.conn,
+        )
+        .await
+    }
+
+    /// Waits on an open link for the target's HEARTBEAT, then runs the handshake if it
+    /// speaks MAVLink 1.
+    pub(crate) async fn find(
+        mut conn: Connection<ChannelProtocol>,
+        system: Option<u8>,
+        component: Option<u8>,
+        wait: Duration,
+        what: &str,
+    ) -> Result<Self, Failure> {
+        let heartbeat = HeartbeatConfig::ground_station().own.map_or_else(
+            || RawMessage::new(&Heartbeat::default()),
+            |h| RawMessage::new(&h),
+        );
+        let start = Instant::now();
+        let deadline = start + wait;
+        let mut next_beat = start;
+        let found = loop {
+            let now = Instant::now();
+            if now >= deadline {
+                return Err(other(format!(
+                    "no vehicle heard on {what} within {:.1} s",
+                    wait.as_secs_f64()
+                )));
+            }
+            if now >= next_beat {
+                conn.send(ChannelCommand::to_all(heartbeat))
+                    .await
+                    .map_err(other)?;
+                next_beat = now + Duration::from_secs(1);
+            }
+            let Ok(event) = tokio::time::timeout_at(next_beat.min(deadline), conn.recv()).await
+            else {
+                continue;
+            };
+            let event = event.ok_or_else(|| other("the link closed"))?;
+            if let Some((from, version, MavMessage::Heartbeat(hb))) = decode(&event.event) {
+                let wanted = match system {
+                    Some(s) => from.system == s && component.is_none_or(|c| c == from.component),
+                    None => hb.autopilot != MavAutopilot::INVALID,
+                };
+                if wanted {
+                    break (event.peer, from, hb.autopilot, version);
+                }
+            }
+        };
+        let (peer, from, autopilot, version) = found;
+        let mut remote = Self {
+            conn,
+            start,
+            peer,
+            target: Address::new(from.system, component.unwrap_or(from.component)),
+            autopilot,
+            heartbeat,
+            next_beat,
+            home_amsl: None,
+        };
+        if version == Version::V1 {
+            remote.handshake().await?;
+        }
+        Ok(remote)
+    }
+
+    /// The MAVLink 2 handshake (REQUEST_MESSAGE(300)); whatever the outcome, the link goes
+    /// on in the version the channel settles on.
+    async fn handshake(&mut self) -> Result<(), Failure> {
+        self.conn
+            .send(ChannelCommand::StartHandshake {
+                peer: self.peer,
+                target: Target::new(self.target.system, self.target.component),
+                method: HandshakeMethod::RequestMessage300,
+                encoding: CommandEncoding::Long,
+            })
+            .await
+            .map_err(other)?;
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while let Ok(Some(event)) = tokio::time::timeout_at(deadline, self.conn.recv()).await {
+            if let ChannelEventKind::Channel(Event::Handshake(_)) = event.event {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    /// The target's address.
+    pub(crate) fn target(&self) -> Address {
+        self.target
+    }
+
+    /// The target's parameter encoding (ArduPilot C-cast, everyone else bytewise).
+    pub(crate) fn encoding(&self) -> Encoding {
+        Encoding::for_autopilot(self.autopilot)
+    }
+
+    fn flavour(&self) -> Option<Autopilot> {
+        match self.autopilot {
+            MavAutopilot::ARDUPILOTMEGA => Some(Autopilot::Ardupilot),
+            MavAutopilot::PX4 => Some(Autopilot::Px4),
+            _ => None,
+        }
+    }
+
+    /// Seconds since the link opened.
+    pub(crate) fn elapsed(&self) -> f64 {
+        self.start.elapsed().as_secs_f64()
+    }
+
+    /// Seconds since `began` (an [`Remote::elapsed`] reading), to the millisecond.
+    pub(crate) fn since(&self, began: f64) -> f64 {
+        ((self.elapsed() - began) * 1000.0).round() / 1000.0
+    }
+
+    /// Drives `service` until `done` returns a result, or fails after `limit`.
+    pub(crate) async fn run<S: Service, R>(
+        &mut self,
+        service: &mut S,
+        limit: Duration,
+        mut done: impl FnMut(&mut S) -> Option<R>,
+    ) -> Result<R, Failure> {
+        let deadline = Instant::now() + limit;
+        loop {
+            while let Some(out) = service.poll_transmit() {
+                let message = ChannelCommand::Send {
+                    dest: Dest::Peer(self.peer),
+                    message: RawMessage::of(&out.message),
+                };
+                self.conn.send(message).await.map_err(other)?;
+            }
+            if let Some(result) = done(service) {
+                return Ok(result);
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Err(other(format!(
+                    "no result within {:.0} s",
+                    limit.as_secs_f64()
+                )));
+            }
+            if now >= self.next_beat {
+                self.conn
+                    .send(ChannelCommand::to_all(self.heartbeat))
+                    .await
+                    .map_err(other)?;
+                self.next_beat = now + Duration::from_secs(1);
+            }
+            let timer = service
+                .poll_timeout()
+                .map(|t| self.start + Duration::from_micros(t.as_micros()));
+            let wake = timer
+                .map_or(deadline, |t| t.min(deadline))
+                .min(self.next_beat);
+            match tokio::time::timeout_at(wake, self.conn.recv()).await {
+                Err(_) => service.handle_timeout(service_time(self.start)),
+                Ok(None) => return Err(other("the link closed")),
+                Ok(Some(event)) => {
+                    if let Some((from, _, msg)) = decode(&event.event) {
+                        if let MavMessage::GlobalPositionInt(GlobalPositionInt {
+                            alt,
+                            relative_alt,
+                            ..
+                        }) = &msg
+                            && from.system == self.target.system
+                        {
+                            self.home_amsl = Some((alt - relative_alt) as f32 / 1000.0);
+                        }
+                        service.handle_message(service_time(self.start), from, &msg);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Closes the link.
+    pub(crate) async fn close(self) -> Result<(), Failure> {
+        self.conn.close().await.map_err(other)
+    }
+}
+
+fn type_name(ty: MavParamType) -> &'static str {
+    ty.name()
+        .and_then(|n| n.strip_prefix("MAV_PARAM_TYPE_"))
+        .unwrap_or("?")
+}
+
+/// A value as text: integers exactly, floats in their shortest form.
+pub(crate) fn value_text(v: Value) -> String {
+    match v {
+        Value::F32(f) => format!("{f}"),
+        other => format!("{}", other.as_f64()),
+    }
+}
+
+fn value_json(v: Value) -> serde_json::Value {
+    match v {
+        Value::F32(f) if f.is_finite() => json!(f),
+        Value::F32(_) => serde_json::Value::Null,
+        other => json!(other.as_f64() as i64),
+    }
+}
+
+fn param_json(index: usize, name: Name, value: Value) -> serde_json::Value {
+    json!({
+        "index": index,
+        "name": name.as_str(),
+        "value": value_json(value),
+        "type": type_name(value.param_type()),
+    })
+}
+
+/// Prints lines to stdout, turning a closed pipe into the failure `main` forgives.
+fn print_lines(lines: &[String]) -> Result<(), Failure> {
+    let mut out = std::io::stdout().lock();
+    for line in lines {
+        writeln!(out, "{line}").map_err(|e| Failure::Other(e.into()))?;
+    }
+    Ok(())
+}
+
+/// Fetches the whole table of the target.
+pub(crate) async fn fetch_params(remote: &mut Remote) -> Result<Vec<(Name, Value)>, Failure> {
+    let mut client = ParamClient::new(Default::default(), remote.encoding());
+    let target = remote.target();
+    client
+        .fetch_all(service_time(remote.start), target)
+        .map_err(other)?;
+    let result = remote
+        .run(&mut client, Duration::from_secs(600), |c| {
+            core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
+                ParamEvent::List { result, .. } => Some(result),
+                _ => None,
+            })
+        })
+        .await?;
+    result.map_err(|e| other(format!("parameter list from {target}: {e}")))
+}
+
+/// Reads one parameter by name.
+async fn read_param(
+    remote: &mut Remote,
+    client: &mut ParamClient,
+    name: Name,
+) -> Result<Param, Failure> {
+    let target = remote.target();
+    let handle = client.read(service_time(remote.start), target, ParamRef::Name(name));
+    let result = remote
+        .run(client, Duration::from_secs(30), |c| {
+            core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
+                ParamEvent::Finished { handle: h, result } if h == handle => Some(result),
+                _ => None,
+            })
+        })
+        .await?;
+    result.map_err(|e| other(format!("{name}: {e}")))
+}
+
+/// Sets one parameter to `value` (converted to `current`'s type) and returns the value in
+/// force.
+pub(crate) async fn set_param(
+    remote: &mut Remote,
+    client: &mut ParamClient,
+    name: Name,
+    current: Value,
+    value: f64,
+) -> Result<Param, Failure> {
+    let typed = Value::F32(value as f32)
+        .converted_to(current.param_type())
+        .map(|v| match (v, current) {
+            // Integers straight from the f64, not through f32 (exact to 2^53).
+            (Value::I32(_), _) if value.fract() == 0.0 => {
+                Value::I32(value.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32)
+            }
+            (Value::U32(_), _) if value.fract() == 0.0 => {
+                Value::U32(value.clamp(0.0, f64::from(u32::MAX)) as u32)
+            }
+            (v, _) => v,
+        })
+        .ok_or_else(|| other(format!("{name} has a type PARAM_SET cannot carry")))?;
+    let target = remote.target();
+    let handle = client
+        .set(service_time(remote.start), target, name, typed)
+        .map_err(other)?;
+    let result = remote
+        .run(client, Duration::from_secs(30), |c| {
+            core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
+                ParamEvent::Finished { handle: h, result } if h == handle => Some(result),
+                _ => None,
+            })
+        })
+        .await?;
+    result.map_err(|e| other(format!("{name}: {e}")))
+}
+
+fn name_arg(text: &str) -> Result<Name, Failure> {
+    Name::new(text).map_err(|e| Failure::Input(anyhow!("parameter name {text:?}: {e}")))
+}
+
+pub(crate) fn param(action: ParamAction) -> Result<(), Failure> {
+    runtime()?.block_on(async {
+        match action {
+            ParamAction::List { remote: args, save } => {
+                let mut remote = Remote::connect(&args).await?;
+                let began = remote.elapsed();
+                let table = fetch_params(&mut remote).await?;
+                let seconds = remote.since(began);
+                let target = remote.target();
+                remote.close().await?;
+                if let Some(path) = &save {
+                    let text: String = table
+                        .iter()
+                        .map(|(n, v)| format!("{n} {}\n", value_text(*v)))
+                        .collect();
+                    std::fs::write(path, text)
+                        .map_err(|e| other(format!("cannot write {path}: {e}")))?;
+                }
+                let lines: Vec<String> = if args.json {
+                    table
+                        .iter()
+                        .enumerate()
+                        .map(|(i, (n, v))| param_json(i, *n, *v).to_string())
+                        .collect()
+                } else {
+                    let width = table
+                        .iter()
+                        .map(|(n, _)| n.as_str().len())
+                        .max()
+                        .unwrap_or(0);
+                    table
+                        .iter()
+                        .map(|(n, v)| {
+                            format!(
+                                "{:<width$}  {:>14}  {}",
+                                n.as_str(),
+                                value_text(*v),
+                                type_name(v.param_type())
+                            )
+                        })
+                        .collect()
+                };
+                print_lines(&lines)?;
+                eprintln!("{} parameters from {target} in {seconds:.2} s", table.len());
+                Ok(())
+            }
+            ParamAction::Get {
+                remote: args,
+                names,
+            } => {
+                let names = names
+                    .iter()
+                    .map(|n| name_arg(n))
+                    .collect::<Result<Vec<_>, _>>()?;
+                let mut remote = Remote::connect(&args).await?;
+                let mut client = ParamClient::new(Default::default(), remote.encoding());
+                let mut lines = Vec::new();
+                for name in names {
+                    let p = read_param(&mut remote, &mut client, name).await?;
+                    lines.push(if args.json {
+                        param_json(usize::from(p.index), p.name, p.value).to_string()
+                    } else {
+                        format!(
+                            "{} = {} ({})",
+                            p.name,
+                            value_text(p.value),
+                            type_name(p.value.param_type())
+                        )
+                    });
+                }
+                remote.close().await?;
+                print_lines(&lines)
+            }
+            ParamAction::Set {
+                remote: args,
+                name,
+                value,
+            } => {
+                let name = name_arg(&name)?;
+                let mut remote = Remote::connect(&args).await?;
+                let mut client = ParamClient::new(Default::default(), remote.encoding());
+                let before = read_param(&mut remote, &mut client, name).await?;
+                let after = set_param(&mut remote, &mut client, name, before.value, value).await?;
+                remote.close().await?;
+                let line = if args.json {
+                    let mut j = param_json(usize::from(after.index), after.name, after.value);
+                    j["previous"] = value_json(before.value);
+                    j.to_string()
+                } else {
+                    format!(
+                        "{} = {} ({}, was {})",
+                        after.name,
+                        value_text(after.value),
+                        type_name(after.value.param_type()),
+                        value_text(before.value)
+                    )
+                };
+                print_lines(&[line])
+            }
+        }
+    })
+}
+
+/// Runs one mission operation to its event.
+pub(crate) async fn mission_op(
+    remote: &mut Remote,
+    client: &mut MissionClient,
+) -> Result<MissionEvent, Failure> {
+    remote
+        .run(client, Duration::from_secs(3600), |c| c.poll_event())
+        .await
+}
+
+pub(crate) fn mission(action: MissionAction) -> Result<(), Failure> {
+    runtime()?.block_on(async {
+        match action {
+            MissionAction::Download {
+                remote: args,
+                file,
+                plan,
+            } => {
+                let mut remote = Remote::connect(&args).await?;
+                let mut client = MissionClient::new(Address::new(args.sysid, args.compid), Default::default());
+                let target = remote.target();
+                let began = remote.elapsed();
+                client
+                    .download(service_time(remote.start), target, plan.mav())
+                    .map_err(other)?;
+                let event = mission_op(&mut remote, &mut client).await?;
+                let seconds = remote.since(began);
+                remote.close().await?;
+                let MissionEvent::Downloaded { result, .. } = event else {
+                    return Err(other(format!("unexpected {event:?}")));
+                };
+                let items = result.map_err(|e| other(format!("download from {target}: {e}")))?;
+                let text = match &file {
+                    Some(path) if path.ends_with(".json") => {
+                        format!("{:#}\n", mission_file::to_json(plan.mav(), &items))
+                    }
+                    Some(_) => mission_file::to_wpl(&items),
+                    None if args.json => {
+                        format!("{}\n", mission_file::to_json(plan.mav(), &items))
+                    }
+                    None => mission_file::to_wpl(&items),
+                };
+                match &file {
+                    Some(path) => std::fs::write(path, text)
+                        .map_err(|e| other(format!("cannot write {path}: {e}")))?,
+                    None => print_lines(&[text.trim_end().to_owned()])?,
+                }
+                eprintln!(
+                    "{} {} items from {target} in {seconds:.2} s",
+                    items.len(),
+                    mission_file::type_name(plan.mav())
+                );
+                Ok(())
+            }
+            MissionAction::Upload {
+                remote: args,
+                file,
+                plan,
+            } => {
+                let items = mission_file::load(&file).map_err(Failure::Input)?;
+                let mut remote = Remote::connect(&args).await?;
+                let mut client = MissionClient::new(Address::new(args.sysid, args.compid), Default::default());
+                let target = remote.target();
+                let began = remote.elapsed();
+                let count = items.len();
+                client
+                    .upload(service_time(remote.start), target, plan.mav(), items)
+                    .map_err(other)?;
+                let event = mission_op(&mut remote, &mut client).await?;
+                let seconds = remote.since(began);
+                remote.close().await?;
+                let MissionEvent::Uploaded { result, .. } = event else {
+                    return Err(other(format!("unexpected {event:?}")));
+                };
+                result.map_err(|e| other(format!("upload to {target}: {e}")))?;
+                let line = if args.json {
+                    json!({"uploaded": count, "mission_type": mission_file::type_name(plan.mav()), "seconds": seconds}).to_string()
+                } else {
+                    format!(
+                        "{count} {} items uploaded to {target} in {seconds:.2} s",
+                        mission_file::type_name(plan.mav())
+                    )
+                };
+                print_lines(&[line])
+            }
+            MissionAction::Clear { remote: args, plan } => {
+                let mut remote = Remote::connect(&args).await?;
+                let mut client = MissionClient::new(Address::new(args.sysid, args.compid), Default::default());
+                let target = remote.target();
+                client
+                    .clear(service_time(remote.start), target, plan.mav())
+                    .map_err(other)?;
+                let event = mission_op(&mut remote, &mut client).await?;
+                remote.close().await?;
+                let MissionEvent::Cleared { result, .. } = event else {
+                    return Err(other(format!("unexpected {event:?}")));
+                };
+                result.map_err(|e| other(format!("clear on {target}: {e}")))?;
+                let line = if args.json {
+                    json!({"cleared": mission_file::type_name(plan.mav())}).to_string()
+                } else {
+                    format!("{} cleared on {target}", mission_file::type_name(plan.mav()))
+                };
+                print_lines(&[line])
+            }
+        }
+    })
+}
+
+fn number(text: &str, what: &str) -> Result<f32, Failure> {
+    text.parse::<f32>()
+        .map_err(|_| Failure::Input(anyhow!("{what} {text:?} is not a number")))
+}
+
+/// The MAV_CMD named `name` (with or without the `MAV_CMD_` prefix) or numbered so.
+fn command_id(name: &str) -> Result<MavCmd, Failure> {
+    if let Ok(n) = name.parse::<u16>() {
+        return Ok(MavCmd(n));
+    }
+    let upper = name.to_ascii_uppercase().replace('-', "_");
+    MavCmd::from_name(&upper)
+        .or_else(|| MavCmd::from_name(&format!("MAV_CMD_{upper}")))
+        .ok_or_else(|| {
+            Failure::Input(anyhow!(
+                "unknown command {name:?}: not a MAV_CMD name or number"
+            ))
+        })
+}
+
+fn result_name(r: MavResult) -> &'static str {
+    r.name()
+        .and_then(|n| n.strip_prefix("MAV_RESULT_"))
+        .unwrap_or("UNKNOWN")
+}
+
+fn command_name(c: MavCmd) -> String {
+    c.name().map_or_else(
+        || c.0.to_string(),
+        |n| n.strip_prefix("MAV_CMD_").unwrap_or(n).to_owned(),
+    )
+}
+
+/// The command `args` ask for: id and params 1–7.
+fn build_command(args: &CommandArgs, remote: &Remote) -> Result<(MavCmd, [f32; 7]), Failure> {
+    let given = |i: usize, what: &str| -> Result<Option<f32>, Failure> {
+        args.params.get(i).map(|p| number(p, what)).transpose()
+    };
+    let only = |n: usize| -> Result<(), Failure> {
+        if args.params.len() > n {
+            return Err(Failure::Input(anyhow!(
+                "`{}` takes at most {n} argument(s)",
+                args.name
+            )));
+        }
+        Ok(())
+    };
+    let mut p = [0.0f32; 7];
+    let id = match args.name.to_ascii_lowercase().as_str() {
+        "arm" | "disarm" => {
+            only(0)?;
+            p[0] = if args.name.eq_ignore_ascii_case("arm") {
+                1.0
+            } else {
+                0.0
+            };
+            if args.force {
+                p[1] = 21196.0;
+            }
+            MavCmd::COMPONENT_ARM_DISARM
+        }
+        "takeoff" => {
+            only(1)?;
+            let alt = given(0, "altitude")?;
+            p[3] = f32::NAN;
+            p[4] = f32::NAN;
+            p[5] = f32::NAN;
+            p[6] = match (remote.flavour(), alt) {
+                // PX4 takes an altitude above mean sea level.
+                (Some(Autopilot::Px4), Some(a)) => match remote.home_amsl {
+                    Some(home) => home + a,
+                    None => f32::NAN,
+                },
+                (_, Some(a)) => a,
+                (_, None) => f32::NAN,
+            };
+            MavCmd::NAV_TAKEOFF
+        }
+        "land" => {
+            only(0)?;
+            p[3] = f32::NAN;
+            p[4] = f32::NAN;
+            p[5] = f32::NAN;
+            p[6] = f32::NAN;
+            MavCmd::NAV_LAND
+        }
+        "rtl" => {
+            only(0)?;
+            MavCmd::NAV_RETURN_TO_LAUNCH
+        }
+        "mission-start" => {
+            only(2)?;
+            p[0] = given(0, "first item")?.unwrap_or(0.0);
+            p[1] = given(1, "last item")?.unwrap_or(0.0);
+            MavCmd::MISSION_START
+        }
+        "mode" => {
+            let Some(name) = args.params.first() else {
+                return Err(Failure::Input(anyhow!("`mode` needs a mode name")));
+            };
+            only(1)?;
+            let flavour = remote.flavour().ok_or_else(|| {
+                other("the target is neither ArduPilot nor PX4: give DO_SET_MODE's params")
+            })?;
+            let mode = modes::by_name(flavour, name).ok_or_else(|| {
+                let names: Vec<&str> = modes::modes(flavour).iter().map(|m| m.name).collect();
+                Failure::Input(anyhow!(
+                    "unknown {flavour:?} mode {name:?}; one of {}",
+                    names.join(", ")
+                ))
+            })?;
+            let (p2, p3) = modes::command_params(flavour, mode);
+            p[0] = MavModeFlag::CUSTOM_MODE_ENABLED.0 as f32;
+            p[1] = p2;
+            p[2] = p3;
+            MavCmd::DO_SET_MODE
+        }
+        _ => {
+            if args.params.len() > 7 {
+                return Err(Failure::Input(anyhow!("a command has at most 7 params")));
+            }
+            for (i, slot) in p.iter_mut().enumerate() {
+                if let Some(v) = given(i, &format!("param{}", i + 1))? {
+                    *slot = v;
+                }
+            }
+            command_id(&args.name)?
+        }
+    };
+    Ok((id, p))
+}
+
+pub(crate) fn command(args: &CommandArgs) -> Result<(), Failure> {
+    // Name errors before the link opens (the shortcuts are checked against the target).
+    let shortcut = [
+        "arm",
+        "disarm",
+        "takeoff",
+        "land",
+        "rtl",
+        "mission-start",
+        "mode",
+    ]
+    .iter()
+    .any(|s| s.eq_ignore_ascii_case(&args.name));
+    if !shortcut {
+        command_id(&args.name)?;
+    }
+    runtime()?.block_on(async {
+        let mut remote = Remote::connect(&args.remote).await?;
+        let (id, p) = build_command(args, &remote)?;
+        let target = remote.target();
+        let command = if args.int {
+            let deg_e7 = |v: f32| {
+                if v.is_finite() {
+                    (f64::from(v) * 1e7) as i32
+                } else {
+                    i32::MAX
+                }
+            };
+            Command::Int(CommandInt {
+                command: id,
+                frame: MavFrame(args.frame),
+                param1: p[0],
+                param2: p[1],
+                param3: p[2],
+                param4: p[3],
+                x: deg_e7(p[4]),
+                y: deg_e7(p[5]),
+                z: p[6],
+                ..CommandInt::default()
+            })
+        } else {
+            Command::Long(CommandLong {
+                command: id,
+                param1: p[0],
+                param2: p[1],
+                param3: p[2],
+                param4: p[3],
+                param5: p[4],
+                param6: p[5],
+                param7: p[6],
+                ..CommandLong::default()
+            })
+        };
+        let mut client = CommandClient::new(
+            Address::new(args.remote.sysid, args.remote.compid),
+            Default::default(),
+        );
+        let began = remote.elapsed();
+        let handle = client
+            .send(service_time(remote.start), target, command)
+            .map_err(other)?;
+        let json = args.remote.json;
+        let result = remote
+            .run(&mut client, Duration::from_secs(600), |c| {
+                core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
+                    CommandEvent::Progress {
+                        handle: h,
+                        progress,
+                    } if h == handle => {
+                        if !json {
+                            eprintln!("{}: in progress {progress}%", command_name(id));
+                        }
+                        None
+                    }
+                    CommandEvent::Finished { handle: h, result } if h == handle => Some(result),
+                    _ => None,
+                })
+            })
+            .await?;
+        let seconds = remote.since(began);
+        remote.close().await?;
+        let (result, code, param2) = match &result {
+            Ok(ack) => (Some(ack.result), 0, ack.result_param2),
+            Err(CommandError::Rejected {
+                result,
+                result_param2,
+            }) => (Some(*result), 1, *result_param2),
+            Err(_) => (None, 1, 0),
+        };
+        let line = if json {
+            json!({
+                "command": id.0,
+                "name": command_name(id),
+                "target": target.to_string(),
+                "result": result.map_or("TIMEOUT", result_name),
+                "result_code": result.map(|r| r.0),
+                "result_param2": param2,
+                "seconds": seconds,
+            })
+            .to_string()
+        } else {
+            format!(
+                "{} → {} ({seconds:.2} s)",
+                command_name(id),
+                result.map_or("no acknowledgement (timed out)", result_name)
+            )
+        };
+        print_lines(&[line])?;
+        if code == 0 {
+            Ok(())
+        } else {
+            Err(other(format!(
+                "{} was not accepted by {target}",
+                command_name(id)
+            )))
+        }
+    })
+}

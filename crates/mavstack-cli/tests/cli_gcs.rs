@@ -1,0 +1,229 @@
+//! `mavstack param`, `mission` and `command` against `mavstack vehicle` on loopback: the
+//! ground-station commands end to end, their output and their errors. Against other
+//! implementations: `interop_services.rs` (pymavlink as the ground station and as the
+//! vehicle) and `interop_gcs.rs` (MAVProxy, MAVSDK).
+
+use std::net::UdpSocket;
+use std::process::{Child, Command, Output, Stdio};
+
+use serde_json::Value;
+
+struct Vehicle(Child);
+
+impl Drop for Vehicle {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn free_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .and_then(|s| s.local_addr())
+        .expect("a free port")
+        .port()
+}
+
+fn vehicle(port: u16, extra: &[&str]) -> Vehicle {
+    let child = Command::new(env!("CARGO_BIN_EXE_mavstack"))
+        .args(["vehicle", &format!("udpin:127.0.0.1:{port}")])
+        .args(extra)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("vehicle starts");
+    Vehicle(child)
+}
+
+fn gcs(port: u16, args: &[&str]) -> Output {
+    let (command, rest) = args.split_at(if args[0] == "command" { 1 } else { 2 });
+    Command::new(env!("CARGO_BIN_EXE_mavstack"))
+        .args(command)
+        .arg(format!("udpout:127.0.0.1:{port}"))
+        .args(rest)
+        .args(["--timeout", "5"])
+        .output()
+        .expect("mavstack runs")
+}
+
+fn ok(out: &Output) -> String {
+    assert!(
+        out.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn json_lines(text: &str) -> Vec<Value> {
+    text.lines()
+        .map(|l| serde_json::from_str(l).expect("a JSON line"))
+        .collect()
+}
+
+#[test]
+fn params_list_get_set_and_save_round_trip() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let file = dir.path().join("table.parm");
+    let lines: String = (0..150)
+        .map(|i| {
+            format!(
+                "P_{i:03} {}\n",
+                if i % 2 == 0 {
+                    format!("{i}")
+                } else {
+                    format!("{i}.5")
+                }
+            )
+        })
+        .collect();
+    std::fs::write(&file, lines).expect("write");
+    let port = free_port();
+    let _v = vehicle(
+        port,
+        &[
+            "--autopilot",
+            "px4",
+            "--params",
+            file.to_str().expect("utf-8"),
+        ],
+    );
+    let list = json_lines(&ok(&gcs(port, &["param", "list", "--json"])));
+    assert_eq!(list.len(), 150);
+    assert_eq!(list[7]["name"], "P_007");
+    assert_eq!(list[7]["value"], 7.5);
+    assert_eq!(list[8]["type"], "INT32");
+    assert_eq!(list[8]["value"], 8);
+    let set = json_lines(&ok(&gcs(
+        port,
+        &["param", "set", "P_009", "-2.25", "--json"],
+    )));
+    assert_eq!(set[0]["value"], -2.25);
+    assert_eq!(set[0]["previous"], 9.5);
+    let got = ok(&gcs(port, &["param", "get", "P_009", "P_010"]));
+    assert_eq!(got, "P_009 = -2.25 (REAL32)\nP_010 = 10 (INT32)\n");
+    let saved = dir.path().join("saved.parm");
+    ok(&gcs(
+        port,
+        &["param", "list", "--save", saved.to_str().expect("utf-8")],
+    ));
+    let text = std::fs::read_to_string(&saved).expect("saved");
+    assert_eq!(text.lines().count(), 150);
+    assert!(
+        text.contains("P_009 -2.25\n") && text.contains("P_010 10\n"),
+        "{text}"
+    );
+    let missing = gcs(port, &["param", "get", "NO_SUCH"]);
+    assert_eq!(missing.status.code(), Some(1));
+}
+
+#[test]
+fn missions_upload_download_clear_in_both_formats() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let wpl = dir.path().join("plan.waypoints");
+    std::fs::write(
+        &wpl,
+        "QGC WPL 110\n\
+         0\t1\t0\t16\t0\t0\t0\t0\t-35.36326100\t149.16523000\t584\t1\n\
+         1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t20\t1\n\
+         2\t0\t3\t16\t5\t0\t0\tnan\t-35.36200000\t149.16400000\t30\t1\n\
+         3\t0\t3\t20\t0\t0\t0\t0\t0\t0\t0\t1\n",
+    )
+    .expect("write");
+    let port = free_port();
+    let _v = vehicle(port, &[]);
+    let up = ok(&gcs(
+        port,
+        &["mission", "upload", wpl.to_str().expect("utf-8")],
+    ));
+    assert!(up.starts_with("4 mission items uploaded to 1/1"), "{up}");
+    let json_file = dir.path().join("plan.json");
+    ok(&gcs(
+        port,
+        &["mission", "download", json_file.to_str().expect("utf-8")],
+    ));
+    let doc: Value =
+        serde_json::from_str(&std::fs::read_to_string(&json_file).expect("read")).expect("JSON");
+    let items = doc["items"].as_array().expect("items");
+    assert_eq!(items.len(), 4);
+    assert_eq!(items[2]["x"], -353_620_000);
+    assert_eq!(items[2]["param1"], 5.0);
+    assert_eq!(items[2]["param4"], Value::Null);
+    assert_eq!(items[3]["command_name"], "MAV_CMD_NAV_RETURN_TO_LAUNCH");
+    // The JSON goes back up as a fence, and comes down as WPL equal to the original.
+    ok(&gcs(
+        port,
+        &[
+            "mission",
+            "upload",
+            json_file.to_str().expect("utf-8"),
+            "--type",
+            "fence",
+        ],
+    ));
+    let fence = ok(&gcs(port, &["mission", "download", "--type", "fence"]));
+    let mission = ok(&gcs(port, &["mission", "download"]));
+    assert_eq!(fence, mission);
+    assert!(
+        mission.starts_with("QGC WPL 110\n0\t1\t0\t16\t"),
+        "{mission}"
+    );
+    assert!(
+        mission.contains("\t-35.36200000\t149.16400000\t30\t1\n"),
+        "{mission}"
+    );
+    ok(&gcs(port, &["mission", "clear"]));
+    assert_eq!(ok(&gcs(port, &["mission", "download"])), "QGC WPL 110\n");
+    let bad = dir.path().join("bad.waypoints");
+    std::fs::write(&bad, "QGC WPL 110\n0\t1\t0\n").expect("write");
+    let out = gcs(port, &["mission", "upload", bad.to_str().expect("utf-8")]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("bad.waypoints:2: expected 12 fields"));
+}
+
+#[test]
+fn commands_arm_fly_and_report_refusals() {
+    let port = free_port();
+    let _v = vehicle(port, &["--autopilot", "ardupilot"]);
+    let armed = json_lines(&ok(&gcs(port, &["command", "arm", "--json"])));
+    assert_eq!(armed[0]["result"], "ACCEPTED");
+    assert_eq!(armed[0]["command"], 400);
+    // ArduPilot takes off in GUIDED only.
+    let refused = gcs(port, &["command", "takeoff", "5"]);
+    assert_eq!(refused.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&refused.stdout).contains("NAV_TAKEOFF → FAILED"));
+    ok(&gcs(port, &["command", "mode", "guided"]));
+    ok(&gcs(port, &["command", "takeoff", "5"]));
+    std::thread::sleep(core::time::Duration::from_secs(1));
+    let denied = gcs(port, &["command", "disarm"]);
+    assert!(String::from_utf8_lossy(&denied.stdout).contains("→ DENIED"));
+    ok(&gcs(port, &["command", "disarm", "--force"]));
+    let raw = ok(&gcs(port, &["command", "MAV_CMD_REQUEST_MESSAGE", "242"]));
+    assert!(raw.starts_with("REQUEST_MESSAGE → ACCEPTED"), "{raw}");
+    let unknown = gcs(port, &["command", "NO_SUCH_COMMAND"]);
+    assert_eq!(unknown.status.code(), Some(2));
+    let mode = gcs(port, &["command", "mode", "warp"]);
+    assert_eq!(mode.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&mode.stderr).contains("one of STABILIZE"));
+}
+
+#[test]
+fn no_vehicle_is_a_clear_failure() {
+    let port = free_port();
+    let out = Command::new(env!("CARGO_BIN_EXE_mavstack"))
+        .args([
+            "param",
+            "list",
+            &format!("udpout:127.0.0.1:{port}"),
+            "--timeout",
+            "1",
+        ])
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(
+        String::from_utf8_lossy(&out.stderr).trim(),
+        format!("error: no vehicle heard on udpout:127.0.0.1:{port} within 1.0 s")
+    );
+}
