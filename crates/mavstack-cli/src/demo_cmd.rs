@@ -14,8 +14,10 @@
 //! MAVLink 2, the radio's RADIO_STATUS follows), asks for AUTOPILOT_VERSION, sets up signing
 //! with SETUP_SIGNING, exchanges signed traffic; an attacker on the ground link replays a
 //! captured signed command and sends a forged one with a timestamp far in the future; the
-//! vehicle rejects both and still accepts the genuine stream. Every step is printed as a
-//! timeline; any step that does not happen fails the demo (exit 1).
+//! vehicle rejects both and still accepts the genuine stream. Then, over the signed link, the
+//! configuration services: the whole parameter table, a parameter set and confirmed, a
+//! mission uploaded and read back identical. Every step is printed as a timeline; any step
+//! that does not happen fails the demo (exit 1).
 
 use core::time::Duration;
 use std::net::UdpSocket;
@@ -29,9 +31,12 @@ use mavstack_core::Message;
 use mavstack_core::signing::{self, SecretKey};
 use mavstack_core::wire::{FrameHeader, MAX_FRAME_LEN, Version, emit_message};
 use mavstack_dialects::common::{
-    AutopilotVersion, CommandLong, Heartbeat, MavAutopilot, MavCmd, MavProtocolCapability, MavType,
-    ProtocolVersion, RadioStatus, SetupSigning,
+    AutopilotVersion, CommandLong, Heartbeat, MavAutopilot, MavCmd, MavFrame, MavMissionType,
+    MavProtocolCapability, MavType, MissionItemInt, ProtocolVersion, RadioStatus, SetupSigning,
 };
+use mavstack_services::Address;
+use mavstack_services::mission::{MissionClient, MissionEvent};
+use mavstack_services::param::{Name, ParamClient};
 use mavstack_transport::channel_protocol::{
     ChannelCommand, ChannelEvent, ChannelEventKind, ChannelProtocol, RawMessage,
 };
@@ -39,7 +44,9 @@ use mavstack_transport::{ConnSpec, Connection, Dest, PeerId, clock};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
+use crate::gcs_cmd::{Remote, fetch_params, mission_op, set_param, value_text};
 use crate::link_cmd::runtime;
+use crate::sim::flight;
 use crate::version_cmd::{
     Autopilot, Log, VehicleSetup, open_radio_side, open_vehicle, run_radio, run_vehicle,
     version_name,
@@ -312,9 +319,14 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
         seen_hb: None,
         seen_signed_hb: false,
     };
-    let outcome = script(timeline, &mut ground, &mut tap_rx, radio_a_addr).await;
+    let outcome = match script(timeline, &mut ground, &mut tap_rx, radio_a_addr).await {
+        Ok(()) => services(timeline, ground.conn).await,
+        Err(e) => {
+            let _ = ground.conn.close().await;
+            Err(e)
+        }
+    };
     let _ = stop_tx.send(true);
-    ground.conn.close().await.map_err(other)?;
     let links = vehicle.await.map_err(other)??;
     radio.await.map_err(other)??;
     outcome?;
@@ -330,6 +342,94 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
         ));
     }
     Ok(())
+}
+
+/// The demo's mission: home, take-off to 20 m, three waypoints, return to launch.
+fn demo_mission() -> Vec<MissionItemInt> {
+    let (lat, lon) = (flight::HOME.lat, flight::HOME.lon);
+    let at = |command: MavCmd, north_m: f64, east_m: f64, z: f32| MissionItemInt {
+        frame: MavFrame::GLOBAL_RELATIVE_ALT_INT,
+        command,
+        autocontinue: 1,
+        x: ((lat + north_m / 111_319.49) * 1e7) as i32,
+        y: ((lon + east_m / 91_000.0) * 1e7) as i32,
+        z,
+        ..MissionItemInt::default()
+    };
+    vec![
+        at(MavCmd::NAV_WAYPOINT, 0.0, 0.0, 0.0),
+        at(MavCmd::NAV_TAKEOFF, 0.0, 0.0, 20.0),
+        at(MavCmd::NAV_WAYPOINT, 60.0, 0.0, 25.0),
+        at(MavCmd::NAV_WAYPOINT, 60.0, 60.0, 25.0),
+        at(MavCmd::NAV_WAYPOINT, 0.0, 60.0, 20.0),
+        at(MavCmd::NAV_RETURN_TO_LAUNCH, 0.0, 0.0, 0.0),
+    ]
+}
+
+/// Step 8: the configuration services over the signed link — the parameter table, a
+/// parameter set, a mission uploaded and read back.
+async fn services(timeline: &Timeline, conn: Connection<ChannelProtocol>) -> Result<(), Failure> {
+    let mut remote =
+        Remote::find(conn, Some(1), Some(1), Duration::from_secs(3), "the radio").await?;
+    timeline.say("ground station → PARAM_REQUEST_LIST, signed");
+    let began = remote.elapsed();
+    let table = fetch_params(&mut remote).await?;
+    timeline.say(format!(
+        "ground station ← {} PARAM_VALUEs in {:.0} ms (ArduPilot C-cast encoding)",
+        table.len(),
+        remote.since(began) * 1000.0
+    ));
+    let name = Name::new("WPNAV_SPEED").map_err(other)?;
+    let current = table
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, v)| *v)
+        .ok_or_else(|| other("demo step failed: no WPNAV_SPEED in the table"))?;
+    let mut client = ParamClient::new(Default::default(), remote.encoding());
+    let set = set_param(&mut remote, &mut client, name, current, 750.0).await?;
+    timeline.say(format!(
+        "ground station → PARAM_SET WPNAV_SPEED {} → 750; vehicle confirms {}",
+        value_text(current),
+        value_text(set.value)
+    ));
+    let items = demo_mission();
+    let count = items.len();
+    let mut missions = MissionClient::new(Address::new(255, 190), Default::default());
+    let target = remote.target();
+    missions
+        .upload(remote.now(), target, MavMissionType::MISSION, items.clone())
+        .map_err(other)?;
+    let began = remote.elapsed();
+    match mission_op(&mut remote, &mut missions).await? {
+        MissionEvent::Uploaded { result: Ok(()), .. } => {}
+        e => return Err(other(format!("demo step failed: mission upload: {e:?}"))),
+    }
+    timeline.say(format!(
+        "ground station → mission of {count} items (MISSION_COUNT, MISSION_ITEM_INT × {count}) accepted in {:.0} ms",
+        remote.since(began) * 1000.0
+    ));
+    missions
+        .download(remote.now(), target, MavMissionType::MISSION)
+        .map_err(other)?;
+    let back = match mission_op(&mut remote, &mut missions).await? {
+        MissionEvent::Downloaded {
+            result: Ok(back), ..
+        } => back,
+        e => return Err(other(format!("demo step failed: mission download: {e:?}"))),
+    };
+    let same = back.len() == items.len()
+        && back.iter().zip(&items).all(|(a, b)| {
+            (a.command, a.frame, a.x, a.y, a.z.to_bits())
+                == (b.command, b.frame, b.x, b.y, b.z.to_bits())
+        });
+    if !same {
+        return Err(other("demo step failed: the mission read back differs"));
+    }
+    timeline.say(format!(
+        "ground station ← mission read back: {} items, identical",
+        back.len()
+    ));
+    remote.close().await
 }
 
 /// Asks the vehicle for AUTOPILOT_VERSION on the signed link and waits for a verified answer;

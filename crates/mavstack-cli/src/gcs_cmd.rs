@@ -321,6 +321,11 @@ impl Remote {
         }
     }
 
+    /// The services' clock.
+    pub(crate) fn now(&self) -> mavstack_core::time::Instant {
+        service_time(self.start)
+    }
+
     /// Seconds since the link opened.
     pub(crate) fn elapsed(&self) -> f64 {
         self.start.elapsed().as_secs_f64()
@@ -441,9 +446,7 @@ fn print_lines(lines: &[String]) -> Result<(), Failure> {
 pub(crate) async fn fetch_params(remote: &mut Remote) -> Result<Vec<(Name, Value)>, Failure> {
     let mut client = ParamClient::new(Default::default(), remote.encoding());
     let target = remote.target();
-    client
-        .fetch_all(service_time(remote.start), target)
-        .map_err(other)?;
+    client.fetch_all(remote.now(), target).map_err(other)?;
     let result = remote
         .run(&mut client, Duration::from_secs(600), |c| {
             core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
@@ -462,7 +465,7 @@ async fn read_param(
     name: Name,
 ) -> Result<Param, Failure> {
     let target = remote.target();
-    let handle = client.read(service_time(remote.start), target, ParamRef::Name(name));
+    let handle = client.read(remote.now(), target, ParamRef::Name(name));
     let result = remote
         .run(client, Duration::from_secs(30), |c| {
             core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
@@ -498,7 +501,7 @@ pub(crate) async fn set_param(
         .ok_or_else(|| other(format!("{name} has a type PARAM_SET cannot carry")))?;
     let target = remote.target();
     let handle = client
-        .set(service_time(remote.start), target, name, typed)
+        .set(remote.now(), target, name, typed)
         .map_err(other)?;
     let result = remote
         .run(client, Duration::from_secs(30), |c| {
@@ -641,7 +644,7 @@ pub(crate) fn mission(action: MissionAction) -> Result<(), Failure> {
                 let target = remote.target();
                 let began = remote.elapsed();
                 client
-                    .download(service_time(remote.start), target, plan.mav())
+                    .download(remote.now(), target, plan.mav())
                     .map_err(other)?;
                 let event = mission_op(&mut remote, &mut client).await?;
                 let seconds = remote.since(began);
@@ -684,7 +687,7 @@ pub(crate) fn mission(action: MissionAction) -> Result<(), Failure> {
                 let began = remote.elapsed();
                 let count = items.len();
                 client
-                    .upload(service_time(remote.start), target, plan.mav(), items)
+                    .upload(remote.now(), target, plan.mav(), items)
                     .map_err(other)?;
                 let event = mission_op(&mut remote, &mut client).await?;
                 let seconds = remote.since(began);
@@ -708,7 +711,7 @@ pub(crate) fn mission(action: MissionAction) -> Result<(), Failure> {
                 let mut client = MissionClient::new(Address::new(args.sysid, args.compid), Default::default());
                 let target = remote.target();
                 client
-                    .clear(service_time(remote.start), target, plan.mav())
+                    .clear(remote.now(), target, plan.mav())
                     .map_err(other)?;
                 let event = mission_op(&mut remote, &mut client).await?;
                 remote.close().await?;
@@ -917,9 +920,7 @@ pub(crate) fn command(args: &CommandArgs) -> Result<(), Failure> {
             Default::default(),
         );
         let began = remote.elapsed();
-        let handle = client
-            .send(service_time(remote.start), target, command)
-            .map_err(other)?;
+        let handle = client.send(remote.now(), target, command).map_err(other)?;
         let json = args.remote.json;
         let result = remote
             .run(&mut client, Duration::from_secs(600), |c| {

@@ -29,7 +29,8 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// The main job: vehicle, radio and ground station on loopback run the MAVLink 2
-    /// handshake, set up signing and fend off a replay and a forgery, as a timeline.
+    /// handshake, set up signing, fend off a replay and a forgery, exchange parameters and a
+    /// mission, as a timeline.
     Demo(demo_cmd::DemoArgs),
     /// List the built-in dialects, or show one dialect's messages and enums.
     Dialect {

@@ -1,5 +1,6 @@
 //! `mavstack demo`, the README's first command: it must run the whole story on loopback and
-//! exit 0 well under 15 seconds, and its timeline must show each step.
+//! exit 0 well under 15 seconds, and its timeline must show each step, the parameter and
+//! mission exchange included.
 
 use core::time::Duration;
 use std::process::Command;
@@ -33,6 +34,11 @@ fn demo_runs_the_handshake_signing_and_attacks_in_under_15_seconds() {
         "rejected 76: Replayed",
         "rejected 76: BadSignature",
         "the genuine stream is still accepted",
+        "ground station ← 35 PARAM_VALUEs",
+        "PARAM_SET WPNAV_SPEED 500 → 750; vehicle confirms 750",
+        "vehicle: param WPNAV_SPEED = 750",
+        "MISSION_TYPE_MISSION plan stored: 6 items",
+        "mission read back: 6 items, identical",
         "1 replay and 1 forgery rejected",
     ] {
         assert!(text.contains(step), "the timeline lacks {step:?}:\n{text}");
