@@ -46,10 +46,11 @@ from gcs_common import (  # noqa: E402
     free_udp_port,
     mavstack_bin,
     run_main,
-    write_params_file,
 )
 
-TEST_PARAMS = {"GCS_TEST_INT": 42, "GCS_TEST_FLT": 1.5}
+# defaults of the PX4 flavour that get_all_params must show
+PX4_PARAMS = {"MAV_SYS_ID": 1, "MPC_XY_CRUISE": 5.0, "MIS_TAKEOFF_ALT": 2.5, "NAV_ACC_RAD": 2.0}
+TAKEOFF_ALT = 8.0
 STEP_TIMEOUT = 20.0
 
 
@@ -185,11 +186,8 @@ def describe(it):
 async def scenario(api, binary, work):
     summary = {"api": api.name}
     t_all = time.monotonic()
-    params_file = os.path.join(work, "vehicle.parm")
-    write_params_file(params_file, TEST_PARAMS)
     port = free_udp_port()
-    vehicle = Vehicle(binary, f"udpout:127.0.0.1:{port}",
-                      ["--autopilot", "px4", "--params", params_file], work)
+    vehicle = Vehicle(binary, f"udpout:127.0.0.1:{port}", ["--autopilot", "px4"], work)
     try:
         t = time.monotonic()
         summary["system"] = await step("connect", api.connect(f"udpin://127.0.0.1:{port}"), 25)
@@ -210,7 +208,7 @@ async def scenario(api, binary, work):
         if armed:
             fail("telemetry: the vehicle is armed before we armed it")
         mode = await first("telemetry: flight mode", api.stream("flight_mode"))
-        summary.update(telemetry_s=round(time.monotonic() - t, 3), flight_mode=str(mode),
+        summary.update(telemetry_s=round(time.monotonic() - t, 3), flight_mode=getattr(mode, "name", str(mode)),
                        battery_v=round(bat.voltage_v, 2), battery_pct=bat.remaining_percent)
 
         # params
@@ -219,23 +217,25 @@ async def scenario(api, binary, work):
         values = {p.name: p.value for p in list(allp.int_params) + list(allp.float_params)}
         summary["params"] = len(values)
         summary["param_get_all_s"] = round(time.monotonic() - t, 3)
-        for name, want in TEST_PARAMS.items():
+        for name, want in PX4_PARAMS.items():
             if name not in values or abs(values[name] - want) > 1e-6:
-                fail(f"params: get_all_params has {name} = {values.get(name)}, --params says {want}")
-        if values.get("MAV_SYS_ID") != 1:
-            fail(f"params: PX4-style MAV_SYS_ID = {values.get('MAV_SYS_ID')}, expected 1")
+                fail(f"params: get_all_params has {name} = {values.get(name)}, the PX4 flavour's "
+                     f"default is {want}")
         t = time.monotonic()
-        got = await step("param.get_param_int", api.param.get_param_int("GCS_TEST_INT"))
-        if got != 42:
-            fail(f"params: get_param_int(GCS_TEST_INT) = {got}, expected 42")
-        await step("param.set_param_int", api.param.set_param_int("GCS_TEST_INT", -1234))
-        got = await step("param.get_param_int", api.param.get_param_int("GCS_TEST_INT"))
-        if got != -1234:
-            fail(f"params: GCS_TEST_INT read back {got} after set_param_int -1234")
-        await step("param.set_param_float", api.param.set_param_float("GCS_TEST_FLT", 2.75))
-        gotf = await step("param.get_param_float", api.param.get_param_float("GCS_TEST_FLT"))
-        if abs(gotf - 2.75) > 1e-6:
-            fail(f"params: GCS_TEST_FLT read back {gotf} after set_param_float 2.75")
+        got = await step("param.get_param_int", api.param.get_param_int("MAV_SYS_ID"))
+        if got != 1:
+            fail(f"params: get_param_int(MAV_SYS_ID) = {got}, expected 1")
+        got = await step("param.get_param_int", api.param.get_param_int("GF_ACTION"))
+        if got != 2:
+            fail(f"params: get_param_int(GF_ACTION) = {got}, expected 2")
+        await step("param.set_param_int", api.param.set_param_int("GF_ACTION", 1))
+        got = await step("param.get_param_int", api.param.get_param_int("GF_ACTION"))
+        if got != 1:
+            fail(f"params: GF_ACTION read back {got} after set_param_int 1")
+        await step("param.set_param_float", api.param.set_param_float("MPC_XY_CRUISE", 7.25))
+        gotf = await step("param.get_param_float", api.param.get_param_float("MPC_XY_CRUISE"))
+        if abs(gotf - 7.25) > 1e-6:
+            fail(f"params: MPC_XY_CRUISE read back {gotf} after set_param_float 7.25")
         summary["param_set_get_s"] = round(time.monotonic() - t, 3)
 
         # mission
@@ -265,9 +265,11 @@ async def scenario(api, binary, work):
         await first("arm: armed in telemetry", api.stream("armed"), lambda a: a)
         summary["arm_s"] = round(time.monotonic() - t, 3)
         t = time.monotonic()
+        await step("action.set_takeoff_altitude", api.action.set_takeoff_altitude(TAKEOFF_ALT))
         await step("action.takeoff", api.action.takeoff())
-        pos = await first("takeoff: relative altitude above 2 m", api.stream("position"),
-                          lambda p: p.relative_altitude_m > 2.0, 30)
+        pos = await first(f"takeoff: relative altitude above {TAKEOFF_ALT - 1} m",
+                          api.stream("position"),
+                          lambda p: p.relative_altitude_m > TAKEOFF_ALT - 1, 30)
         await first("takeoff: in air", api.stream("in_air"), lambda a: a)
         summary["takeoff_s"] = round(time.monotonic() - t, 3)
         summary["takeoff_alt_m"] = round(pos.relative_altitude_m, 2)
