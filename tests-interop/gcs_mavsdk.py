@@ -14,7 +14,8 @@ Two distinct Python packages, both driven through the same checks:
   gRPC to this script.
 
 mavsdk_server listens for gRPC on all interfaces, so unless --no-netns the script re-runs itself
-in a new network namespace (`unshare -n`, loopback brought up) where the vehicle, mavsdk_server
+in a new network namespace (`unshare -n`, then `lo` brought up as `ip link set lo up`
+does, by ioctl) where the vehicle, mavsdk_server
 and the script share a private loopback. Failing to do so fails the run (never skipped).
 
 Checks, each with a deadline: connect (the autopilot is discovered); telemetry (position at the
@@ -30,7 +31,6 @@ import asyncio
 import logging
 import math
 import os
-import shlex
 import socket
 import subprocess
 import sys
@@ -300,13 +300,32 @@ def in_netns():
     return os.environ.get("MAVSTACK_GCS_NETNS") == "1"
 
 
+def loopback_up():
+    """Brings `lo` up in this (new) network namespace (what `ip link set lo up` does), then
+    checks that a datagram to 127.0.0.1 arrives."""
+    import fcntl
+    import struct
+
+    siocgifflags, siocsifflags, iff_up = 0x8913, 0x8914, 0x1
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        ifr = struct.pack("16sH22x", b"lo", 0)
+        flags = struct.unpack("16sH22x", fcntl.ioctl(s, siocgifflags, ifr))[1]
+        if not flags & iff_up:
+            fcntl.ioctl(s, siocsifflags, struct.pack("16sH22x", b"lo", flags | iff_up))
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        s.settimeout(2)
+        s.sendto(b"ping", s.getsockname())
+        if s.recv(16) != b"ping":
+            fail("the network namespace's loopback does not carry a datagram")
+
+
 def reexec_in_netns():
-    """Runs this script again in a new network namespace with its loopback up."""
+    """Runs this script again in a new network namespace (`unshare -n`); loopback_up() there."""
     cmd = [sys.executable, os.path.abspath(__file__), *sys.argv[1:]]
-    inner = "ip link set lo up && exec " + " ".join(shlex.quote(c) for c in cmd)
     env = dict(os.environ, MAVSTACK_GCS_NETNS="1")
     try:
-        r = subprocess.run(["unshare", "-n", "sh", "-c", inner], env=env)
+        r = subprocess.run(["unshare", "-n", *cmd], env=env)
     except FileNotFoundError:
         print("gcs_mavsdk: FAILED: unshare not found (util-linux); mavsdk_server must run in its "
               "own network namespace", file=sys.stderr)
@@ -329,6 +348,8 @@ def main():
         reexec_in_netns()
 
     def body():
+        if in_netns():
+            loopback_up()
         binary = mavstack_bin(args.mavstack)
         work = args.keep or tempfile.mkdtemp(prefix="gcs-mavsdk-")
         os.makedirs(work, exist_ok=True)
