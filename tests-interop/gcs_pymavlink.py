@@ -27,6 +27,18 @@ Scenarios:
   mission     --autopilot px4: upload take-off, two waypoints, land; arm; DO_SET_MODE AUTO.MISSION;
               MISSION_ITEM_REACHED 0..3 in order, MISSION_CURRENT follows, the vehicle lands at
               the last waypoint and disarms; battery drains
+
+The other way round, `mavstack param|mission|command` against a vehicle written here with
+pymavlink alone (PymavlinkVehicle: ArduPilot-like, C-cast parameters, MISSION_ITEM_INT):
+  cli_params        `param list --json` of 300 params (names, indices, values, types), `param set`
+                    (the vehicle's table changes), `param get`
+  cli_mission       a 40-item plan saved by pymavlink's MAVWPLoader: `mission upload` (the vehicle
+                    stores the same items), `mission download FILE` (MAVWPLoader reads the same
+                    items back), `mission clear`, `command arm` (the vehicle saw 400/1), an
+                    UNSUPPORTED command -> exit 1
+  cli_params_lossy, cli_mission_lossy
+                    the same with the vehicle ignoring 20 % of what it receives and dropping 20 %
+                    of what it sends: the retries and gap re-requests of our clients
 """
 
 import argparse
@@ -415,6 +427,222 @@ def scenario_mission(binary):
     return "4-item PX4 mission flown: reached 0..3, landed 30 m north, disarmed, battery drained"
 
 
+class PymavlinkVehicle:
+    """A vehicle written with pymavlink alone (ArduPilot-like: C-cast parameters, MISSION_ITEM_INT
+    protocol), serving one ground station on udpin, in a thread. With `loss`, it ignores that
+    share of what it receives and drops that share of what it sends (seeded)."""
+
+    def __init__(self, params, loss=0.0, seed=7):
+        import random
+        import threading
+        self.port = free_port()
+        self.conn = mavutil.mavlink_connection(
+            f"udpin:127.0.0.1:{self.port}", source_system=1, source_component=1)
+        self.params = list(params)  # [(name, value, type)]
+        self.mission = []
+        self.loss = loss
+        self.rng = random.Random(seed)
+        self.stop = False
+        self.upload = None
+        self.commands = []
+        self.sent_values = 0
+        self.thread = threading.Thread(target=self.run, daemon=True)
+        self.thread.start()
+
+    def send(self, msg):
+        if self.rng.random() < self.loss:
+            return
+        try:
+            self.conn.mav.send(msg)
+        except OSError:
+            pass
+
+    def value(self, i):
+        name, value, ty = self.params[i]
+        self.sent_values += 1
+        return M.MAVLink_param_value_message(name.encode(), float(value), ty, len(self.params), i)
+
+    def run(self):
+        next_beat = 0
+        while not self.stop:
+            now = time.time()
+            # udpin: pymavlink writes to every client heard, so beat once a GCS has spoken.
+            if now >= next_beat and self.conn.clients:
+                self.send(M.MAVLink_heartbeat_message(
+                    M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                    M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0, M.MAV_STATE_STANDBY, 3))
+                next_beat = now + 1
+            m = self.conn.recv_match(blocking=True, timeout=0.05)
+            if m is None or self.rng.random() < self.loss:
+                continue
+            self.handle(m)
+
+    def handle(self, m):
+        t = m.get_type()
+        if t == "PARAM_REQUEST_LIST":
+            for i in range(len(self.params)):
+                self.send(self.value(i))
+        elif t == "PARAM_REQUEST_READ":
+            if m.param_index >= 0:
+                i = m.param_index
+            else:
+                names = [p[0] for p in self.params]
+                i = names.index(m.param_id) if m.param_id in names else None
+            if i is not None and i < len(self.params):
+                self.send(self.value(i))
+        elif t == "PARAM_SET":
+            for i, (name, _, ty) in enumerate(self.params):
+                if name == m.param_id:
+                    v = m.param_value if ty == M.MAV_PARAM_TYPE_REAL32 else float(int(m.param_value))
+                    self.params[i] = (name, v, ty)
+                    self.send(self.value(i))
+        elif t == "MISSION_COUNT":
+            self.upload = [None] * m.count
+            if m.count == 0:
+                self.mission = []
+                self.send(M.MAVLink_mission_ack_message(255, 190, M.MAV_MISSION_ACCEPTED, 0))
+            else:
+                self.send(M.MAVLink_mission_request_int_message(255, 190, 0, 0))
+        elif t == "MISSION_ITEM_INT" and self.upload is None:
+            # The last item again: our ACK was lost. ACK again, as autopilots do.
+            if self.mission and m.seq == len(self.mission) - 1:
+                self.send(M.MAVLink_mission_ack_message(255, 190, M.MAV_MISSION_ACCEPTED, 0))
+        elif t == "MISSION_ITEM_INT":
+            if m.seq < len(self.upload):
+                self.upload[m.seq] = m
+            missing = [i for i, x in enumerate(self.upload) if x is None]
+            if missing:
+                self.send(M.MAVLink_mission_request_int_message(255, 190, missing[0], 0))
+            else:
+                self.mission = self.upload
+                self.upload = None
+                self.send(M.MAVLink_mission_ack_message(255, 190, M.MAV_MISSION_ACCEPTED, 0))
+        elif t == "MISSION_REQUEST_LIST":
+            self.send(M.MAVLink_mission_count_message(255, 190, len(self.mission), 0))
+        elif t in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
+            if m.seq < len(self.mission):
+                it = self.mission[m.seq]
+                self.send(M.MAVLink_mission_item_int_message(
+                    255, 190, it.seq, it.frame, it.command, it.current, it.autocontinue,
+                    it.param1, it.param2, it.param3, it.param4, it.x, it.y, it.z, 0))
+        elif t == "MISSION_CLEAR_ALL":
+            self.mission = []
+            self.send(M.MAVLink_mission_ack_message(255, 190, M.MAV_MISSION_ACCEPTED, 0))
+        elif t == "COMMAND_LONG":
+            self.commands.append((m.command, m.param1, m.confirmation))
+            result = M.MAV_RESULT_ACCEPTED if m.command == 400 else M.MAV_RESULT_UNSUPPORTED
+            self.send(M.MAVLink_command_ack_message(m.command, result, 0, 0, 255, 190))
+
+    def close(self):
+        self.stop = True
+        self.thread.join(timeout=2)
+        self.conn.close()
+
+
+def cli(binary, port, *args):
+    cmd = [binary, args[0]]
+    rest = list(args[1:])
+    if args[0] in ("param", "mission"):
+        cmd.append(rest.pop(0))
+    cmd += [f"udpout:127.0.0.1:{port}", *rest, "--timeout", "10"]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    return out
+
+
+def table(n):
+    rows = []
+    for i in range(n):
+        if i % 3 == 0:
+            rows.append((f"PY_REAL_{i:04d}", 0.5 * i - 7.25, M.MAV_PARAM_TYPE_REAL32))
+        else:
+            rows.append((f"PY_INT_{i:04d}", float(i * 11 - 300), M.MAV_PARAM_TYPE_INT32))
+    return rows
+
+
+def scenario_cli_params(binary, loss=0.0):
+    import json
+    rows = table(300)
+    v = PymavlinkVehicle(rows, loss=loss)
+    try:
+        started = time.time()
+        out = cli(binary, v.port, "param", "list", "--json")
+        took = time.time() - started
+        if not check(out.returncode == 0, f"param list: {out.returncode} {out.stderr}"):
+            return "param list failed"
+        got = [json.loads(line) for line in out.stdout.splitlines()]
+        check(len(got) == len(rows), f"{len(got)} parameters listed of {len(rows)}")
+        for i, (g, (name, value, ty)) in enumerate(zip(got, rows)):
+            check(g["name"] == name and g["index"] == i, f"row {i}: {g} vs {name}")
+            check(float(g["value"]) == value, f"{name}: {g['value']} != {value}")
+            want_ty = "REAL32" if ty == M.MAV_PARAM_TYPE_REAL32 else "INT32"
+            check(g["type"] == want_ty, f"{name}: type {g['type']}")
+        out = cli(binary, v.port, "param", "set", "PY_INT_0004", "-1234", "--json")
+        check(out.returncode == 0, f"param set: {out.stderr}")
+        check(v.params[4][1] == -1234.0, f"vehicle holds {v.params[4]}")
+        out = cli(binary, v.port, "param", "get", "PY_REAL_0003", "--json")
+        check(out.returncode == 0 and json.loads(out.stdout)["value"] == -5.75,
+              f"param get: {out.stdout} {out.stderr}")
+    finally:
+        v.close()
+    return f"mavstack param list/set/get against a pymavlink vehicle: 300 params in {took:.2f} s" + (
+        f" with {loss:.0%} loss" if loss else "")
+
+
+def scenario_cli_mission(binary, loss=0.0):
+    v = PymavlinkVehicle([("A", 1.0, M.MAV_PARAM_TYPE_INT32)], loss=loss)
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            # The plan is written by pymavlink's own MAVWPLoader.
+            loader = mavwp.MAVWPLoader(target_system=1, target_component=1)
+            for it in make_items((1, 1), 40):
+                # MAVWPLoader keeps float MISSION_ITEMs (degrees), as its files do.
+                loader.add(M.MAVLink_mission_item_message(
+                    1, 1, it.seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT, it.command, it.current,
+                    it.autocontinue, it.param1, it.param2, it.param3, it.param4,
+                    it.x / 1e7, it.y / 1e7, it.z, 0))
+            path = os.path.join(tmp, "plan.waypoints")
+            loader.save(path)
+            started = time.time()
+            out = cli(binary, v.port, "mission", "upload", path)
+            took = time.time() - started
+            check(out.returncode == 0, f"mission upload: {out.stdout} {out.stderr}")
+            reread = mavwp.MAVWPLoader()
+            reread.load(path)
+            sent = [reread.wp(i) for i in range(reread.count())]
+            check(len(v.mission) == len(sent), f"vehicle stored {len(v.mission)} of {len(sent)}")
+            for a, b in zip(sent, v.mission):
+                check(a.command == b.command and a.frame == b.frame,
+                      f"item {a.seq} kind {a.command}/{a.frame} vs {b.command}/{b.frame}")
+                check(abs(a.x * 1e7 - b.x) <= 1 and abs(a.y * 1e7 - b.y) <= 1,
+                      f"item {a.seq} position {a.x},{a.y} vs {b.x},{b.y}")
+                same_z = a.z == b.z
+                check(same_z and (a.param1 == b.param1 or (math.isnan(a.param1) and math.isnan(b.param1))),
+                      f"item {a.seq} z/param1")
+            back = os.path.join(tmp, "back.waypoints")
+            out = cli(binary, v.port, "mission", "download", back)
+            check(out.returncode == 0, f"mission download: {out.stderr}")
+            # pymavlink reads what we wrote.
+            got = mavwp.MAVWPLoader()
+            got.load(back)
+            check(got.count() == len(sent), f"pymavlink read {got.count()} items back")
+            for i in range(min(got.count(), len(sent))):
+                a, b = sent[i], got.wp(i)
+                check((a.command, a.frame, round(a.x, 7), round(a.y, 7), a.z)
+                      == (b.command, b.frame, round(b.x, 7), round(b.y, 7), b.z),
+                      f"downloaded item {i}: {b} vs {a}")
+            out = cli(binary, v.port, "mission", "clear")
+            check(out.returncode == 0 and v.mission == [], f"clear: {out.stderr}")
+            out = cli(binary, v.port, "command", "arm", "--json")
+            check(out.returncode == 0 and v.commands and v.commands[-1][:2] == (400, 1.0),
+                  f"arm: {out.stdout} {out.stderr} {v.commands}")
+            out = cli(binary, v.port, "command", "DO_FLIGHTTERMINATION", "1")
+            check(out.returncode == 1 and "UNSUPPORTED" in out.stdout, f"nack: {out.stdout}")
+    finally:
+        v.close()
+    return f"mavstack mission upload/download/clear, command against a pymavlink vehicle: 40 items up in {took:.2f} s" + (
+        f" with {loss:.0%} loss" if loss else "")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("scenario")
@@ -427,6 +655,10 @@ def main():
         "commands": scenario_commands,
         "intervals": scenario_intervals,
         "mission": scenario_mission,
+        "cli_params": scenario_cli_params,
+        "cli_params_lossy": lambda b: scenario_cli_params(b, loss=0.2),
+        "cli_mission": scenario_cli_mission,
+        "cli_mission_lossy": lambda b: scenario_cli_mission(b, loss=0.2),
     }
     if args.scenario not in scenarios:
         print(f"unknown scenario {args.scenario}; one of {', '.join(scenarios)}", file=sys.stderr)

@@ -35,8 +35,8 @@ use mavstack_dialects::common::{
     MavProtocolCapability, MavType, MissionItemInt, ProtocolVersion, RadioStatus, SetupSigning,
 };
 use mavstack_services::Address;
-use mavstack_services::mission::{MissionClient, MissionEvent};
-use mavstack_services::param::{Name, ParamClient};
+use mavstack_services::mission::MissionEvent;
+use mavstack_services::param::Name;
 use mavstack_transport::channel_protocol::{
     ChannelCommand, ChannelEvent, ChannelEventKind, ChannelProtocol, RawMessage,
 };
@@ -369,8 +369,15 @@ fn demo_mission() -> Vec<MissionItemInt> {
 /// Step 8: the configuration services over the signed link — the parameter table, a
 /// parameter set, a mission uploaded and read back.
 async fn services(timeline: &Timeline, conn: Connection<ChannelProtocol>) -> Result<(), Failure> {
-    let mut remote =
-        Remote::find(conn, Some(1), Some(1), Duration::from_secs(3), "the radio").await?;
+    let mut remote = Remote::find(
+        conn,
+        Address::new(255, 190),
+        Some(1),
+        Some(1),
+        Duration::from_secs(3),
+        "the radio",
+    )
+    .await?;
     timeline.say("ground station → PARAM_REQUEST_LIST, signed");
     let began = remote.elapsed();
     let table = fetch_params(&mut remote).await?;
@@ -385,7 +392,7 @@ async fn services(timeline: &Timeline, conn: Connection<ChannelProtocol>) -> Res
         .find(|(n, _)| *n == name)
         .map(|(_, v)| *v)
         .ok_or_else(|| other("demo step failed: no WPNAV_SPEED in the table"))?;
-    let mut client = ParamClient::new(Default::default(), remote.encoding());
+    let mut client = remote.param_client();
     let set = set_param(&mut remote, &mut client, name, current, 750.0).await?;
     timeline.say(format!(
         "ground station → PARAM_SET WPNAV_SPEED {} → 750; vehicle confirms {}",
@@ -394,7 +401,7 @@ async fn services(timeline: &Timeline, conn: Connection<ChannelProtocol>) -> Res
     ));
     let items = demo_mission();
     let count = items.len();
-    let mut missions = MissionClient::new(Address::new(255, 190), Default::default());
+    let mut missions = remote.mission_client();
     let target = remote.target();
     missions
         .upload(remote.now(), target, MavMissionType::MISSION, items.clone())

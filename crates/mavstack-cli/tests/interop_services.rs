@@ -15,7 +15,8 @@
 //! - `intervals`: SET_MESSAGE_INTERVAL with the rate measured, MESSAGE_INTERVAL, turning a
 //!   stream off, REQUEST_MESSAGE(HOME_POSITION), REQUEST_DATA_STREAM;
 //! - `mission`: a PX4-flavoured vehicle flies an uploaded mission (items reached in order,
-//!   lands at the last waypoint, disarms, battery drained).
+//!   lands at the last waypoint, disarms, battery drained);
+//! - `cli_*`: our ground-station commands against a pymavlink vehicle, clean and lossy.
 //!
 //! Never skipped: without pymavlink 2.4.50 they fail.
 
@@ -67,4 +68,28 @@ fn intervals() {
 #[test]
 fn mission_flight() {
     scenario("mission");
+}
+
+// The other way round: `mavstack param|mission|command` against a vehicle written with
+// pymavlink alone (tests-interop/gcs_pymavlink.py, PymavlinkVehicle), plans written and read
+// back by pymavlink's MAVWPLoader; then with that vehicle losing 20 % each way.
+
+#[test]
+fn cli_params_against_a_pymavlink_vehicle() {
+    scenario("cli_params");
+}
+
+#[test]
+fn cli_mission_and_command_against_a_pymavlink_vehicle() {
+    scenario("cli_mission");
+}
+
+#[test]
+fn cli_params_against_a_lossy_pymavlink_vehicle() {
+    scenario("cli_params_lossy");
+}
+
+#[test]
+fn cli_mission_against_a_lossy_pymavlink_vehicle() {
+    scenario("cli_mission_lossy");
 }
