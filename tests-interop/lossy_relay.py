@@ -47,8 +47,13 @@ class LossyRelay:
         self._rng_up = random.Random(f"{seed}/up")
         self._rng_down = random.Random(f"{seed}/down")
         self.near = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.near.bind(listen)
         self.far = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        for s in (self.near, self.far):
+            # Room for a burst (a whole parameter list is ~1,000 datagrams): the relay
+            # must lose only what it chooses to drop.
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 8 << 20)
+        self.near.bind(listen)
         self.far.bind((listen[0], 0))
         self.listen_port = self.near.getsockname()[1]
         self.near_peer = None

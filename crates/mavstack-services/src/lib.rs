@@ -121,6 +121,7 @@ pub mod command;
 pub mod heartbeat;
 pub mod mission;
 pub mod param;
+mod rtt;
 pub mod stream;
 pub mod timesync;
 

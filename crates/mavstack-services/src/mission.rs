@@ -33,6 +33,7 @@ use mavstack_dialects::common::{
     MissionRequestList, MissionSetCurrent,
 };
 
+use crate::rtt::Rtt;
 use crate::{Address, Outgoing, Service};
 
 /// Timeouts and retries of both roles.
@@ -40,7 +41,9 @@ use crate::{Address, Outgoing, Service};
 pub struct MissionConfig {
     /// Time to wait for the first answer (default 1.5 s).
     pub timeout: Duration,
-    /// Time to wait for the next item or request while items flow (default 250 ms).
+    /// The longest wait for the next item or request while items flow (default 250 ms).
+    /// The client waits less once it has measured the round trip (`srtt + 4 × rttvar`,
+    /// at least 20 ms, RFC 6298's estimator with Karn's rule); the server always waits this.
     pub item_timeout: Duration,
     /// Resends before giving up (default 5).
     pub retries: u8,
@@ -222,6 +225,10 @@ struct Running {
     target: Address,
     mission_type: MavMissionType,
     op: Op,
+    /// When the message awaiting an answer was last sent.
+    sent: Instant,
+    /// Whether it was sent more than once (its answer then says nothing of the RTT).
+    resent: bool,
 }
 
 /// The client side of the mission protocol.
@@ -229,6 +236,7 @@ struct Running {
 pub struct MissionClient {
     own: Address,
     config: MissionConfig,
+    rtt: Rtt,
     running: Option<Running>,
     out: VecDeque<Outgoing>,
     events: VecDeque<MissionEvent>,
@@ -278,6 +286,7 @@ impl MissionClient {
         Self {
             own,
             config,
+            rtt: Rtt::default(),
             running: None,
             out: VecDeque::new(),
             events: VecDeque::new(),
@@ -315,6 +324,7 @@ impl MissionClient {
 
     fn start(
         &mut self,
+        now: Instant,
         target: Address,
         mission_type: MavMissionType,
         message: MavMessage,
@@ -328,6 +338,8 @@ impl MissionClient {
             target,
             mission_type,
             op,
+            sent: now,
+            resent: false,
         });
         Ok(())
     }
@@ -365,6 +377,7 @@ impl MissionClient {
             deadline: now + self.config.timeout,
         };
         self.start(
+            now,
             target,
             mission_type,
             count,
@@ -389,6 +402,7 @@ impl MissionClient {
             deadline: now + self.config.timeout,
         };
         self.start(
+            now,
             target,
             mission_type,
             message,
@@ -411,6 +425,7 @@ impl MissionClient {
         let message = clear_all(target, mission_type);
         let deadline = now + self.config.timeout;
         self.start(
+            now,
             target,
             mission_type,
             message,
@@ -435,6 +450,7 @@ impl MissionClient {
         let message = set_current(target, seq);
         let deadline = now + self.config.timeout;
         self.start(
+            now,
             target,
             MavMissionType::MISSION,
             message,
@@ -561,10 +577,38 @@ impl MissionClient {
                     );
                     return (None, true);
                 };
+                let next = last.map_or(0, |l| l.saturating_add(1));
+                if seq < next {
+                    // A late copy of a request already answered (the link duplicated or
+                    // delayed it), or the vehicle going back: answer it, but it neither
+                    // moves the transfer back nor says anything of the round trip.
+                    self.send(target, MavMessage::MissionItemInt(item));
+                    let state = AwaitingRequest {
+                        items,
+                        last,
+                        attempts,
+                        deadline,
+                    };
+                    r.op = Op::Upload(if usize::from(next) >= state.items.len() {
+                        Upload::AwaitingAck(AwaitingAck {
+                            items: state.items,
+                            last: state.last,
+                            attempts: state.attempts,
+                            deadline: state.deadline,
+                        })
+                    } else {
+                        Upload::AwaitingRequest(state)
+                    });
+                    return (Some(r), true);
+                }
+                if !r.resent {
+                    self.rtt.sample(r.sent, now);
+                }
+                (r.sent, r.resent) = (now, false);
                 let last = Some(seq);
                 self.send(target, MavMessage::MissionItemInt(item));
                 let is_last = usize::from(seq) + 1 == items.len();
-                let (attempts, deadline) = (1, now + self.config.item_timeout);
+                let (attempts, deadline) = (1, now + self.item_wait());
                 r.op = Op::Upload(if is_last {
                     Upload::AwaitingAck(AwaitingAck {
                         items,
@@ -584,6 +628,13 @@ impl MissionClient {
             }
             Op::Download(state) => {
                 let (next, used) = self.download_step(now, target, ty, state, message);
+                if used {
+                    // A count or the awaited item: the answer to what we sent last.
+                    if !r.resent {
+                        self.rtt.sample(r.sent, now);
+                    }
+                    (r.sent, r.resent) = (now, false);
+                }
                 match next {
                     Ok(state) => {
                         r.op = Op::Download(state);
@@ -639,7 +690,7 @@ impl MissionClient {
                     count: c.count,
                     items: Vec::with_capacity(usize::from(c.count)),
                     attempts: 1,
-                    deadline: now + self.config.item_timeout,
+                    deadline: now + self.item_wait(),
                 };
                 (Ok(Download::AwaitingItem(next)), true)
             }
@@ -658,7 +709,7 @@ impl MissionClient {
                 }
                 s.seq += 1;
                 s.attempts = 1;
-                s.deadline = now + self.config.item_timeout;
+                s.deadline = now + self.item_wait();
                 self.send(target, request_int(target, ty, s.seq));
                 (Ok(Download::AwaitingItem(s)), true)
             }
@@ -684,6 +735,12 @@ impl MissionClient {
     #[must_use]
     pub fn poll_event(&mut self) -> Option<MissionEvent> {
         self.events.pop_front()
+    }
+
+    /// How long to wait for the next item or request: the measured round trip's timeout,
+    /// at most [`MissionConfig::item_timeout`].
+    fn item_wait(&self) -> Duration {
+        self.rtt.timeout(self.config.item_timeout)
     }
 
     fn deadline(&self) -> Option<Instant> {
@@ -747,7 +804,8 @@ impl Service for MissionClient {
         let (target, ty) = (r.target, r.mission_type);
         let retries = self.config.retries;
         let wait = self.config.timeout;
-        let item_wait = self.config.item_timeout;
+        let item_wait = self.item_wait();
+        (r.sent, r.resent) = (now, true);
         // (attempts so far, message to resend, wait)
         let (attempts, resend, wait) = match &mut r.op {
             Op::Upload(Upload::AwaitingRequest(s)) => {
@@ -972,9 +1030,11 @@ impl MissionServer {
         };
         let expected = u16::try_from(r.items.len()).unwrap_or(u16::MAX);
         if item.seq != expected {
-            // Out of sequence (a duplicate or a gap): drop it; re-request the expected one
-            // only for a gap, a duplicate's answer is already on its way.
-            if item.seq > expected {
+            // Out of sequence: drop it and ask for the expected one. After a gap that is
+            // the only way forward; after a copy of the previous item it is the client
+            // resending because our request was lost (a copy the link made gets a second
+            // request, whose answer we drop in turn).
+            if item.seq > expected || item.seq.saturating_add(1) == expected {
                 self.send(from, request_int(from, ty, expected));
             }
             return;

@@ -4,13 +4,15 @@
 //! state wrapped in [`ListFetch`], so a value that arrives in a state that cannot use it
 //! has nowhere to go.
 
-use alloc::collections::{BTreeSet, VecDeque};
+use alloc::collections::{BTreeMap, BTreeSet, VecDeque};
 use alloc::vec::Vec;
+use core::time::Duration;
 
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::{MavMessage, ParamRequestList, ParamRequestRead};
 
 use super::{Name, ParamConfig, ParamError, Value};
+use crate::rtt::Rtt;
 use crate::{Address, Outgoing};
 
 /// The phase of a list fetch.
@@ -30,6 +32,8 @@ pub struct AwaitingCount {
     target: Address,
     attempts: u8,
     deadline: Instant,
+    /// When PARAM_REQUEST_LIST was last sent.
+    sent: Instant,
 }
 
 /// Values arriving; `missing` holds the indices not seen yet.
@@ -43,10 +47,34 @@ pub struct Collecting {
     fruitless: u8,
     /// Whether anything new arrived since the last expiry.
     progressed: bool,
-    /// Indices re-requested and not answered yet (at most `rerequest_batch`).
-    outstanding: BTreeSet<u16>,
+    /// Indices re-requested and not answered yet (at most `rerequest_batch`), with when
+    /// and whether more than once (Karn's rule for the RTT).
+    outstanding: BTreeMap<u16, (Instant, bool)>,
     /// Whether the stream has ended and gaps are being re-requested.
     rerequesting: bool,
+    /// The round trip of requests to this target.
+    rtt: Rtt,
+    /// The last value's arrival, and the smoothed gap between values of the stream (µs).
+    last_value: Instant,
+    gap_us: Option<u64>,
+    /// Indices whose re-request was lost once already: their next one counts as resent.
+    retried: BTreeSet<u16>,
+}
+
+impl Collecting {
+    /// How long the stream may pause before its gaps are re-requested: long enough for
+    /// 32 of its usual gaps and a round trip, at most [`ParamConfig::list_timeout`].
+    fn stream_wait(&self, config: &ParamConfig) -> Duration {
+        let gaps = Duration::from_micros(self.gap_us.map_or(u64::MAX, |g| g.saturating_mul(32)));
+        gaps.max(4 * self.rtt.timeout(config.list_timeout))
+            .max(Rtt::FLOOR)
+            .min(config.list_timeout)
+    }
+
+    /// How long to wait for the answers to a round of re-requests.
+    fn rerequest_wait(&self, config: &ParamConfig) -> Duration {
+        self.rtt.timeout(config.timeout)
+    }
 }
 
 /// Every value of the set, by index.
@@ -81,6 +109,7 @@ impl AwaitingCount {
             target,
             attempts: 1,
             deadline: now + config.list_timeout,
+            sent: now,
         }
     }
 
@@ -93,6 +122,10 @@ impl AwaitingCount {
         out: &mut VecDeque<Outgoing>,
     ) -> ListFetch {
         let count = usize::from(v.count);
+        let mut rtt = Rtt::default();
+        if self.attempts == 1 {
+            rtt.sample(self.sent, now);
+        }
         let c = Collecting {
             target: self.target,
             values: alloc::vec![None; count],
@@ -100,8 +133,12 @@ impl AwaitingCount {
             deadline: now,
             fruitless: 0,
             progressed: false,
-            outstanding: BTreeSet::new(),
+            outstanding: BTreeMap::new(),
             rerequesting: false,
+            rtt,
+            last_value: now,
+            gap_us: None,
+            retried: BTreeSet::new(),
         };
         c.on_value(now, v, config, out)
     }
@@ -120,6 +157,7 @@ impl AwaitingCount {
         request_list(self.target, out);
         self.attempts += 1;
         self.deadline = now + config.list_timeout;
+        self.sent = now;
         Ok(ListFetch::AwaitingCount(self))
     }
 }
@@ -149,8 +187,9 @@ impl Collecting {
             // the new count.
             let again = AwaitingCount {
                 target: self.target,
-                attempts: 1,
+                attempts: 2,
                 deadline: now,
+                sent: now,
             };
             return again.on_value(now, v, config, out);
         }
@@ -161,15 +200,23 @@ impl Collecting {
             self.progressed = true;
         }
         // An answered re-request frees its place for the next gap (a sliding window).
-        if self.outstanding.remove(&v.index) {
-            self.top_up(config, out);
+        if let Some((sent, resent)) = self.outstanding.remove(&v.index) {
+            if !resent {
+                self.rtt.sample(sent, now);
+            }
+            self.top_up(now, config, out);
+        } else if !self.rerequesting {
+            let gap = u64::try_from(now.saturating_duration_since(self.last_value).as_micros())
+                .unwrap_or(u64::MAX);
+            self.gap_us = Some(self.gap_us.map_or(gap, |g| (7 * g + gap) / 8));
         }
+        self.last_value = now;
         // The inactivity timer restarts with every value.
         self.deadline = now
             + if self.rerequesting {
-                config.timeout
+                self.rerequest_wait(config)
             } else {
-                config.list_timeout
+                self.stream_wait(config)
             };
         if self.missing.is_empty() {
             let params = self.values.into_iter().flatten().collect();
@@ -201,15 +248,17 @@ impl Collecting {
         }
         // Whatever was outstanding is presumed lost: re-request the gaps, a window at a
         // time, by index (as QGC does).
+        let lost: Vec<u16> = self.outstanding.keys().copied().collect();
+        self.retried.extend(lost);
         self.outstanding.clear();
         self.rerequesting = true;
-        self.top_up(config, out);
-        self.deadline = now + config.timeout;
+        self.top_up(now, config, out);
+        self.deadline = now + self.rerequest_wait(config);
         Ok(ListFetch::Collecting(self))
     }
 
     /// Re-requests missing indices until `rerequest_batch` are outstanding.
-    fn top_up(&mut self, config: &ParamConfig, out: &mut VecDeque<Outgoing>) {
+    fn top_up(&mut self, now: Instant, config: &ParamConfig, out: &mut VecDeque<Outgoing>) {
         let room = config
             .rerequest_batch
             .max(1)
@@ -217,12 +266,13 @@ impl Collecting {
         let next: Vec<u16> = self
             .missing
             .iter()
-            .filter(|i| !self.outstanding.contains(i))
+            .filter(|i| !self.outstanding.contains_key(i))
             .take(room)
             .copied()
             .collect();
         for index in next {
-            self.outstanding.insert(index);
+            let resent = self.retried.contains(&index);
+            self.outstanding.insert(index, (now, resent));
             out.push_back(Outgoing {
                 target: self.target,
                 message: MavMessage::ParamRequestRead(ParamRequestRead {

@@ -39,13 +39,16 @@ pub use value::{Encoding, Name, NameError, Value};
 /// Retry and timeout settings of a [`ParamClient`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ParamConfig {
-    /// Time to wait for a PARAM_VALUE after a read or set, and between gap re-request
-    /// rounds (default 0.5 s).
+    /// Time to wait for a PARAM_VALUE after a read or set, and the longest wait between
+    /// gap re-request rounds (default 0.5 s; a list fetch waits less once it has measured
+    /// the round trip: `srtt + 4 × rttvar`, at least 20 ms).
     pub timeout: Duration,
     /// Resends of a read or set, PARAM_REQUEST_LIST resends, and re-request rounds in a
     /// row without a new value before a list fetch gives up (default 5).
     pub retries: u8,
-    /// Inactivity timeout of the list stream (default 2 s, 4 × `timeout`).
+    /// The longest pause of the list stream before its gaps are re-requested (default
+    /// 2 s). The fetch waits less on a fast link: 32 of the stream's smoothed gaps between
+    /// values or 4 round-trip timeouts, whichever is longer.
     pub list_timeout: Duration,
     /// How many missing indices are re-requested per round (default 64).
     pub rerequest_batch: usize,
