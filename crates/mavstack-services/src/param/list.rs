@@ -105,10 +105,11 @@ impl AwaitingCount {
         out: &mut VecDeque<Outgoing>,
     ) -> Self {
         request_list(target, out);
+        // The first value comes a round trip later; a lost request costs this much.
         Self {
             target,
             attempts: 1,
-            deadline: now + config.list_timeout,
+            deadline: now + config.timeout,
             sent: now,
         }
     }
@@ -156,7 +157,7 @@ impl AwaitingCount {
         }
         request_list(self.target, out);
         self.attempts += 1;
-        self.deadline = now + config.list_timeout;
+        self.deadline = now + config.timeout;
         self.sent = now;
         Ok(ListFetch::AwaitingCount(self))
     }

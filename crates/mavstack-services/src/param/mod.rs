@@ -39,8 +39,8 @@ pub use value::{Encoding, Name, NameError, Value};
 /// Retry and timeout settings of a [`ParamClient`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ParamConfig {
-    /// Time to wait for a PARAM_VALUE after a read or set, and the longest wait between
-    /// gap re-request rounds (default 0.5 s; a list fetch waits less once it has measured
+    /// Time to wait for a PARAM_VALUE after a read, a set or a PARAM_REQUEST_LIST, and the
+    /// longest wait between gap re-request rounds (default 0.5 s; a list fetch waits less once it has measured
     /// the round trip: `srtt + 4 × rttvar`, at least 20 ms).
     pub timeout: Duration,
     /// Resends of a read or set, PARAM_REQUEST_LIST resends, and re-request rounds in a
