@@ -44,7 +44,6 @@ pymavlink alone (PymavlinkVehicle: ArduPilot-like, C-cast parameters, MISSION_IT
 import argparse
 import math
 import os
-import socket
 import struct
 import subprocess
 import sys
@@ -54,6 +53,9 @@ import time
 os.environ["MAVLINK20"] = "1"
 os.environ.setdefault("MAVLINK_DIALECT", "ardupilotmega")
 from pymavlink import mavutil, mavwp  # noqa: E402
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from gcs_common import free_udp_port as free_port  # noqa: E402
 
 M = mavutil.mavlink
 HOME = (-35.363261, 149.165230)
@@ -69,14 +71,6 @@ def check(cond, msg):
     if not cond:
         fail(msg)
     return cond
-
-
-def free_port():
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 class Session:

@@ -22,7 +22,7 @@ use mavstack_services::command::{Command, CommandClient, CommandError, CommandEv
 use mavstack_services::heartbeat::HeartbeatConfig;
 use mavstack_services::mission::{MissionClient, MissionConfig, MissionEvent};
 use mavstack_services::param::{
-    Encoding, Name, Param, ParamClient, ParamConfig, ParamEvent, ParamRef, Value,
+    Encoding, Name, Param, ParamClient, ParamConfig, ParamEvent, ParamHandle, ParamRef, Value,
 };
 use mavstack_services::{Address, Service};
 use mavstack_transport::channel_protocol::{
@@ -497,6 +497,16 @@ async fn read_param(
 ) -> Result<Param, Failure> {
     let target = remote.target();
     let handle = client.read(remote.now(), target, ParamRef::Name(name));
+    finish_param(remote, client, handle, name).await
+}
+
+/// Drives `client` until the read or set `handle` ends.
+async fn finish_param(
+    remote: &mut Remote,
+    client: &mut ParamClient,
+    handle: ParamHandle,
+    name: Name,
+) -> Result<Param, Failure> {
     let result = remote
         .run(client, Duration::from_secs(30), |c| {
             core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
@@ -534,15 +544,7 @@ pub(crate) async fn set_param(
     let handle = client
         .set(remote.now(), target, name, typed)
         .map_err(other)?;
-    let result = remote
-        .run(client, Duration::from_secs(30), |c| {
-            core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
-                ParamEvent::Finished { handle: h, result } if h == handle => Some(result),
-                _ => None,
-            })
-        })
-        .await?;
-    result.map_err(|e| other(format!("{name}: {e}")))
+    finish_param(remote, client, handle, name).await
 }
 
 fn name_arg(text: &str) -> Result<Name, Failure> {

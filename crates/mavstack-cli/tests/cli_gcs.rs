@@ -3,36 +3,19 @@
 //! implementations: `interop_services.rs` (pymavlink as the ground station and as the
 //! vehicle) and `interop_gcs.rs` (MAVProxy, MAVSDK).
 
+mod vehicle;
+
 use std::net::UdpSocket;
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Command, Output};
 
 use serde_json::Value;
-
-struct Vehicle(Child);
-
-impl Drop for Vehicle {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
+use vehicle::Vehicle;
 
 fn free_port() -> u16 {
     UdpSocket::bind("127.0.0.1:0")
         .and_then(|s| s.local_addr())
         .expect("a free port")
         .port()
-}
-
-fn vehicle(port: u16, extra: &[&str]) -> Vehicle {
-    let child = Command::new(env!("CARGO_BIN_EXE_mavstack"))
-        .args(["vehicle", &format!("udpin:127.0.0.1:{port}")])
-        .args(extra)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("vehicle starts");
-    Vehicle(child)
 }
 
 fn gcs(port: u16, args: &[&str]) -> Output {
@@ -79,16 +62,13 @@ fn params_list_get_set_and_save_round_trip() {
         })
         .collect();
     std::fs::write(&file, lines).expect("write");
-    let port = free_port();
-    let _v = vehicle(
-        port,
-        &[
-            "--autopilot",
-            "px4",
-            "--params",
-            file.to_str().expect("utf-8"),
-        ],
-    );
+    let v = Vehicle::start(&[
+        "--autopilot",
+        "px4",
+        "--params",
+        file.to_str().expect("utf-8"),
+    ]);
+    let port = v.port;
     let list = json_lines(&ok(&gcs(port, &["param", "list", "--json"])));
     assert_eq!(list.len(), 150);
     assert_eq!(list[7]["name"], "P_007");
@@ -131,8 +111,8 @@ fn missions_upload_download_clear_in_both_formats() {
          3\t0\t3\t20\t0\t0\t0\t0\t0\t0\t0\t1\n",
     )
     .expect("write");
-    let port = free_port();
-    let _v = vehicle(port, &[]);
+    let v = Vehicle::start(&[]);
+    let port = v.port;
     let up = ok(&gcs(
         port,
         &["mission", "upload", wpl.to_str().expect("utf-8")],
@@ -184,8 +164,8 @@ fn missions_upload_download_clear_in_both_formats() {
 
 #[test]
 fn commands_arm_fly_and_report_refusals() {
-    let port = free_port();
-    let _v = vehicle(port, &["--autopilot", "ardupilot"]);
+    let v = Vehicle::start(&["--autopilot", "ardupilot"]);
+    let port = v.port;
     let armed = json_lines(&ok(&gcs(port, &["command", "arm", "--json"])));
     assert_eq!(armed[0]["result"], "ACCEPTED");
     assert_eq!(armed[0]["command"], 400);

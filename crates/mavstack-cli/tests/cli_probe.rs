@@ -2,27 +2,14 @@
 //! the handshake over the signed link; with another key it finds no system (every frame it
 //! gets fails verification). pymavlink's side of signing is in `interop_versions.rs`.
 
-use std::net::UdpSocket;
-use std::process::{Child, Command, Output, Stdio};
+mod vehicle;
+
+use std::process::{Command, Output};
+
+use vehicle::Vehicle;
 
 const KEY: &str = "000102030405060708090a0b0c0d0e0f101112131415161718191a1b1c1d1e1f";
 const OTHER: &str = "1111111111111111111111111111111111111111111111111111111111111111";
-
-struct Vehicle(Child);
-
-impl Drop for Vehicle {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn free_port() -> u16 {
-    UdpSocket::bind("127.0.0.1:0")
-        .and_then(|s| s.local_addr())
-        .expect("a free port")
-        .port()
-}
 
 fn probe(port: u16, key: &str) -> Output {
     Command::new(env!("CARGO_BIN_EXE_mavstack"))
@@ -39,20 +26,8 @@ fn probe(port: u16, key: &str) -> Output {
 
 #[test]
 fn probe_with_the_key_handshakes_with_a_signing_vehicle_and_without_it_finds_nothing() {
-    let port = free_port();
-    let _vehicle = Vehicle(
-        Command::new(env!("CARGO_BIN_EXE_mavstack"))
-            .args([
-                "vehicle",
-                &format!("udpin:127.0.0.1:{port}"),
-                "--sign-key",
-                KEY,
-            ])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("vehicle runs"),
-    );
+    let vehicle = Vehicle::start(&["--sign-key", KEY]);
+    let port = vehicle.port;
     let out = probe(port, KEY);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(

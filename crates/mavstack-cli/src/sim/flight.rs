@@ -508,15 +508,7 @@ impl Flight {
     /// Where an item's coordinates point (its own where given, else here).
     fn item_position(&self, item: &MissionItemInt) -> Position {
         let here = self.position;
-        let global = matches!(
-            item.frame,
-            MavFrame::GLOBAL
-                | MavFrame::GLOBAL_INT
-                | MavFrame::GLOBAL_RELATIVE_ALT
-                | MavFrame::GLOBAL_RELATIVE_ALT_INT
-                | MavFrame::GLOBAL_TERRAIN_ALT
-                | MavFrame::GLOBAL_TERRAIN_ALT_INT
-        );
+        let global = crate::mission_file::is_global(item.frame);
         let (lat, lon) = if global && (item.x != 0 || item.y != 0) {
             (f64::from(item.x) / 1e7, f64::from(item.y) / 1e7)
         } else {
