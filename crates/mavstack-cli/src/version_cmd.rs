@@ -315,11 +315,7 @@ pub(crate) async fn run_vehicle(
                 continue;
             }
             ChannelEventKind::PeerAdded(_) => {
-                let hello = ChannelCommand::Send {
-                    dest: Dest::Peer(peer),
-                    message: RawMessage::of(&sim.heartbeat()),
-                };
-                conn.send(hello).await.map_err(other)?;
+                sim.greet(service_time(start));
                 continue;
             }
             _ => continue,

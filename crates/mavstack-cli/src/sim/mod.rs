@@ -722,10 +722,15 @@ impl Vehicle {
         self.log.pop_front()
     }
 
-    /// Our HEARTBEAT as of now, for a peer that just appeared (it need not wait for the
-    /// next one of the stream).
-    pub(crate) fn heartbeat(&self) -> MavMessage {
-        MavMessage::Heartbeat(self.commands.handler().heartbeat())
+    /// A peer appeared: restart the HEARTBEAT stream so that it goes out now (the new peer
+    /// need not wait up to a second to find us) and every interval from now on.
+    pub(crate) fn greet(&mut self, now: Instant) {
+        let streams = &mut self.craft().streams;
+        if let Some(every) = streams.interval(Heartbeat::ID) {
+            // HEARTBEAT is always supported.
+            let _ = streams.set_interval(now, Heartbeat::ID, Interval::Every(every));
+        }
+        self.settle(now);
     }
 
     /// The parameter table's size.
