@@ -179,37 +179,59 @@ def read_param_file(path):
 
 def upload(mp, path, n, timeout, attempts=1):
     """`wp load`; returns (seconds, attempts used) once the vehicle's MISSION_ACK is ACCEPTED.
-    MAVProxy never resends MISSION_COUNT (nor notices a lost final MISSION_ACK), so on a lossy
-    link the whole upload is started again."""
+    MAVProxy never resends MISSION_COUNT (nor notices that the vehicle gave up, or a lost
+    final MISSION_ACK), so with attempts > 1 the whole upload is started again when the
+    vehicle's log says it abandoned the upload, or after `timeout` without the ACK."""
     t = time.monotonic()
+    ack = r"Got MISSION_ACK: (?:TYPE_)?MISSION: (\w+)"
     for attempt in range(1, attempts + 1):
+        abandoned = mp.vehicle.log(10**9).count("upload abandoned")
         mp.cmd(f"wp load {path}")
         mp.expect(rf"Loaded {n} waypoints from", 10, "wp load: reading the file")
-        if attempt == attempts:
-            _, m = mp.expect(r"Got MISSION_ACK: (?:TYPE_)?MISSION: (\w+)", timeout,
-                             f"wp load: MISSION_ACK for {n} items (attempt {attempt})")
+        if attempts == 1:
+            _, m = mp.expect(ack, timeout, f"wp load: MISSION_ACK for {n} items")
         else:
-            try:
-                mp.p.expect(r"Got MISSION_ACK: (?:TYPE_)?MISSION: (\w+)", timeout=timeout)
-                m = mp.p.match
-            except pexpect.TIMEOUT:
+            m, t_try = None, time.monotonic()
+            while m is None and time.monotonic() - t_try < timeout:
+                try:
+                    mp.p.expect(ack, timeout=0.5)
+                    m = mp.p.match
+                except pexpect.TIMEOUT:
+                    if mp.vehicle.log(10**9).count("upload abandoned") > abandoned:
+                        break
+            if m is None:
                 continue
         if m.group(1) != "ACCEPTED":
             fail(f"wp load: the vehicle answered MISSION_ACK {m.group(1)} to {n} items")
         return round(time.monotonic() - t, 3), attempt
-    fail("unreachable")
+    fail(f"wp load: no MISSION_ACK ACCEPTED for {n} items after {attempts} attempts\n"
+         f"--- MAVProxy (tail) ---\n{mp.tail()}\n--- vehicle (tail) ---\n{mp.vehicle.log(1500)}")
 
 
-def download(mp, path, n, timeout):
-    if os.path.exists(path):
-        os.remove(path)
-    mp.cmd(f"wp save {path}")
+def download(mp, path, n, timeout, attempts=1):
+    """`wp save PATH` (MISSION_REQUEST_LIST, then MAVProxy requests the items and re-requests
+    missing ones itself); returns (seconds, attempts). MAVProxy never resends
+    MISSION_REQUEST_LIST, so with attempts > 1 it is sent again when no MISSION_COUNT came."""
     t = time.monotonic()
-    _, m = mp.expect(rf"Saved (\d+) waypoints to {re.escape(path)}", timeout,
-                     f"wp save: download of {n} items")
-    if int(m.group(1)) != n:
-        fail(f"wp save: downloaded {m.group(1)} items, expected {n}")
-    return round(time.monotonic() - t, 3)
+    for attempt in range(1, attempts + 1):
+        if os.path.exists(path):
+            os.remove(path)
+        mp.cmd(f"wp save {path}")
+        if attempt < attempts:
+            try:
+                mp.p.expect(r"Requesting (\d+) waypoints", timeout=3)
+            except pexpect.TIMEOUT:
+                continue
+        else:
+            mp.expect(r"Requesting (\d+) waypoints", 3, "wp save: MISSION_COUNT")
+        if int(mp.p.match.group(1)) != n:
+            fail(f"wp save: the vehicle announced {mp.p.match.group(1)} items, expected {n}")
+        _, m = mp.expect(rf"Saved (\d+) waypoints to {re.escape(path)}", timeout,
+                         f"wp save: download of {n} items")
+        if int(m.group(1)) != n:
+            fail(f"wp save: downloaded {m.group(1)} items, expected {n}")
+        return round(time.monotonic() - t, 3), attempt
+    fail(f"wp save: no MISSION_COUNT after {attempts} MISSION_REQUEST_LISTs\n{mp.tail()}")
 
 
 def tlog_frames(path):
@@ -323,7 +345,7 @@ def full(binary, keep):
         write_qgc_wpl(mission, items)
         secs, _ = upload(mp, mission, len(items), 20)
         back = os.path.join(work, "downloaded.txt")
-        dsecs = download(mp, back, len(items), 20)
+        dsecs, _ = download(mp, back, len(items), 20)
         compare_missions(read_qgc_wpl(mission), read_qgc_wpl(back), "wp load/save")
         summary.update(wp_items=len(items), wp_upload_s=secs, wp_download_s=dsecs)
 
@@ -390,16 +412,26 @@ def bench_run(binary, n_params, n_items, loss, seed, work):
         if n < n_params:
             fail(f"bench: the vehicle reports {n} parameters, the --params file has {n_params}")
         res.update(params=n, param_fetch_s=secs)
+        saved = os.path.join(work, "fetched.parm")
+        mp.cmd(f"param save {saved}")
+        mp.expect(r"Saved (\d+) parameters to", 30, "param save")
+        values = read_param_file(saved)
+        wrong = [(k, v, values.get(k)) for k, v in params.items()
+                 if k not in values or abs(values[k] - v) > 1e-3]
+        if wrong:
+            fail(f"bench: {len(wrong)} parameters differ from the --params file, first "
+                 f"(name, file, fetched): {wrong[:5]}")
         items = survey_mission(n_items)
         mission = os.path.join(work, "bench-mission.txt")
         write_qgc_wpl(mission, items)
-        secs, attempts = upload(mp, mission, len(items), 30 + n_items * (0.1 if loss else 0.02),
-                                attempts=10 if loss else 1)
+        secs, attempts = upload(mp, mission, len(items), 30 + n_items * (0.3 if loss else 0.02),
+                                attempts=30 if loss else 1)
         back = os.path.join(work, "bench-downloaded.txt")
-        dsecs = download(mp, back, len(items), 60 + n_items * (0.2 if loss else 0.02))
+        dsecs, dattempts = download(mp, back, len(items), 60 + n_items * (1.5 if loss else 0.02),
+                                   attempts=10 if loss else 1)
         compare_missions(read_qgc_wpl(mission), read_qgc_wpl(back), "bench mission")
         res.update(items=len(items), wp_upload_s=secs, wp_upload_attempts=attempts,
-                   wp_download_s=dsecs)
+                   wp_download_s=dsecs, wp_download_attempts=dattempts)
         vehicle.check_alive()
     finally:
         if mp is not None:
@@ -413,6 +445,8 @@ def bench_run(binary, n_params, n_items, loss, seed, work):
 
 def bench(binary, n_params, n_items, losses, seed, keep):
     runs = []
+    if keep:
+        os.makedirs(keep, exist_ok=True)
     for loss in losses:
         work = tempfile.mkdtemp(prefix=f"gcs-mavproxy-bench-{loss}-", dir=keep)
         runs.append(bench_run(binary, n_params, n_items, loss, seed, work))

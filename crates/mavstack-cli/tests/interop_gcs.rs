@@ -9,6 +9,9 @@
 //!   mission download, upload of a QGC WPL 110 file and download again (compared), arm, and
 //!   `signing setup` on a `--secure` vehicle followed by a fetch that only signed frames can
 //!   complete (and every vehicle frame in MAVProxy's log signed with its key);
+//! - `gcs_mavproxy.py --bench 1000 500 --loss 0`: MAVProxy fetches the 1,000 parameters of a
+//!   generated `--params` file (every value compared) and uploads and downloads a 500-item
+//!   mission (compared), with timings;
 //! - `gcs_mavsdk.py --api native`: MAVSDK's native Python binding `mavsdk` 4.1.0 (ctypes over
 //!   libcmavsdk);
 //! - `gcs_mavsdk.py --api grpc`: `mavsdk-grpc` 4.0.5 with its bundled `mavsdk_server`;
@@ -95,6 +98,14 @@ fn run(name: &str, args: &[&str]) -> String {
 #[test]
 fn mavproxy_params_missions_arm_and_signing() {
     run("gcs_mavproxy.py", &[]);
+}
+
+#[test]
+fn mavproxy_fetches_1000_parameters_from_a_file_and_moves_a_500_item_mission() {
+    run(
+        "gcs_mavproxy.py",
+        &["--bench", "1000", "500", "--loss", "0"],
+    );
 }
 
 #[test]
