@@ -178,33 +178,41 @@ def read_param_file(path):
 
 
 def upload(mp, path, n, timeout, attempts=1):
-    """`wp load`; returns (seconds, attempts used) once the vehicle's MISSION_ACK is ACCEPTED.
-    MAVProxy never resends MISSION_COUNT (nor notices that the vehicle gave up, or a lost
-    final MISSION_ACK), so with attempts > 1 the whole upload is started again when the
-    vehicle's log says it abandoned the upload, or after `timeout` without the ACK."""
+    """`wp load`; returns (seconds, attempts used, how it ended). With attempts == 1 (a clean
+    link) MAVProxy must print the vehicle's MISSION_ACK ACCEPTED. On a lossy link MAVProxy
+    1.8.75 cannot finish on its own every time: it never resends MISSION_COUNT, and once it has
+    sent the last item it ignores the vehicle's re-requests for it (loading_waypoints is
+    cleared), so a lost last item, or a lost final MISSION_ACK, ends the transfer on one side
+    only. There the upload counts as done when MAVProxy prints the ACK or the vehicle's log
+    says it stored the N items, and is started again when the vehicle's log says it abandoned
+    it (or after `timeout`)."""
     t = time.monotonic()
     ack = r"Got MISSION_ACK: (?:TYPE_)?MISSION: (\w+)"
+    stored = f"plan stored: {n} items"
     for attempt in range(1, attempts + 1):
-        abandoned = mp.vehicle.log(10**9).count("upload abandoned")
+        log = mp.vehicle.log(10**9)
+        abandoned, stores = log.count("upload abandoned"), log.count(stored)
         mp.cmd(f"wp load {path}")
         mp.expect(rf"Loaded {n} waypoints from", 10, "wp load: reading the file")
         if attempts == 1:
             _, m = mp.expect(ack, timeout, f"wp load: MISSION_ACK for {n} items")
-        else:
-            m, t_try = None, time.monotonic()
-            while m is None and time.monotonic() - t_try < timeout:
-                try:
-                    mp.p.expect(ack, timeout=0.5)
-                    m = mp.p.match
-                except pexpect.TIMEOUT:
-                    if mp.vehicle.log(10**9).count("upload abandoned") > abandoned:
-                        break
-            if m is None:
-                continue
-        if m.group(1) != "ACCEPTED":
-            fail(f"wp load: the vehicle answered MISSION_ACK {m.group(1)} to {n} items")
-        return round(time.monotonic() - t, 3), attempt
-    fail(f"wp load: no MISSION_ACK ACCEPTED for {n} items after {attempts} attempts\n"
+            if m.group(1) != "ACCEPTED":
+                fail(f"wp load: the vehicle answered MISSION_ACK {m.group(1)} to {n} items")
+            return round(time.monotonic() - t, 3), attempt, "ack"
+        t_try = time.monotonic()
+        while time.monotonic() - t_try < timeout:
+            try:
+                mp.p.expect(ack, timeout=0.5)
+                if mp.p.match.group(1) != "ACCEPTED":
+                    fail(f"wp load: the vehicle answered MISSION_ACK {mp.p.match.group(1)}")
+                return round(time.monotonic() - t, 3), attempt, "ack"
+            except pexpect.TIMEOUT:
+                log = mp.vehicle.log(10**9)
+                if log.count(stored) > stores:
+                    return round(time.monotonic() - t, 3), attempt, "vehicle stored (ACK lost)"
+                if log.count("upload abandoned") > abandoned:
+                    break
+    fail(f"wp load: {n} items not stored after {attempts} attempts\n"
          f"--- MAVProxy (tail) ---\n{mp.tail()}\n--- vehicle (tail) ---\n{mp.vehicle.log(1500)}")
 
 
@@ -343,7 +351,7 @@ def full(binary, keep):
         items = survey_mission(12)
         mission = os.path.join(work, "mission.txt")
         write_qgc_wpl(mission, items)
-        secs, _ = upload(mp, mission, len(items), 20)
+        secs, _, _ = upload(mp, mission, len(items), 20)
         back = os.path.join(work, "downloaded.txt")
         dsecs, _ = download(mp, back, len(items), 20)
         compare_missions(read_qgc_wpl(mission), read_qgc_wpl(back), "wp load/save")
@@ -424,13 +432,15 @@ def bench_run(binary, n_params, n_items, loss, seed, work):
         items = survey_mission(n_items)
         mission = os.path.join(work, "bench-mission.txt")
         write_qgc_wpl(mission, items)
-        secs, attempts = upload(mp, mission, len(items), 30 + n_items * (0.3 if loss else 0.02),
-                                attempts=30 if loss else 1)
+        budget = 30 + n_items * (0.3 if loss else 0.02)
+        secs, attempts, ended = upload(mp, mission, len(items), budget,
+                                       attempts=30 if loss else 1)
         back = os.path.join(work, "bench-downloaded.txt")
         dsecs, dattempts = download(mp, back, len(items), 60 + n_items * (1.5 if loss else 0.02),
                                    attempts=10 if loss else 1)
         compare_missions(read_qgc_wpl(mission), read_qgc_wpl(back), "bench mission")
         res.update(items=len(items), wp_upload_s=secs, wp_upload_attempts=attempts,
+                   wp_upload_end=ended,
                    wp_download_s=dsecs, wp_download_attempts=dattempts)
         vehicle.check_alive()
     finally:
