@@ -177,7 +177,7 @@ def read_param_file(path):
     return out
 
 
-def upload(mp, path, n, timeout, attempts=1):
+def upload(mp, path, n, timeout, attempts=1, last_request=None):
     """`wp load`; returns (seconds, attempts used, how it ended). With attempts == 1 (a clean
     link) MAVProxy must print the vehicle's MISSION_ACK ACCEPTED. On a lossy link MAVProxy
     1.8.75 cannot finish on its own every time: it never resends MISSION_COUNT, and once it has
@@ -185,7 +185,8 @@ def upload(mp, path, n, timeout, attempts=1):
     cleared), so a lost last item, or a lost final MISSION_ACK, ends the transfer on one side
     only. There the upload counts as done when MAVProxy prints the ACK or the vehicle's log
     says it stored the N items, and is started again when the vehicle's log says it abandoned
-    it (or after `timeout`)."""
+    it, when no MISSION_REQUEST from the vehicle got through for 3 s (`last_request()`, the
+    relay's tap: a lost MISSION_COUNT), or after `timeout`."""
     t = time.monotonic()
     ack = r"Got MISSION_ACK: (?:TYPE_)?MISSION: (\w+)"
     stored = f"plan stored: {n} items"
@@ -211,6 +212,9 @@ def upload(mp, path, n, timeout, attempts=1):
                 if log.count(stored) > stores:
                     return round(time.monotonic() - t, 3), attempt, "vehicle stored (ACK lost)"
                 if log.count("upload abandoned") > abandoned:
+                    break
+                quiet_since = max(t_try, last_request() if last_request else t_try)
+                if last_request and time.monotonic() - quiet_since > 3.0:
                     break
     fail(f"wp load: {n} items not stored after {attempts} attempts\n"
          f"--- MAVProxy (tail) ---\n{mp.tail()}\n--- vehicle (tail) ---\n{mp.vehicle.log(1500)}")
@@ -404,8 +408,17 @@ def bench_run(binary, n_params, n_items, loss, seed, work):
     write_params_file(params_file, params)
     gcs_port = free_udp_port()
     relay = None
+    heard = {"request": 0.0}
+
+    def tap(way, data, dropped):
+        # a MISSION_REQUEST(_INT) (ids 40, 51) from the vehicle that reaches MAVProxy
+        if way == "up" and not dropped and len(data) > 10 and data[0] == 0xFD:
+            if int.from_bytes(data[7:10], "little") in (40, 51):
+                heard["request"] = time.monotonic()
+
     if loss > 0:
-        relay = LossyRelay(("127.0.0.1", 0), ("127.0.0.1", gcs_port), loss=loss, seed=seed).start()
+        relay = LossyRelay(("127.0.0.1", 0), ("127.0.0.1", gcs_port), loss=loss, seed=seed,
+                           tap=tap).start()
         vport = relay.listen_port
     else:
         vport = gcs_port
@@ -434,7 +447,8 @@ def bench_run(binary, n_params, n_items, loss, seed, work):
         write_qgc_wpl(mission, items)
         budget = 30 + n_items * (0.3 if loss else 0.02)
         secs, attempts, ended = upload(mp, mission, len(items), budget,
-                                       attempts=30 if loss else 1)
+                                       attempts=30 if loss else 1,
+                                       last_request=(lambda: heard["request"]) if loss else None)
         back = os.path.join(work, "bench-downloaded.txt")
         dsecs, dattempts = download(mp, back, len(items), 60 + n_items * (1.5 if loss else 0.02),
                                    attempts=10 if loss else 1)

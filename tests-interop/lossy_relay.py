@@ -40,7 +40,10 @@ def _addr(text):
 class LossyRelay:
     """Relays datagrams between one near peer and one far address, dropping some."""
 
-    def __init__(self, listen, forward, loss=0.2, seed=1, loss_up=None, loss_down=None):
+    def __init__(self, listen, forward, loss=0.2, seed=1, loss_up=None, loss_down=None,
+                 tap=None):
+        # tap(way, datagram, dropped), if given, sees every datagram ("up": near -> far)
+        self.tap = tap
         self.forward = forward
         self.loss_up = loss if loss_up is None else loss_up  # near -> far
         self.loss_down = loss if loss_down is None else loss_down  # far -> near
@@ -103,7 +106,10 @@ class LossyRelay:
         st = self.stats[way]
         st["datagrams"] += 1
         st["bytes"] += len(data)
-        if rng.random() < loss:
+        dropped = rng.random() < loss
+        if self.tap is not None:
+            self.tap(way, data, dropped)
+        if dropped:
             st["dropped"] += 1
             return
         try:
