@@ -42,8 +42,8 @@ pub struct MissionConfig {
     /// Time to wait for the first answer (default 1.5 s).
     pub timeout: Duration,
     /// The longest wait for the next item or request while items flow (default 250 ms).
-    /// The client waits less once it has measured the round trip (`srtt + 4 × rttvar`,
-    /// at least 20 ms, RFC 6298's estimator with Karn's rule); the server always waits this.
+    /// Both roles wait less once they have measured the round trip (`srtt + 4 × rttvar`,
+    /// at least 20 ms, RFC 6298's estimator with Karn's rule).
     pub item_timeout: Duration,
     /// Resends before giving up (default 5).
     pub retries: u8,
@@ -889,6 +889,9 @@ struct Receiving {
     items: Vec<MissionItemInt>,
     attempts: u8,
     deadline: Instant,
+    /// When the pending request was sent, and whether more than once.
+    sent: Instant,
+    resent: bool,
 }
 
 /// The server side of the mission protocol: stores the mission, fence and rally plans.
@@ -899,6 +902,8 @@ pub struct MissionServer {
     plans: [Vec<MissionItemInt>; 3],
     current: u16,
     receiving: Option<Receiving>,
+    /// The round trip of our requests (uploads from ground stations that never resend).
+    rtt: Rtt,
     /// The last completed upload (peer, type, count), to re-ACK a resent last item.
     last_upload: Option<(Address, MavMissionType, u16)>,
     out: VecDeque<Outgoing>,
@@ -924,6 +929,7 @@ impl MissionServer {
             plans: [Vec::new(), Vec::new(), Vec::new()],
             current: 0,
             receiving: None,
+            rtt: Rtt::default(),
             last_upload: None,
             out: VecDeque::new(),
             events: VecDeque::new(),
@@ -1010,7 +1016,9 @@ impl MissionServer {
             count: c.count,
             items: Vec::with_capacity(usize::from(c.count)),
             attempts: 1,
-            deadline: now + self.config.item_timeout,
+            deadline: now + self.rtt.timeout(self.config.item_timeout),
+            sent: now,
+            resent: false,
         });
         self.send(from, request_int(from, ty, 0));
     }
@@ -1035,13 +1043,18 @@ impl MissionServer {
             // resending because our request was lost (a copy the link made gets a second
             // request, whose answer we drop in turn).
             if item.seq > expected || item.seq.saturating_add(1) == expected {
+                (r.sent, r.resent) = (now, true);
                 self.send(from, request_int(from, ty, expected));
             }
             return;
         }
         r.items.push(*item);
+        if !r.resent {
+            self.rtt.sample(r.sent, now);
+        }
         r.attempts = 1;
-        r.deadline = now + self.config.item_timeout;
+        r.deadline = now + self.rtt.timeout(self.config.item_timeout);
+        (r.sent, r.resent) = (now, false);
         if r.items.len() < usize::from(r.count) {
             self.send(from, request_int(from, ty, expected + 1));
             return;
@@ -1234,7 +1247,7 @@ impl Service for MissionServer {
 
     fn handle_timeout(&mut self, now: Instant) {
         let retries = self.config.retries;
-        let wait = self.config.item_timeout;
+        let wait = self.rtt.timeout(self.config.item_timeout);
         let Some(r) = self.receiving.as_mut().filter(|r| now >= r.deadline) else {
             return;
         };
@@ -1247,6 +1260,7 @@ impl Service for MissionServer {
         }
         r.attempts += 1;
         r.deadline = now + wait;
+        (r.sent, r.resent) = (now, true);
         let (peer, ty) = (r.peer, r.mission_type);
         let seq = u16::try_from(r.items.len()).unwrap_or(u16::MAX);
         self.send(peer, request_int(peer, ty, seq));
