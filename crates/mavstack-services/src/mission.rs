@@ -803,8 +803,9 @@ impl Service for MissionClient {
         };
         let (target, ty) = (r.target, r.mission_type);
         let retries = self.config.retries;
-        let wait = self.config.timeout;
-        let item_wait = self.item_wait();
+        let wait = Some(self.config.timeout);
+        // `None`: an item's wait, the round trip's timeout backing off with each resend.
+        let item_wait = None;
         (r.sent, r.resent) = (now, true);
         // (attempts so far, message to resend, wait)
         let (attempts, resend, wait) = match &mut r.op {
@@ -841,7 +842,8 @@ impl Service for MissionClient {
         }
         *attempts += 1;
         let (deadline, w) = wait;
-        *deadline = now + w;
+        let item_timeout = self.config.item_timeout;
+        *deadline = now + w.unwrap_or_else(|| self.rtt.backoff(item_timeout, *attempts));
         self.out.push_back(Outgoing {
             target,
             message: resend,
@@ -892,6 +894,9 @@ struct Receiving {
     /// When the pending request was sent, and whether more than once.
     sent: Instant,
     resent: bool,
+    /// When the last item arrived (or the count): the upload is abandoned after
+    /// [`MissionServer::patience`] without one.
+    progress_at: Instant,
 }
 
 /// The server side of the mission protocol: stores the mission, fence and rally plans.
@@ -960,6 +965,15 @@ impl MissionServer {
         true
     }
 
+    /// How long an upload may go without an item before it is abandoned: `timeout ×
+    /// (retries + 1)`, 9 s by default (ArduPilot allows about 8 s). Ground stations such as
+    /// MAVProxy never resend an item, so the server's re-requests (which back off from the
+    /// measured round trip to `item_timeout`) are all that moves a lossy upload on.
+    #[must_use]
+    pub fn patience(&self) -> Duration {
+        self.config.timeout * (u32::from(self.config.retries) + 1)
+    }
+
     /// Whether an upload is in progress.
     #[must_use]
     pub fn is_receiving(&self) -> bool {
@@ -1019,6 +1033,7 @@ impl MissionServer {
             deadline: now + self.rtt.timeout(self.config.item_timeout),
             sent: now,
             resent: false,
+            progress_at: now,
         });
         self.send(from, request_int(from, ty, 0));
     }
@@ -1055,6 +1070,7 @@ impl MissionServer {
         r.attempts = 1;
         r.deadline = now + self.rtt.timeout(self.config.item_timeout);
         (r.sent, r.resent) = (now, false);
+        r.progress_at = now;
         if r.items.len() < usize::from(r.count) {
             self.send(from, request_int(from, ty, expected + 1));
             return;
@@ -1247,19 +1263,22 @@ impl Service for MissionServer {
 
     fn handle_timeout(&mut self, now: Instant) {
         let retries = self.config.retries;
-        let wait = self.rtt.timeout(self.config.item_timeout);
+        let patience = self.patience();
         let Some(r) = self.receiving.as_mut().filter(|r| now >= r.deadline) else {
             return;
         };
-        if r.attempts > retries {
+        if r.attempts > retries && now.saturating_duration_since(r.progress_at) >= patience {
             let ty = r.mission_type;
             self.receiving = None;
             self.events
                 .push_back(MissionServerEvent::UploadAbandoned { mission_type: ty });
             return;
         }
-        r.attempts += 1;
-        r.deadline = now + wait;
+        r.attempts = r.attempts.saturating_add(1);
+        let wait = self.rtt.backoff(self.config.item_timeout, r.attempts);
+        r.deadline = (now + wait)
+            .min(r.progress_at + patience)
+            .max(now + Rtt::FLOOR);
         (r.sent, r.resent) = (now, true);
         let (peer, ty) = (r.peer, r.mission_type);
         let seq = u16::try_from(r.items.len()).unwrap_or(u16::MAX);

@@ -47,6 +47,17 @@ impl Rtt {
     }
 }
 
+impl Rtt {
+    /// The wait before send number `attempt` (1 = the first) is given up on: the timeout,
+    /// doubled for each resend already made (RFC 6298's back-off), at most `ceiling`.
+    pub(crate) fn backoff(&self, ceiling: Duration, attempt: u8) -> Duration {
+        let doublings = u32::from(attempt.saturating_sub(1)).min(16);
+        self.timeout(ceiling)
+            .saturating_mul(1 << doublings)
+            .min(ceiling)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -68,5 +79,19 @@ mod tests {
         assert!(t > Duration::from_millis(100) && t <= ceiling, "{t:?}");
         rtt.sample(t0, t0 + Duration::from_secs(5));
         assert_eq!(rtt.timeout(ceiling), ceiling);
+    }
+
+    #[test]
+    fn backoff_doubles_up_to_the_ceiling() {
+        let mut rtt = Rtt::default();
+        let t0 = Instant::from_millis(1000);
+        for _ in 0..20 {
+            rtt.sample(t0, t0 + Duration::from_millis(1));
+        }
+        let ceiling = Duration::from_millis(250);
+        let waits: alloc::vec::Vec<u128> = (1..=6)
+            .map(|a| rtt.backoff(ceiling, a).as_millis())
+            .collect();
+        assert_eq!(waits, [20, 40, 80, 160, 250, 250]);
     }
 }

@@ -247,11 +247,17 @@ fn sim_silent_client_makes_the_server_give_up_unchanged() {
         }),
     );
     let mut requests = 0;
+    let mut gave_up = T0;
     while let Some(t) = s.poll_timeout() {
         requests += core::iter::from_fn(|| s.poll_transmit()).count();
         s.handle_timeout(t);
+        gave_up = t;
     }
-    assert_eq!(requests, 6);
+    // Re-requests every 250 ms (no round trip measured) until 9 s without an item:
+    // ground stations like MAVProxy never resend, so the server's patience is ArduPilot's.
+    assert_eq!(s.patience(), Duration::from_secs(9));
+    assert_eq!(gave_up, T0 + Duration::from_secs(9));
+    assert_eq!(requests, 36);
     assert_eq!(
         s.poll_event(),
         Some(MissionServerEvent::UploadAbandoned {
