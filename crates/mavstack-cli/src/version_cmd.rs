@@ -315,7 +315,13 @@ pub(crate) async fn run_vehicle(
                 continue;
             }
             ChannelEventKind::PeerAdded(_) => {
-                sim.greet(service_time(start));
+                if let Some(hello) = sim.greeting(service_time(start)) {
+                    let hello = ChannelCommand::Send {
+                        dest: Dest::Peer(peer),
+                        message: RawMessage::of(&hello),
+                    };
+                    conn.send(hello).await.map_err(other)?;
+                }
                 continue;
             }
             _ => continue,

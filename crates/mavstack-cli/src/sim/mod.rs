@@ -35,6 +35,9 @@ use self::flight::{Flight, FlightEvent, HOME_AMSL, Position, Tuning};
 use self::modes::{Behaviour, Mode};
 use crate::version_cmd::Autopilot;
 
+/// Peers that appear later than this after the start get a HEARTBEAT of their own.
+const GREETING_AFTER: Duration = Duration::from_millis(100);
+
 /// How often the craft's model advances.
 const STEP: Duration = Duration::from_millis(50);
 
@@ -493,6 +496,8 @@ pub(crate) struct Vehicle {
     out: VecDeque<Outgoing>,
     log: VecDeque<String>,
     next_step: Instant,
+    /// When the vehicle started.
+    started: Instant,
 }
 
 impl Vehicle {
@@ -530,6 +535,7 @@ impl Vehicle {
             out: VecDeque::new(),
             log: VecDeque::new(),
             next_step: now,
+            started: now,
         };
         vehicle.retune();
         vehicle
@@ -722,15 +728,12 @@ impl Vehicle {
         self.log.pop_front()
     }
 
-    /// A peer appeared: restart the HEARTBEAT stream so that it goes out now (the new peer
-    /// need not wait up to a second to find us) and every interval from now on.
-    pub(crate) fn greet(&mut self, now: Instant) {
-        let streams = &mut self.craft().streams;
-        if let Some(every) = streams.interval(Heartbeat::ID) {
-            // HEARTBEAT is always supported.
-            let _ = streams.set_interval(now, Heartbeat::ID, Interval::Every(every));
-        }
-        self.settle(now);
+    /// What to send a peer that just appeared: our HEARTBEAT at once, so that it need not
+    /// wait up to a second to find us — except in the first moments, when the stream's own
+    /// first HEARTBEAT reaches the peers a link starts with (a `udpout` destination).
+    pub(crate) fn greeting(&self, now: Instant) -> Option<MavMessage> {
+        (now.saturating_duration_since(self.started) >= GREETING_AFTER)
+            .then(|| MavMessage::Heartbeat(self.commands.handler().heartbeat()))
     }
 
     /// The parameter table's size.
