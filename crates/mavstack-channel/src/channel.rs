@@ -150,6 +150,8 @@ pub struct Channel<L = CommonCrc> {
     peer_protocol_version: Option<ProtocolVersion>,
     mavlink2_received: bool,
     input_pending: bool,
+    /// The buffered input ends a datagram: nothing after it belongs to its frames.
+    datagram_end: bool,
     last_input_at: Instant,
     seqs: SeqTable,
     stats: LinkStats,
@@ -178,6 +180,7 @@ impl<L: CrcExtra> Channel<L> {
                 version: VehicleVersion::Mavlink2,
                 ..
             })
+            | Role::Relay(VehicleVersion::Mavlink2)
             | Role::GroundStation(GroundPolicy::Mavlink2) => Version::V2,
             _ if config.signing.is_some() => Version::V2,
             _ => Version::V1,
@@ -199,6 +202,7 @@ impl<L: CrcExtra> Channel<L> {
             peer_protocol_version: None,
             mavlink2_received: false,
             input_pending: false,
+            datagram_end: false,
             last_input_at: Instant::ZERO,
             seqs: SeqTable::new(),
             stats: LinkStats::default(),
@@ -229,6 +233,23 @@ impl<L: CrcExtra> Channel<L> {
             taken += n;
             self.input_pending = true;
         }
+    }
+
+    /// Feeds one whole UDP datagram (or another input whose end is a frame boundary), like
+    /// [`handle_input`](Self::handle_input), and returns how many bytes were taken. Once all of
+    /// it is taken, an incomplete frame at its end is dropped (counted as skipped bytes) at
+    /// once instead of waiting for bytes that will never come, so a truncated datagram never
+    /// delays the next one. Call again with the rest after draining
+    /// [`poll_event`](Self::poll_event) if fewer were taken.
+    #[must_use = "bytes not taken must be fed again after draining poll_event"]
+    pub fn handle_datagram(&mut self, now: Instant, data: &[u8]) -> usize {
+        let taken = self.handle_input(now, data);
+        if taken == data.len() {
+            self.datagram_end = true;
+            self.input_pending = true;
+            self.process_buffered();
+        }
+        taken
     }
 
     /// Lets time pass: call at (or after) the instant [`poll_timeout`](Self::poll_timeout)
@@ -375,6 +396,27 @@ impl<L: CrcExtra> Channel<L> {
         self.write(now, &info, payload, Framing::Link, out)
     }
 
+    /// Appends this link's signature to a MAVLink 2 frame someone else wrote (a router
+    /// forwarding a frame onto a signed link): `out[..len]` holds the frame with its signed
+    /// flag set and its checksum computed over that flag. The signature uses the link's
+    /// primary key, link id and next timestamp, as [`send`](Self::send) does. Returns the
+    /// signed frame's length, or `None` when the link does not sign or `out` has no room for
+    /// the 13 signature bytes.
+    pub fn sign_frame(&mut self, now: Instant, out: &mut [u8], len: usize) -> Option<usize> {
+        let s = self.signing.as_mut()?;
+        let timestamp = s.next_timestamp(now);
+        let signed = append_signature(
+            out,
+            len,
+            s.config.link_id,
+            timestamp,
+            s.config.primary_key(),
+        )
+        .ok()?;
+        self.stats.sent += 1;
+        Some(signed)
+    }
+
     // ----- the handshake ---------------------------------------------------------------
 
     /// Starts the ground-station handshake with `target` at `now`: the request goes out
@@ -449,7 +491,8 @@ impl<L: CrcExtra> Channel<L> {
         }
     }
 
-    /// Whether the link accepts MAVLink 2 (all but a vehicle with MAVLink 2 disabled).
+    /// Whether the link accepts MAVLink 2 (all but a vehicle or relay with MAVLink 2
+    /// disabled).
     #[must_use]
     pub const fn accepts_mavlink2(&self) -> bool {
         !matches!(
@@ -457,7 +500,7 @@ impl<L: CrcExtra> Channel<L> {
             Role::Vehicle(VehiclePolicy {
                 version: VehicleVersion::Mavlink1Only,
                 ..
-            })
+            }) | Role::Relay(VehicleVersion::Mavlink1Only)
         )
     }
 
@@ -606,8 +649,14 @@ impl<L: CrcExtra> Channel<L> {
                 return false;
             }
             let lookup = WithBuiltins(&self.lookup);
-            let Some(item) = self.deframer.next_item(&lookup) else {
+            let item = if self.datagram_end {
+                self.deframer.finish(&lookup)
+            } else {
+                self.deframer.next_item(&lookup)
+            };
+            let Some(item) = item else {
                 self.input_pending = false;
+                self.datagram_end = false;
                 return true;
             };
             let (view, known) = match item {
@@ -627,7 +676,7 @@ impl<L: CrcExtra> Channel<L> {
             Ok(auth) => auth,
             Err(reason) => return self.reject(now, &frame, reason),
         };
-        if known && frame.msg_id() == SetupSigning::ID {
+        if known && frame.msg_id() == SetupSigning::ID && !matches!(self.role, Role::Relay(_)) {
             return self.handle_setup_signing(now, &frame);
         }
         self.stats.accepted += 1;
@@ -729,6 +778,7 @@ impl<L: CrcExtra> Channel<L> {
             self.mavlink2_received = true;
             let switches = match self.role {
                 Role::Vehicle(p) => p.version == VehicleVersion::StartMavlink1,
+                Role::Relay(v) => v == VehicleVersion::StartMavlink1,
                 Role::GroundStation(p) => p == GroundPolicy::Automatic,
             };
             if switches {

@@ -82,6 +82,12 @@ pub enum Role {
     Vehicle(VehiclePolicy),
     /// A ground station (or any component that runs the handshake).
     GroundStation(GroundPolicy),
+    /// A router's link: it forwards what others send and speaks for nobody. It never answers
+    /// or starts a handshake, and delivers SETUP_SIGNING as an ordinary frame (the router
+    /// decides where it may go). The version policy is a vehicle's: MAVLink 1 only
+    /// ([`VehicleVersion::Mavlink1Only`]), MAVLink 1 until the peer's first MAVLink 2 frame
+    /// ([`VehicleVersion::StartMavlink1`]), or MAVLink 2 from the start.
+    Relay(VehicleVersion),
 }
 
 /// The setup of one link.
@@ -139,6 +145,26 @@ impl Config {
         }
     }
 
+    /// A router's link `(system_id, component_id)` with version policy `version`; no
+    /// signing; not secure. The ids are the router's own, used for frames it sends itself.
+    ///
+    /// ```
+    /// use mavstack_channel::{Channel, Config, LinkVersion, VehicleVersion};
+    /// let link = Channel::new(Config::relay(1, 191, VehicleVersion::Mavlink2)).unwrap();
+    /// assert_eq!(link.version(), LinkVersion::Mavlink2);
+    /// ```
+    #[must_use]
+    pub fn relay(system_id: u8, component_id: u8, version: VehicleVersion) -> Self {
+        Self {
+            system_id,
+            component_id,
+            role: Role::Relay(version),
+            signing: None,
+            secure: false,
+            handshake: HandshakeConfig::default(),
+        }
+    }
+
     /// The vehicle policy, to adjust it (`None` for a ground station).
     ///
     /// ```
@@ -151,11 +177,12 @@ impl Config {
     pub const fn vehicle_policy_mut(&mut self) -> Option<&mut VehiclePolicy> {
         match &mut self.role {
             Role::Vehicle(policy) => Some(policy),
-            Role::GroundStation(_) => None,
+            Role::GroundStation(_) | Role::Relay(_) => None,
         }
     }
 
-    /// Whether the link accepts MAVLink 2 (every role but a vehicle with MAVLink 2 disabled).
+    /// Whether the link accepts MAVLink 2 (every role but a vehicle or relay with MAVLink 2
+    /// disabled).
     #[must_use]
     pub const fn accepts_mavlink2(&self) -> bool {
         !matches!(
@@ -163,7 +190,7 @@ impl Config {
             Role::Vehicle(VehiclePolicy {
                 version: VehicleVersion::Mavlink1Only,
                 ..
-            })
+            }) | Role::Relay(VehicleVersion::Mavlink1Only)
         )
     }
 

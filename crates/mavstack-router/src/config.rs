@@ -1,0 +1,211 @@
+//! How the router and each of its links are set up.
+
+use alloc::string::String;
+use alloc::vec::Vec;
+use core::time::Duration;
+
+use mavstack_channel::{Config as ChannelConfig, SigningConfig, VehicleVersion};
+
+/// Which framing a link carries (the `version` link option).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum VersionMode {
+    /// `version=1`: MAVLink 1 only. MAVLink 2 frames are converted to MAVLink 1 (base fields);
+    /// ids above 255 cannot go.
+    Mavlink1,
+    /// `version=2`: MAVLink 2 from the start. MAVLink 1 frames are converted.
+    Mavlink2,
+    /// `version=auto`: the peer decides. Frames go out in the framing they arrived in until
+    /// the peer's first MAVLink 2 frame; from then on the link is MAVLink 2.
+    #[default]
+    Auto,
+}
+
+impl VersionMode {
+    /// The channel's version policy for this mode.
+    #[must_use]
+    pub const fn channel_policy(self) -> VehicleVersion {
+        match self {
+            Self::Mavlink1 => VehicleVersion::Mavlink1Only,
+            Self::Mavlink2 => VehicleVersion::Mavlink2,
+            Self::Auto => VehicleVersion::StartMavlink1,
+        }
+    }
+}
+
+/// An allow list and a block list of numbers (message ids, system or component ids).
+/// A value passes when it is not blocked and, if there is an allow list, on it.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct IdFilter {
+    /// Only these pass (`None`: every value not blocked passes).
+    pub allow: Option<Vec<u32>>,
+    /// These never pass.
+    pub block: Vec<u32>,
+}
+
+impl IdFilter {
+    /// Whether `value` passes.
+    #[must_use]
+    pub fn passes(&self, value: u32) -> bool {
+        !self.block.contains(&value) && self.allow.as_ref().is_none_or(|a| a.contains(&value))
+    }
+
+    /// Whether the filter lets everything through.
+    #[must_use]
+    pub fn is_open(&self) -> bool {
+        self.allow.is_none() && self.block.is_empty()
+    }
+}
+
+/// Filters of one direction of a link, on the message id and the source system and
+/// component ids.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct DirectionFilters {
+    /// On the message id.
+    pub msg: IdFilter,
+    /// On the source system id.
+    pub src_sys: IdFilter,
+    /// On the source component id.
+    pub src_comp: IdFilter,
+}
+
+impl DirectionFilters {
+    /// Whether a frame of message `msg_id` from `(sysid, compid)` passes.
+    #[must_use]
+    pub fn passes(&self, msg_id: u32, sysid: u8, compid: u8) -> bool {
+        self.msg.passes(msg_id)
+            && self.src_sys.passes(u32::from(sysid))
+            && self.src_comp.passes(u32::from(compid))
+    }
+
+    /// Whether nothing is filtered.
+    #[must_use]
+    pub fn is_open(&self) -> bool {
+        self.msg.is_open() && self.src_sys.is_open() && self.src_comp.is_open()
+    }
+}
+
+/// Rate limits on what a link sends. Control traffic ([`crate::is_control`]) is never
+/// limited.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct RateLimits {
+    /// `(message id, maximum frames per second)`: per source (sysid, compid), frames of that
+    /// message closer together than `1 / rate` are dropped.
+    pub per_message: Vec<(u32, u32)>,
+    /// A byte budget per second for the whole link (a slow radio); telemetry that does not
+    /// fit is dropped. Control traffic always goes and uses the budget up.
+    pub bytes_per_s: Option<u32>,
+}
+
+/// One link of the router.
+///
+/// ```
+/// use mavstack_router::{LinkConfig, VersionMode};
+/// let mut legacy = LinkConfig::new("legacy");
+/// legacy.version = VersionMode::Mavlink1;
+/// legacy.filters_out.msg.block.push(30); // no ATTITUDE for it
+/// ```
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub struct LinkConfig {
+    /// Its name in statistics and logs.
+    pub name: String,
+    /// The framing it carries.
+    pub version: VersionMode,
+    /// Signing: `Some` makes it a signed MAVLink 2 link (every frame out signed, every frame
+    /// in verified and fresh).
+    pub signing: Option<SigningConfig>,
+    /// SETUP_SIGNING may be forwarded from this link.
+    pub secure: bool,
+    /// Unsigned frames from this link may be signed onto signed links. A link with a key is
+    /// trusted for the frames that verify on it.
+    pub trusted: bool,
+    /// Filters on what the link receives.
+    pub filters_in: DirectionFilters,
+    /// Filters on what the link sends.
+    pub filters_out: DirectionFilters,
+    /// Rate limits on what it sends.
+    pub limits: RateLimits,
+    /// How many frames may wait to be sent, per priority (default 1024 telemetry, 256
+    /// control). More are dropped and counted (`queue_full`).
+    pub queue_frames: usize,
+}
+
+impl LinkConfig {
+    /// A link named `name` with every default: `version=auto`, no key, not secure, not
+    /// trusted, no filters, no limits.
+    #[must_use]
+    pub fn new(name: impl Into<String>) -> Self {
+        Self {
+            name: name.into(),
+            version: VersionMode::Auto,
+            signing: None,
+            secure: false,
+            trusted: false,
+            filters_in: DirectionFilters::default(),
+            filters_out: DirectionFilters::default(),
+            limits: RateLimits::default(),
+            queue_frames: 1024,
+        }
+    }
+
+    /// The channel setup of this link for a router with ids `(sysid, compid)`.
+    #[must_use]
+    pub fn channel_config(&self, sysid: u8, compid: u8) -> ChannelConfig {
+        let mut config = ChannelConfig::relay(sysid, compid, self.version.channel_policy());
+        config.signing.clone_from(&self.signing);
+        config.secure = self.secure;
+        config
+    }
+}
+
+/// How the router as a whole behaves.
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub struct RouterConfig {
+    /// The router's own system id, used for the frames its links send themselves (default
+    /// 1; a router sends none unless a node's services do).
+    pub system_id: u8,
+    /// The router's own component id (default 191, MAV_COMP_ID_ONBOARD_COMPUTER... an
+    /// onboard router).
+    pub component_id: u8,
+    /// A route not refreshed for this long is forgotten (default 30 s).
+    pub route_ttl: Duration,
+    /// A system heard on a second link replaces the first one only if it has not been heard
+    /// there for this long (default 1 s); otherwise both links lead to it (redundant paths,
+    /// or an echo that must not cut it off).
+    pub route_move_after: Duration,
+    /// Drop a frame whose exact bytes were seen within this window; each sighting renews it
+    /// (default off).
+    pub dedup: Option<Duration>,
+    /// Entries in the dedup table (default 8192; older entries are evicted first).
+    pub dedup_capacity: usize,
+    /// Frames for the router itself ([`crate::Event::Local`]): none, the ones addressed to
+    /// it or broadcast, or every frame (a sniffer).
+    pub local: LocalDelivery,
+}
+
+/// Which frames the router hands to its own component.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum LocalDelivery {
+    /// None (a pure router).
+    #[default]
+    None,
+    /// Broadcasts and frames addressed to the router's system (and component).
+    Addressed,
+    /// Every accepted frame.
+    All,
+}
+
+impl Default for RouterConfig {
+    fn default() -> Self {
+        Self {
+            system_id: 1,
+            component_id: 191,
+            route_ttl: Duration::from_secs(30),
+            route_move_after: Duration::from_secs(1),
+            dedup: None,
+            dedup_capacity: 8192,
+            local: LocalDelivery::None,
+        }
+    }
+}

@@ -1,0 +1,617 @@
+//! The [`Router`]: many links, learned routes, forwarding with conversion.
+
+use alloc::collections::VecDeque;
+use alloc::vec::Vec;
+use core::time::Duration;
+
+use mavstack_channel::{
+    Channel, ConfigError, Event as ChannelEvent, LinkVersion, ReceivedFrame, Rejected,
+};
+use mavstack_core::message::Message as _;
+use mavstack_core::signing;
+use mavstack_core::time::Instant;
+use mavstack_core::wire::MAX_FRAME_LEN;
+use mavstack_dialects::common::SetupSigning;
+
+use crate::config::{LinkConfig, LocalDelivery, RouterConfig, VersionMode};
+use crate::convert::{self, Origin, Plan};
+use crate::dedup::Dedup;
+use crate::dialect::{Dialect, is_control, target_of};
+use crate::limit::Limiter;
+use crate::queue::OutQueue;
+use crate::route::{Route, Routes};
+use crate::stats::{Counters, DropReason, LinkMode, LinkStatus};
+
+/// How many events wait for [`Router::poll_event`]; more are dropped and counted
+/// ([`Router::events_dropped`]).
+pub const EVENT_CAPACITY: usize = 4096;
+/// How often routes are swept for expiry.
+const SWEEP: Duration = Duration::from_secs(1);
+
+/// A link's handle within one router. Ids of removed links are reused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct LinkId(u32);
+
+impl LinkId {
+    /// The id with index `n`.
+    #[must_use]
+    pub const fn new(n: u32) -> Self {
+        Self(n)
+    }
+
+    /// Its index.
+    #[must_use]
+    pub const fn index(self) -> usize {
+        self.0 as usize
+    }
+}
+
+impl core::fmt::Display for LinkId {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "link {}", self.0)
+    }
+}
+
+/// What the router reports.
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub enum Event {
+    /// A frame for the router's own component (see [`RouterConfig::local`]).
+    Local {
+        /// The link it came from.
+        link: LinkId,
+        /// The frame.
+        frame: ReceivedFrame,
+    },
+    /// A link's version changed (an auto link's peer sent its first MAVLink 2 frame).
+    VersionChanged {
+        /// The link.
+        link: LinkId,
+        /// Before.
+        from: LinkVersion,
+        /// After.
+        to: LinkVersion,
+    },
+    /// A signed link asks for its signing timestamp to be stored (see the channel's
+    /// `Event::PersistTimestamp`).
+    PersistTimestamp {
+        /// The link.
+        link: LinkId,
+        /// The value to store.
+        timestamp: u64,
+    },
+    /// A link's channel refused a frame (bad signature, replay, unsigned on a signed link).
+    Rejected {
+        /// The link.
+        link: LinkId,
+        /// What and why.
+        rejected: Rejected,
+    },
+}
+
+/// A frame to send: `buf[..len]` onto `link`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[must_use = "the frame is in the buffer and must be sent"]
+pub struct Transmit {
+    /// The link.
+    pub link: LinkId,
+    /// The frame's length.
+    pub len: usize,
+}
+
+struct LinkState<D> {
+    config: LinkConfig,
+    channel: Channel<D>,
+    queue: OutQueue,
+    limiter: Limiter,
+    counters: Counters,
+    ready: bool,
+}
+
+impl<D: Dialect> LinkState<D> {
+    fn mode(&self) -> LinkMode {
+        if self.channel.signing().is_some() {
+            return LinkMode::Signed;
+        }
+        match (self.config.version, self.channel.version()) {
+            (VersionMode::Mavlink1, _) => LinkMode::Mavlink1,
+            (VersionMode::Mavlink2, _) | (VersionMode::Auto, LinkVersion::Mavlink2) => {
+                LinkMode::Mavlink2
+            }
+            (VersionMode::Auto, _) => LinkMode::Auto,
+        }
+    }
+}
+
+/// The sans-IO state of a router: a [`Channel`] per link (its version, signing and
+/// statistics), learned routes, and a bounded queue per link.
+///
+/// Bytes come in with [`handle_datagram`](Self::handle_datagram) (a whole UDP datagram) or
+/// [`handle_input`](Self::handle_input) (a piece of a stream), time with
+/// [`handle_timeout`](Self::handle_timeout); frames to send come out of
+/// [`poll_transmit`](Self::poll_transmit) (or per link,
+/// [`poll_link_transmit`](Self::poll_link_transmit)), events out of
+/// [`poll_event`](Self::poll_event). It never reads a clock, sleeps or touches a socket, and
+/// does not allocate per frame once its tables have grown.
+///
+/// ```
+/// use mavstack_core::time::Instant;
+/// use mavstack_router::{DialectInfo, LinkConfig, Router, RouterConfig, VersionMode};
+/// use mavstack_dialects::common::MavMessage;
+///
+/// let mut router = Router::new(RouterConfig::default(), DialectInfo::<MavMessage>::new());
+/// let vehicle = router.add_link(LinkConfig::new("vehicle")).unwrap();
+/// let mut legacy = LinkConfig::new("legacy");
+/// legacy.version = VersionMode::Mavlink1;
+/// let legacy = router.add_link(legacy).unwrap();
+///
+/// // The protocol digest's golden MAVLink 2 HEARTBEAT, from the vehicle.
+/// let hb = [0xfd, 9, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0, 0, 0, 2, 12, 0x51, 4, 3, 0x1b, 0x74];
+/// router.handle_datagram(Instant::from_secs(1), vehicle, &hb);
+/// let mut buf = [0u8; 280];
+/// let t = router.poll_transmit(&mut buf).unwrap();
+/// assert_eq!(t.link, legacy);
+/// // ...converted to MAVLink 1, the digest's golden MAVLink 1 HEARTBEAT.
+/// assert_eq!(&buf[..t.len], [0xfe, 9, 0, 1, 1, 0, 0, 0, 0, 0, 2, 12, 0x51, 4, 3, 0x81, 0xb7]);
+/// ```
+pub struct Router<D> {
+    config: RouterConfig,
+    dialect: D,
+    links: Vec<Option<LinkState<D>>>,
+    routes: Routes,
+    dedup: Option<Dedup>,
+    events: VecDeque<Event>,
+    events_dropped: u64,
+    ready: VecDeque<LinkId>,
+    scratch: Vec<LinkId>,
+    next_sweep: Option<Instant>,
+}
+
+impl<D: Dialect> Router<D> {
+    /// A router with no links.
+    #[must_use]
+    pub fn new(config: RouterConfig, dialect: D) -> Self {
+        let dedup = config.dedup.map(|w| Dedup::new(config.dedup_capacity, w));
+        Self {
+            config,
+            dialect,
+            links: Vec::new(),
+            routes: Routes::default(),
+            dedup,
+            events: VecDeque::new(),
+            events_dropped: 0,
+            ready: VecDeque::new(),
+            scratch: Vec::new(),
+            next_sweep: None,
+        }
+    }
+
+    /// The router's settings.
+    #[must_use]
+    pub const fn config(&self) -> &RouterConfig {
+        &self.config
+    }
+
+    // ----- links -----------------------------------------------------------------------
+
+    /// Adds a link (a serial port, a UDP peer, a TCP client...).
+    ///
+    /// # Errors
+    /// [`ConfigError`] if its channel cannot be set up (signing with `version=1`).
+    pub fn add_link(&mut self, config: LinkConfig) -> Result<LinkId, ConfigError> {
+        let channel = Channel::with_lookup(
+            config.channel_config(self.config.system_id, self.config.component_id),
+            self.dialect.clone(),
+        )?;
+        let state = LinkState {
+            limiter: Limiter::new(&config.limits),
+            config,
+            channel,
+            queue: OutQueue::default(),
+            counters: Counters::default(),
+            ready: false,
+        };
+        let index = match self.links.iter().position(Option::is_none) {
+            Some(i) => {
+                self.links[i] = Some(state);
+                i
+            }
+            None => {
+                self.links.push(Some(state));
+                self.links.len() - 1
+            }
+        };
+        // Fewer than 2^32 links exist at once.
+        Ok(LinkId(u32::try_from(index).unwrap_or(u32::MAX)))
+    }
+
+    /// Removes a link (its peer went away): its routes and queued frames go with it.
+    /// Returns its final status counters, or `None` for an unknown id.
+    pub fn remove_link(&mut self, link: LinkId) -> Option<Counters> {
+        let state = self.links.get_mut(link.index())?.take()?;
+        self.routes.remove_link(link);
+        self.ready.retain(|&l| l != link);
+        Some(state.counters)
+    }
+
+    /// The ids of the links there are now.
+    pub fn links(&self) -> impl Iterator<Item = LinkId> + '_ {
+        self.links
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| l.is_some())
+            .map(|(i, _)| LinkId(u32::try_from(i).unwrap_or(u32::MAX)))
+    }
+
+    /// A snapshot of a link's state and counters.
+    #[must_use]
+    pub fn link_status(&self, link: LinkId) -> Option<LinkStatus<'_>> {
+        let l = self.link(link)?;
+        Some(LinkStatus {
+            name: &l.config.name,
+            mode: l.mode(),
+            counters: l.counters,
+            channel: l.channel.stats(),
+            queued: l.queue.len(),
+        })
+    }
+
+    /// A link's channel (its version, signing state, per-source sequence statistics).
+    #[must_use]
+    pub fn channel(&self, link: LinkId) -> Option<&Channel<D>> {
+        self.link(link).map(|l| &l.channel)
+    }
+
+    /// A link's setup.
+    #[must_use]
+    pub fn link_config(&self, link: LinkId) -> Option<&LinkConfig> {
+        self.link(link).map(|l| &l.config)
+    }
+
+    /// The learned routes.
+    pub fn routes(&self) -> impl Iterator<Item = Route> + '_ {
+        self.routes.iter()
+    }
+
+    /// Events dropped because nobody drained [`poll_event`](Self::poll_event).
+    #[must_use]
+    pub const fn events_dropped(&self) -> u64 {
+        self.events_dropped
+    }
+
+    fn link(&self, link: LinkId) -> Option<&LinkState<D>> {
+        self.links.get(link.index())?.as_ref()
+    }
+
+    fn link_mut(&mut self, link: LinkId) -> Option<&mut LinkState<D>> {
+        self.links.get_mut(link.index())?.as_mut()
+    }
+
+    // ----- input -----------------------------------------------------------------------
+
+    /// Feeds one whole datagram received on `link` at `now` (UDP: frames never span two
+    /// datagrams, so an incomplete frame at its end is dropped at once). Unknown links are
+    /// ignored.
+    pub fn handle_datagram(&mut self, now: Instant, link: LinkId, data: &[u8]) {
+        self.feed(now, link, data, true);
+    }
+
+    /// Feeds the next piece of a byte stream received on `link` (TCP, serial).
+    pub fn handle_input(&mut self, now: Instant, link: LinkId, data: &[u8]) {
+        self.feed(now, link, data, false);
+    }
+
+    fn feed(&mut self, now: Instant, id: LinkId, mut data: &[u8], datagram: bool) {
+        if self.next_sweep.is_none() {
+            self.next_sweep = Some(now + SWEEP);
+        }
+        loop {
+            let Some(l) = self.link_mut(id) else { return };
+            let n = if datagram {
+                l.channel.handle_datagram(now, data)
+            } else {
+                l.channel.handle_input(now, data)
+            };
+            data = &data[n..];
+            let drained = self.drain_channel(now, id);
+            if data.is_empty() || (n == 0 && !drained) {
+                return;
+            }
+        }
+    }
+
+    /// Handles every event of `id`'s channel; returns whether there was any.
+    fn drain_channel(&mut self, now: Instant, id: LinkId) -> bool {
+        let mut any = false;
+        loop {
+            let Some(event) = self.link_mut(id).and_then(|l| l.channel.poll_event()) else {
+                return any;
+            };
+            any = true;
+            match event {
+                ChannelEvent::Frame(frame) => self.route(now, id, &frame),
+                ChannelEvent::Rejected(rejected) => {
+                    self.push_event(Event::Rejected { link: id, rejected });
+                }
+                ChannelEvent::VersionChanged { from, to, .. } => {
+                    self.push_event(Event::VersionChanged { link: id, from, to });
+                }
+                ChannelEvent::PersistTimestamp { timestamp } => {
+                    self.push_event(Event::PersistTimestamp {
+                        link: id,
+                        timestamp,
+                    });
+                }
+                _ => {}
+            }
+        }
+    }
+
+    fn push_event(&mut self, event: Event) {
+        if self.events.len() >= EVENT_CAPACITY {
+            self.events_dropped += 1;
+        } else {
+            self.events.push_back(event);
+        }
+    }
+
+    /// Routes one accepted frame from `src`.
+    fn route(&mut self, now: Instant, src: LinkId, received: &ReceivedFrame) {
+        let frame = received.frame.view();
+        let (sysid, compid, msg_id) = (frame.sysid(), frame.compid(), frame.msg_id());
+        let Some(l) = self.link_mut(src) else { return };
+        l.counters.rx_frames += 1;
+        l.counters.rx_bytes += frame.frame_len() as u64;
+        if !l.config.filters_in.passes(msg_id, sysid, compid) {
+            l.counters.dropped.count(DropReason::Filtered);
+            return;
+        }
+        let origin = Origin {
+            trusted: l.config.trusted,
+            verified: received.auth.is_authenticated(),
+        };
+        let secure = l.config.secure;
+        if sysid != 0 && compid != 0 {
+            self.routes
+                .learn(now, (sysid, compid), src, self.config.route_move_after);
+        }
+        let info = if received.crc_checked {
+            self.dialect.info(msg_id)
+        } else {
+            None
+        };
+        let (tsys, tcomp) = target_of(info.as_ref(), frame.payload());
+        let duplicate = self
+            .dedup
+            .as_mut()
+            .is_some_and(|d| d.seen(now, frame.as_bytes()));
+
+        let mut dests = core::mem::take(&mut self.scratch);
+        dests.clear();
+        let own = (self.config.system_id, self.config.component_id);
+        let for_us = tsys == 0 || (tsys == own.0 && (tcomp == 0 || tcomp == own.1));
+        if tsys == 0 {
+            dests.extend(self.links().filter(|&l| l != src));
+        } else {
+            let known = self
+                .routes
+                .links_to(now, self.config.route_ttl, tsys, tcomp, &mut dests);
+            dests.retain(|&l| l != src);
+            let local = self.config.local != LocalDelivery::None && tsys == own.0;
+            if !known
+                && !local
+                && let Some(l) = self.link_mut(src)
+            {
+                l.counters.dropped.count(DropReason::UnknownTarget);
+            }
+        }
+        if msg_id == SetupSigning::ID && (!secure || tsys == 0) {
+            // Never broadcast, and only from a link marked secure.
+            for &d in &dests {
+                if let Some(l) = self.link_mut(d) {
+                    l.counters.dropped.count(DropReason::SetupSigning);
+                }
+            }
+            dests.clear();
+        }
+        if duplicate {
+            for &d in &dests {
+                if let Some(l) = self.link_mut(d) {
+                    l.counters.dropped.count(DropReason::Duplicate);
+                }
+            }
+        } else {
+            let control = is_control(msg_id);
+            for &d in &dests {
+                self.forward(now, d, received, info.as_ref(), origin, control);
+            }
+            let deliver = match self.config.local {
+                LocalDelivery::None => false,
+                LocalDelivery::Addressed => for_us,
+                LocalDelivery::All => true,
+            };
+            if deliver {
+                self.push_event(Event::Local {
+                    link: src,
+                    frame: received.clone(),
+                });
+            }
+        }
+        self.scratch = dests;
+    }
+
+    /// Puts one frame onto link `dst`, converted as its framing needs.
+    fn forward(
+        &mut self,
+        now: Instant,
+        dst: LinkId,
+        received: &ReceivedFrame,
+        info: Option<&mavstack_core::MessageInfo>,
+        origin: Origin,
+        control: bool,
+    ) {
+        let frame = received.frame.view();
+        let Some(out) = self.link_mut(dst) else {
+            return;
+        };
+        let (sysid, compid, msg_id) = (frame.sysid(), frame.compid(), frame.msg_id());
+        if !out.config.filters_out.passes(msg_id, sysid, compid) {
+            return out.counters.dropped.count(DropReason::Filtered);
+        }
+        if !control && !out.limiter.allow_message(now, sysid, compid, msg_id) {
+            return out.counters.dropped.count(DropReason::RateLimited);
+        }
+        let mode = out.mode();
+        let channel = &out.channel;
+        let verifies_here = || {
+            channel
+                .signing()
+                .is_some_and(|s| signing::verify(&frame, s.primary_key()).is_ok())
+        };
+        let plan = match convert::plan(&frame, info.is_some(), mode, origin, verifies_here) {
+            Ok(plan) => plan,
+            Err(reason) => return out.counters.dropped.count(reason),
+        };
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        let bytes: &[u8] = match (plan, info) {
+            (Plan::AsIs, _) => frame.as_bytes(),
+            (Plan::Reframe { version, sign }, Some(info)) => {
+                let len = match convert::reframe(&frame, info, version, sign, &mut buf) {
+                    Ok(len) => len,
+                    Err(reason) => return out.counters.dropped.count(reason),
+                };
+                let signature = if sign {
+                    mavstack_core::wire::SIGNATURE_LEN
+                } else {
+                    0
+                };
+                if !out.limiter.spend(now, len + signature, control) {
+                    return out.counters.dropped.count(DropReason::RateLimited);
+                }
+                let len = if sign {
+                    match out.channel.sign_frame(now, &mut buf, len) {
+                        Some(len) => len,
+                        None => return out.counters.dropped.count(DropReason::CannotConvert),
+                    }
+                } else {
+                    len
+                };
+                convert::count(&mut out.counters.conversions, &frame, version, sign);
+                out.counters.converted += 1;
+                &buf[..len]
+            }
+            (Plan::Reframe { .. }, None) => {
+                return out.counters.dropped.count(DropReason::CannotConvert);
+            }
+        };
+        if plan == Plan::AsIs && !out.limiter.spend(now, bytes.len(), control) {
+            return out.counters.dropped.count(DropReason::RateLimited);
+        }
+        if !out.queue.push(control, bytes, out.config.queue_frames) {
+            return out.counters.dropped.count(DropReason::QueueFull);
+        }
+        if plan == Plan::AsIs {
+            out.counters.unchanged += 1;
+        }
+        out.counters.tx_frames += 1;
+        out.counters.tx_bytes += bytes.len() as u64;
+        if !out.ready {
+            out.ready = true;
+            self.ready.push_back(dst);
+        }
+    }
+
+    // ----- output ----------------------------------------------------------------------
+
+    /// Moves the next frame to send into `buf`: links take turns, each link's control
+    /// traffic first. Call until `None` after every `handle_*`.
+    pub fn poll_transmit(&mut self, buf: &mut [u8; MAX_FRAME_LEN]) -> Option<Transmit> {
+        while let Some(link) = self.ready.pop_front() {
+            let Some(l) = self.link_mut(link) else {
+                continue;
+            };
+            let Some(len) = l.queue.pop_into(buf) else {
+                l.ready = false;
+                continue;
+            };
+            if l.queue.is_empty() {
+                l.ready = false;
+            } else {
+                self.ready.push_back(link);
+            }
+            return Some(Transmit { link, len });
+        }
+        None
+    }
+
+    /// Moves the next frame for `link` into `buf` (for a driver that writes per socket).
+    pub fn poll_link_transmit(
+        &mut self,
+        link: LinkId,
+        buf: &mut [u8; MAX_FRAME_LEN],
+    ) -> Option<usize> {
+        self.link_mut(link)?.queue.pop_into(buf)
+    }
+
+    /// Whether `link` has frames waiting.
+    #[must_use]
+    pub fn has_transmits(&self, link: LinkId) -> bool {
+        self.link(link).is_some_and(|l| !l.queue.is_empty())
+    }
+
+    /// The next event, or `None`.
+    #[must_use]
+    pub fn poll_event(&mut self) -> Option<Event> {
+        self.events.pop_front()
+    }
+
+    // ----- time ------------------------------------------------------------------------
+
+    /// When to call [`handle_timeout`](Self::handle_timeout) next.
+    #[must_use]
+    pub fn poll_timeout(&self) -> Option<Instant> {
+        let channels = self
+            .links
+            .iter()
+            .flatten()
+            .filter_map(|l| l.channel.poll_timeout())
+            .min();
+        let sweep = self.next_sweep.filter(|_| !self.routes.is_empty());
+        match (channels, sweep) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// Lets time pass: expires quiet routes, runs the links' timers.
+    pub fn handle_timeout(&mut self, now: Instant) {
+        if self.next_sweep.is_some_and(|t| now >= t) {
+            self.routes.expire(now, self.config.route_ttl);
+            self.next_sweep = Some(now + SWEEP);
+        }
+        let ids: Vec<LinkId> = self
+            .links()
+            .filter(|&id| {
+                self.link(id)
+                    .and_then(|l| l.channel.poll_timeout())
+                    .is_some_and(|t| now >= t)
+            })
+            .collect();
+        for id in ids {
+            if let Some(l) = self.link_mut(id) {
+                l.channel.handle_timeout(now);
+            }
+            self.drain_channel(now, id);
+        }
+    }
+}
+
+impl<D> core::fmt::Debug for Router<D> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Router")
+            .field("links", &self.links.iter().flatten().count())
+            .field("routes", &self.routes.len())
+            .field("events", &self.events.len())
+            .finish_non_exhaustive()
+    }
+}
