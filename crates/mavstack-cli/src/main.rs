@@ -11,6 +11,7 @@ mod gcs_cmd;
 mod json_frames;
 mod link_cmd;
 mod mission_file;
+mod router_cmd;
 mod sim;
 mod version_cmd;
 
@@ -68,6 +69,9 @@ enum Command {
     /// Send a command (arm, takeoff, mode, any MAV_CMD) and print its acknowledgement.
     #[command(name = "command")]
     Cmd(gcs_cmd::CommandArgs),
+    /// Forward between many links, each with its own MAVLink version and signing, converting
+    /// where they differ (runs until interrupted).
+    Router(router_cmd::RouterArgs),
 }
 
 /// A failure with the exit code it maps to.
@@ -116,6 +120,7 @@ fn main() -> ExitCode {
         Command::Param { action } => gcs_cmd::param(action),
         Command::Mission { action } => gcs_cmd::mission(action),
         Command::Cmd(args) => gcs_cmd::command(&args),
+        Command::Router(args) => router_cmd::router(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

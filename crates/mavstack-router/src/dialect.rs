@@ -66,6 +66,32 @@ impl<M: MessageSet> Dialect for DialectInfo<M> {
     }
 }
 
+/// The facts of whatever dialect a function knows: a plain `fn` pointer, so that the
+/// dialect can be chosen at run time (e.g. by name on a command line).
+///
+/// ```
+/// use mavstack_core::MessageSet as _;
+/// use mavstack_router::{Dialect, InfoFn};
+/// let apm = InfoFn(|id| mavstack_dialects::common::MavMessage::info(id).copied());
+/// assert_eq!(apm.info(0).map(|i| i.crc_extra), Some(50));
+/// ```
+#[derive(Clone, Copy, Debug)]
+pub struct InfoFn(pub fn(u32) -> Option<MessageInfo>);
+
+impl CrcExtra for InfoFn {
+    #[inline]
+    fn crc_extra(&self, id: u32) -> Option<u8> {
+        (self.0)(id).map(|info| info.crc_extra)
+    }
+}
+
+impl Dialect for InfoFn {
+    #[inline]
+    fn info(&self, id: u32) -> Option<MessageInfo> {
+        (self.0)(id)
+    }
+}
+
 /// The target `(system, component)` of a frame's payload as transmitted: read through the
 /// message's target offsets, 0 (broadcast) for a message without target fields, an unknown
 /// message, or a field that MAVLink 2 truncation or a MAVLink 1 frame left out.

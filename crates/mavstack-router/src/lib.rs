@@ -50,7 +50,7 @@ pub mod stats;
 pub use config::{
     DirectionFilters, IdFilter, LinkConfig, LocalDelivery, RateLimits, RouterConfig, VersionMode,
 };
-pub use dialect::{Dialect, DialectInfo, is_control, target_of};
+pub use dialect::{Dialect, DialectInfo, InfoFn, is_control, target_of};
 pub use options::OptionError;
 pub use route::Route;
 pub use router::{Event, LinkId, Router, Transmit};
@@ -71,9 +71,11 @@ pub fn fuzz_router(data: &[u8]) {
     use mavstack_core::wire::{Frame, MAX_FRAME_LEN, Version};
 
     let dialect = DialectInfo::<mavstack_dialects::common::MavMessage>::new();
-    let mut config = RouterConfig::default();
-    config.dedup = Some(core::time::Duration::from_millis(50));
-    config.local = LocalDelivery::All;
+    let config = RouterConfig {
+        dedup: Some(core::time::Duration::from_millis(50)),
+        local: LocalDelivery::All,
+        ..RouterConfig::default()
+    };
     let mut router = Router::new(config, dialect);
     let key_a = SecretKey::new([0x42; 32]);
     let key_b = SecretKey::new([0x24; 32]);

@@ -53,6 +53,8 @@ impl core::fmt::Display for LinkId {
 }
 
 /// What the router reports.
+// Frames travel inline (no heap per frame); the other variants are rare.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
 #[non_exhaustive]
 pub enum Event {

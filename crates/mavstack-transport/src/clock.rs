@@ -52,7 +52,7 @@ pub(crate) fn to_std(t: Instant) -> std::time::Instant {
 
 /// The tokio instant of `t` (see [`to_std`]).
 #[must_use]
-pub(crate) fn to_tokio(t: Instant) -> tokio::time::Instant {
+pub fn to_tokio(t: Instant) -> tokio::time::Instant {
     tokio::time::Instant::from_std(to_std(t))
 }
 

@@ -78,6 +78,7 @@
 //! MSRV: Rust 1.95.
 #![forbid(unsafe_code)]
 
+mod batch;
 pub mod blocking;
 pub mod channel_protocol;
 pub mod clock;
@@ -94,5 +95,5 @@ pub use conn::{ConnSpec, ConnSpecError, FileFormat};
 pub use connection::{Connection, ConnectionStats, FileMode, Options};
 pub use error::{LinkError, OpenError, SendError};
 pub use frame::{FrameBuf, FrameCommand, FrameEvent, FrameProtocol, ReceivedFrame};
-pub use link::LinkStats;
-pub use protocol::{Dest, PeerId, PeerInfo, Protocol, Transmit};
+pub use link::{Link, LinkStats};
+pub use protocol::{Dest, Input, PeerId, PeerInfo, Protocol, Transmit};

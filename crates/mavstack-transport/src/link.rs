@@ -10,6 +10,7 @@
 
 use core::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
 use core::sync::atomic::{AtomicU32, Ordering};
+use core::task::{Context, Poll};
 use core::time::Duration;
 use std::collections::HashMap;
 use std::io;
@@ -22,11 +23,12 @@ use tokio::net::{TcpListener, TcpStream, UdpSocket};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 
+use crate::batch::{RECV_BATCH, RecvBatch, SendBatch};
 use crate::clock;
 use crate::conn::{ConnSpec, FileFormat};
 use crate::connection::{FileMode, Options};
 use crate::error::{LinkError, OpenError, Reason};
-use crate::protocol::{Dest, Framing, PeerAddr, PeerId, PeerInfo, Protocol};
+use crate::protocol::{Dest, Framing, Input, PeerAddr, PeerId, PeerInfo};
 use crate::tlog;
 
 /// The largest UDP datagram, and so the driver's receive buffer.
@@ -137,9 +139,13 @@ pub(crate) struct PeerWriter {
     task: Option<JoinHandle<()>>,
 }
 
-/// One connection's link.
+/// One link (a UDP socket, a TCP server or client, a serial port, a file) and its peers,
+/// driven by polling: [`Link::poll_ready`] then [`Link::dispatch`] hand input to an
+/// [`Input`]; [`Link::send`] and [`Link::flush`] write without waiting. A driver that runs
+/// many links in one task (a router) uses this directly; [`crate::Connection`] runs one link
+/// with a [`crate::Protocol`].
 #[derive(Debug)]
-pub(crate) struct Link {
+pub struct Link {
     kind: Kind,
     stats: LinkStats,
     peers: Arc<PeerTable>,
@@ -155,7 +161,11 @@ enum Kind {
 
 impl Link {
     /// Opens the link `spec` describes.
-    pub(crate) async fn open(spec: &ConnSpec, options: &Options) -> Result<Self, OpenError> {
+    ///
+    /// # Errors
+    /// [`OpenError`]: a name that does not resolve, an address in use, a refused TCP
+    /// connection, a missing serial device or file.
+    pub async fn open(spec: &ConnSpec, options: &Options) -> Result<Self, OpenError> {
         let ids = PeerIds::default();
         let peers = Arc::new(PeerTable::default());
         let hp = spec.host_port().unwrap_or_default();
@@ -257,20 +267,30 @@ impl Link {
     }
 
     /// The bound local address (UDP sockets, TCP listeners, a TCP client's first connection).
-    pub(crate) fn local_addr(&self) -> Option<SocketAddr> {
+    #[must_use]
+    pub fn local_addr(&self) -> Option<SocketAddr> {
         self.local_addr
     }
 
-    pub(crate) fn stats(&self) -> LinkStats {
+    /// The link layer's counters.
+    #[must_use]
+    pub fn stats(&self) -> LinkStats {
         self.stats
+    }
+
+    /// The peers the link has now.
+    #[must_use]
+    pub fn peers(&self) -> Vec<PeerInfo> {
+        self.peers.snapshot()
     }
 
     /// Announces the peers a link has from the start: the target of `udpout`/`udpbcast`,
     /// a TCP client's first connection, a serial port, a file being written. They are known
     /// before `open` returns, so that what is sent right after opening is not dropped.
-    pub(crate) fn start<P: Protocol>(&mut self, proto: &mut P) {
+    pub fn start<I: Input>(&mut self, input: &mut I) {
         let initial = match &mut self.kind {
             Kind::Udp(udp) => udp
+                .peers
                 .target
                 .map(|(id, addr)| PeerInfo {
                     id,
@@ -284,12 +304,13 @@ impl Link {
         for info in initial {
             self.peers.add(info.clone());
             self.stats.peers_added += 1;
-            proto.handle_peer_added(clock::now(), &info);
+            input.handle_peer_added(clock::now(), &info);
         }
     }
 
-    /// How the link ended, once it has: then the driver forwards the last events and stops.
-    pub(crate) fn finished(&self) -> Option<&Result<(), LinkError>> {
+    /// How the link ended, once it has (a file read to its end, a fatal error).
+    #[must_use]
+    pub fn finished(&self) -> Option<&Result<(), LinkError>> {
         self.finished.as_ref()
     }
 
@@ -297,28 +318,33 @@ impl Link {
         self.finished.take().unwrap_or(Ok(()))
     }
 
-    /// Waits for input and keeps it for [`Link::dispatch`]. Cancel-safe: nothing is lost if
-    /// the future is dropped.
+    /// Waits for input; [`Link::dispatch`] then takes it. Cancel-safe.
     pub(crate) async fn wait(&mut self) {
+        core::future::poll_fn(|cx| self.poll_ready(cx)).await;
+    }
+
+    /// Ready when input may be waiting for [`Link::dispatch`] (a spurious wake-up is
+    /// harmless: dispatch then finds nothing). Registers `cx` for the next input otherwise.
+    pub fn poll_ready(&mut self, cx: &mut Context<'_>) -> Poll<()> {
         match &mut self.kind {
-            Kind::Udp(udp) => udp.wait(&mut self.stats).await,
-            Kind::Tasks(tasks) => tasks.wait().await,
+            Kind::Udp(udp) => udp.poll_ready(cx),
+            Kind::Tasks(tasks) => tasks.poll_ready(cx),
         }
     }
 
-    /// Hands what [`Link::wait`] got, and whatever else is ready, to the protocol.
-    pub(crate) fn dispatch<P: Protocol>(&mut self, proto: &mut P) {
+    /// Hands whatever input is ready (a bounded batch) to `input`.
+    pub fn dispatch<I: Input>(&mut self, input: &mut I) {
         match &mut self.kind {
-            Kind::Udp(udp) => udp.dispatch(proto, &mut self.stats, &self.peers),
+            Kind::Udp(udp) => udp.dispatch(input, &mut self.stats, &self.peers),
             Kind::Tasks(tasks) => {
-                if let Some(end) = tasks.dispatch(proto, &mut self.stats, &self.peers) {
+                if let Some(end) = tasks.dispatch(input, &mut self.stats, &self.peers) {
                     self.finished = Some(end);
                 }
             }
         }
     }
 
-    /// Sends `data` to `dest`.
+    /// Sends `data` to `dest`, waiting for the socket (the single-link driver's path).
     pub(crate) async fn transmit(&mut self, dest: Dest, data: &[u8]) {
         match &mut self.kind {
             Kind::Udp(udp) => udp.transmit(dest, data, &mut self.stats).await,
@@ -326,23 +352,47 @@ impl Link {
         }
     }
 
+    /// Sends `data` to `dest` without ever waiting: UDP datagrams are batched until
+    /// [`Link::flush`] (or a full batch) and go out many per system call; stream peers get
+    /// it in their writer's queue. What cannot go (a full socket buffer or queue, no peer)
+    /// is dropped and counted in [`LinkStats::tx_dropped`].
+    pub fn send(&mut self, dest: Dest, data: &[u8]) {
+        match &mut self.kind {
+            Kind::Udp(udp) => udp.queue(dest, data, &mut self.stats),
+            Kind::Tasks(tasks) => tasks.transmit(dest, data, &mut self.stats),
+        }
+    }
+
+    /// Sends what [`Link::send`] batched.
+    pub fn flush(&mut self) {
+        if let Kind::Udp(udp) = &mut self.kind {
+            udp.flush(&mut self.stats);
+        }
+    }
+
     /// When [`Link::housekeeping`] is next due (expiring quiet UDP peers).
-    pub(crate) fn next_housekeeping(&self) -> Option<Instant> {
+    #[must_use]
+    pub fn next_housekeeping(&self) -> Option<Instant> {
         match &self.kind {
-            Kind::Udp(udp) if !udp.learned.is_empty() => udp.next_expiry,
+            Kind::Udp(udp) if !udp.peers.learned.is_empty() => udp.peers.next_expiry,
             _ => None,
         }
     }
 
-    pub(crate) fn housekeeping<P: Protocol>(&mut self, proto: &mut P) {
+    /// Expires UDP peers that have been quiet for [`Options::peer_timeout`].
+    pub fn housekeeping<I: Input>(&mut self, input: &mut I) {
         if let Kind::Udp(udp) = &mut self.kind {
-            udp.expire(proto, &mut self.stats, &self.peers);
+            udp.peers.expire(input, &mut self.stats, &self.peers);
         }
     }
 
-    /// Stops the link: writer tasks get to drain their queues (a file sink writes out its
-    /// buffer) for a short while.
-    pub(crate) async fn shutdown(&mut self) -> Result<(), LinkError> {
+    /// Stops the link: what is batched is sent, writer tasks get to drain their queues (a
+    /// file sink writes out its buffer) for a short while.
+    ///
+    /// # Errors
+    /// A write error of a file being written.
+    pub async fn shutdown(&mut self) -> Result<(), LinkError> {
+        self.flush();
         let Kind::Tasks(tasks) = &mut self.kind else {
             return Ok(());
         };
@@ -466,9 +516,14 @@ struct Learned {
 #[derive(Debug)]
 struct Udp {
     socket: UdpSocket,
-    buf: Vec<u8>,
-    /// A datagram received by `wait`, not yet dispatched.
-    pending: Option<(usize, SocketAddr)>,
+    rx: RecvBatch,
+    tx: SendBatch,
+    peers: UdpPeers,
+}
+
+/// The peers of one UDP socket.
+#[derive(Debug)]
+struct UdpPeers {
     /// `udpout`/`udpbcast`: the fixed destination, a peer that never expires.
     target: Option<(PeerId, SocketAddr)>,
     by_addr: HashMap<SocketAddr, PeerId>,
@@ -487,54 +542,92 @@ impl Udp {
     ) -> Self {
         Self {
             socket,
-            buf: vec![0; MAX_DATAGRAM],
-            pending: None,
-            target,
-            by_addr: HashMap::new(),
-            learned: HashMap::new(),
-            peer_timeout: options.peer_timeout,
-            next_expiry: None,
-            ids,
+            rx: RecvBatch::new(),
+            tx: SendBatch::default(),
+            peers: UdpPeers {
+                target,
+                by_addr: HashMap::new(),
+                learned: HashMap::new(),
+                peer_timeout: options.peer_timeout,
+                next_expiry: None,
+                ids,
+            },
         }
     }
 
-    async fn wait(&mut self, stats: &mut LinkStats) {
-        if self.pending.is_some() {
-            return;
-        }
-        match self.socket.recv_from(&mut self.buf).await {
-            Ok(got) => self.pending = Some(got),
-            Err(e) => {
-                // ICMP errors and the like: the socket stays usable.
-                stats.rx_errors += 1;
-                tracing::debug!("udp receive error: {e}");
-                tokio::time::sleep(Duration::from_millis(1)).await;
-            }
-        }
+    fn poll_ready(&self, cx: &mut Context<'_>) -> Poll<()> {
+        // An error (ICMP and the like) shows as readiness too: the receive reports it.
+        self.socket.poll_recv_ready(cx).map(|_| ())
     }
 
-    fn dispatch<P: Protocol>(&mut self, proto: &mut P, stats: &mut LinkStats, table: &PeerTable) {
-        if let Some((len, from)) = self.pending.take() {
-            self.deliver(proto, len, from, stats, table);
-        }
-        // Drain what else is waiting before going back to the event loop.
-        for _ in 1..BATCH {
-            match self.socket.try_recv_from(&mut self.buf) {
-                Ok((len, from)) => self.deliver(proto, len, from, stats, table),
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
+    fn dispatch<I: Input>(&mut self, input: &mut I, stats: &mut LinkStats, table: &PeerTable) {
+        // Drain what is waiting, a batch per system call, before going back to the loop.
+        for _ in 0..BATCH.div_ceil(RECV_BATCH) {
+            let n = match self.rx.recv(&self.socket) {
+                Ok(n) => n,
                 Err(e) => {
                     stats.rx_errors += 1;
                     tracing::debug!("udp receive error: {e}");
-                    break;
+                    return;
                 }
+            };
+            for i in 0..n {
+                if let Some((bytes, from)) = self.rx.get(i) {
+                    self.peers.deliver(input, bytes, from, stats, table);
+                }
+            }
+            stats.rx_errors += core::mem::take(&mut self.rx.truncated);
+            if n < RECV_BATCH {
+                return;
             }
         }
     }
 
-    fn deliver<P: Protocol>(
+    /// Queues a datagram for the next [`Udp::flush`] (flushing at once when the batch is
+    /// full).
+    fn queue(&mut self, dest: Dest, data: &[u8], stats: &mut LinkStats) {
+        let mut full = false;
+        let mut none = true;
+        self.peers.each_dest(dest, |addr| {
+            none = false;
+            full |= self.tx.push(data, addr);
+        });
+        if none {
+            stats.tx_dropped += 1;
+        }
+        if full {
+            self.flush(stats);
+        }
+    }
+
+    fn flush(&mut self, stats: &mut LinkStats) {
+        if self.tx.is_empty() {
+            return;
+        }
+        let sent = self.tx.flush(&self.socket);
+        stats.tx_chunks += sent.datagrams;
+        stats.tx_bytes += sent.bytes;
+        stats.tx_dropped += sent.dropped;
+        stats.tx_errors += sent.errors;
+    }
+
+    async fn transmit(&mut self, dest: Dest, data: &[u8], stats: &mut LinkStats) {
+        let mut addrs = Vec::new();
+        self.peers.each_dest(dest, |a| addrs.push(a));
+        if addrs.is_empty() {
+            stats.tx_dropped += 1;
+        }
+        for addr in addrs {
+            send_to(&self.socket, data, addr, stats).await;
+        }
+    }
+}
+
+impl UdpPeers {
+    fn deliver<I: Input>(
         &mut self,
-        proto: &mut P,
-        len: usize,
+        input: &mut I,
+        data: &[u8],
         from: SocketAddr,
         stats: &mut LinkStats,
         table: &PeerTable,
@@ -567,17 +660,17 @@ impl Udp {
                     self.next_expiry.get_or_insert(now + self.peer_timeout);
                     table.add(info.clone());
                     stats.peers_added += 1;
-                    proto.handle_peer_added(now, &info);
+                    input.handle_peer_added(now, &info);
                     id
                 }
             }
         };
         stats.rx_chunks += 1;
-        stats.rx_bytes += len as u64;
-        proto.handle_input(now, id, &self.buf[..len]);
+        stats.rx_bytes += data.len() as u64;
+        input.handle_input(now, id, data);
     }
 
-    fn expire<P: Protocol>(&mut self, proto: &mut P, stats: &mut LinkStats, table: &PeerTable) {
+    fn expire<I: Input>(&mut self, input: &mut I, stats: &mut LinkStats, table: &PeerTable) {
         let now = clock::now();
         let timeout = self.peer_timeout;
         let gone: Vec<PeerId> = self
@@ -592,22 +685,22 @@ impl Udp {
                 self.by_addr.remove(&peer.addr);
                 table.remove(id);
                 stats.peers_removed += 1;
-                proto.handle_peer_removed(now, id);
+                input.handle_peer_removed(now, id);
             }
         }
         self.next_expiry = self.learned.values().map(|p| p.last_seen + timeout).min();
     }
 
-    async fn transmit(&mut self, dest: Dest, data: &[u8], stats: &mut LinkStats) {
+    /// Calls `f` with every address `dest` names.
+    fn each_dest(&self, dest: Dest, mut f: impl FnMut(SocketAddr)) {
         match dest {
             Dest::Peer(id) => {
                 let addr = match self.target {
                     Some((t, addr)) if t == id => Some(addr),
                     _ => self.learned.get(&id).map(|p| p.addr),
                 };
-                match addr {
-                    Some(addr) => send_to(&self.socket, data, addr, stats).await,
-                    None => stats.tx_dropped += 1,
+                if let Some(addr) = addr {
+                    f(addr);
                 }
             }
             Dest::All | Dest::AllExcept(_) => {
@@ -617,19 +710,14 @@ impl Udp {
                 };
                 if let Some((id, addr)) = self.target {
                     if except != Some(id) {
-                        send_to(&self.socket, data, addr, stats).await;
+                        f(addr);
                     }
                     return;
                 }
-                let mut sent = false;
                 for (&id, peer) in &self.learned {
                     if except != Some(id) {
-                        send_to(&self.socket, data, peer.addr, stats).await;
-                        sent = true;
+                        f(peer.addr);
                     }
-                }
-                if !sent {
-                    stats.tx_dropped += 1;
                 }
             }
         }
@@ -674,16 +762,18 @@ impl Tasks {
         }
     }
 
-    async fn wait(&mut self) {
+    fn poll_ready(&mut self, cx: &mut Context<'_>) -> Poll<()> {
         if self.pending.is_some() {
-            return;
+            return Poll::Ready(());
         }
-        self.pending = Some(self.rx.recv().await.unwrap_or(LinkMsg::Closed(Ok(()))));
+        self.rx.poll_recv(cx).map(|msg| {
+            self.pending = Some(msg.unwrap_or(LinkMsg::Closed(Ok(()))));
+        })
     }
 
-    fn dispatch<P: Protocol>(
+    fn dispatch<I: Input>(
         &mut self,
-        proto: &mut P,
+        proto: &mut I,
         stats: &mut LinkStats,
         table: &PeerTable,
     ) -> Option<Result<(), LinkError>> {
@@ -698,10 +788,10 @@ impl Tasks {
         None
     }
 
-    fn apply<P: Protocol>(
+    fn apply<I: Input>(
         &mut self,
         msg: LinkMsg,
-        proto: &mut P,
+        proto: &mut I,
         stats: &mut LinkStats,
         table: &PeerTable,
     ) -> Option<Result<(), LinkError>> {

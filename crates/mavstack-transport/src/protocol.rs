@@ -108,6 +108,30 @@ pub struct Transmit {
     pub len: usize,
 }
 
+/// What a [`crate::Link`] hands its input to: peers appearing and going, and their bytes.
+/// Every [`Protocol`] is one; a driver of many links implements it to route each peer's
+/// bytes.
+pub trait Input {
+    /// A peer appeared. Called before its first [`Input::handle_input`].
+    fn handle_peer_added(&mut self, now: Instant, peer: &PeerInfo);
+    /// A peer went away; no input from it follows.
+    fn handle_peer_removed(&mut self, now: Instant, peer: PeerId);
+    /// Bytes from `peer`: one datagram, or the next piece of its stream (see [`Framing`]).
+    fn handle_input(&mut self, now: Instant, peer: PeerId, data: &[u8]);
+}
+
+impl<P: Protocol> Input for P {
+    fn handle_peer_added(&mut self, now: Instant, peer: &PeerInfo) {
+        Protocol::handle_peer_added(self, now, peer);
+    }
+    fn handle_peer_removed(&mut self, now: Instant, peer: PeerId) {
+        Protocol::handle_peer_removed(self, now, peer);
+    }
+    fn handle_input(&mut self, now: Instant, peer: PeerId, data: &[u8]) {
+        Protocol::handle_input(self, now, peer, data);
+    }
+}
+
 /// A sans-IO protocol state machine that a connection's driver runs: time comes in, work is
 /// pulled out.
 ///

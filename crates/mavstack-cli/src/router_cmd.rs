@@ -1,0 +1,219 @@
+//! `mavstack router`: forwards between many links, each with its own MAVLink version and
+//! signing, converting where they differ (shared/DESIGN.md, "Router"). A thin shell over
+//! [`mavstack::Node`]: argument parsing, the mavlink-router configuration file, `--stats`
+//! JSON lines.
+
+use core::time::Duration;
+use std::path::PathBuf;
+
+use anyhow::anyhow;
+use clap::Args;
+use mavstack::core::MessageSet as _;
+use mavstack::router::{InfoFn, RouterConfig};
+use mavstack::{LinkSpec, Node, NodeReport, router_conf};
+use serde_json::{Map, Value, json};
+
+use crate::Failure;
+use crate::link_cmd::{interrupted, runtime};
+
+/// `mavstack router` arguments.
+#[derive(Debug, Args)]
+pub(crate) struct RouterArgs {
+    /// Links: connection strings with options, e.g. 'udpin:0.0.0.0:14550?version=1&name=legacy'.
+    links: Vec<String>,
+    /// A mavlink-router configuration file (main.conf), read as it is; its links come
+    /// before the ones on the command line.
+    #[arg(long, value_name = "FILE")]
+    conf: Option<PathBuf>,
+    /// A TCP server port for dynamic clients (each client a link of its own).
+    #[arg(long, value_name = "PORT")]
+    tcp_server: Option<u16>,
+    /// Write a tlog of all traffic into this directory.
+    #[arg(long, value_name = "DIR")]
+    log: Option<PathBuf>,
+    /// Drop a frame whose exact bytes passed within this many milliseconds (off by default).
+    #[arg(long, value_name = "MS")]
+    dedup: Option<u64>,
+    /// Forget a route after this many seconds of silence.
+    #[arg(long, value_name = "S", default_value_t = 30.0)]
+    route_ttl: f64,
+    /// Print one JSON object of statistics every S seconds on stdout.
+    #[arg(long, value_name = "S")]
+    stats: Option<f64>,
+    /// Dialect for CRC_EXTRA, lengths and target offsets.
+    #[arg(long, default_value = "ardupilotmega")]
+    dialect: String,
+}
+
+/// The built-in dialects a router can use, by name.
+fn dialect(name: &str) -> Result<InfoFn, Failure> {
+    macro_rules! table {
+        ($($d:ident),*) => {
+            match name {
+                $(stringify!($d) => Ok(InfoFn(|id| mavstack::dialects::$d::MavMessage::info(id).copied())),)*
+                _ => Err(Failure::Input(anyhow!(
+                    "unknown dialect \"{name}\" for the router; expected one of {}",
+                    [$(stringify!($d)),*].join(", ")
+                ))),
+            }
+        };
+    }
+    table!(ardupilotmega, common, minimal, standard, development, all)
+}
+
+/// The id of a message name in `dialect`, for the filters and `rate` options.
+fn message_id(name: &str) -> Option<u32> {
+    mavstack::dialects::all::MavMessage::all()
+        .iter()
+        .find(|m| m.name.eq_ignore_ascii_case(name))
+        .map(|m| m.id)
+}
+
+fn seconds(value: f64, what: &str) -> Result<Duration, Failure> {
+    Duration::try_from_secs_f64(value)
+        .ok()
+        .filter(|d| !d.is_zero())
+        .ok_or_else(|| Failure::Input(anyhow!("{what} must be a positive number of seconds")))
+}
+
+pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
+    let mut specs = Vec::new();
+    let mut config = RouterConfig::default();
+    config.route_ttl = seconds(args.route_ttl, "--route-ttl")?;
+    config.dedup = args
+        .dedup
+        .map(Duration::from_millis)
+        .filter(|d| !d.is_zero());
+    let mut tcp_server = args.tcp_server;
+    let mut log = args.log.clone();
+    let mut dialect_name = args.dialect.clone();
+    if let Some(path) = &args.conf {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Failure::Input(anyhow!("cannot read {}: {e}", path.display())))?;
+        let conf = router_conf::parse(&text)
+            .map_err(|e| Failure::Input(anyhow!("{}:{}: {}", path.display(), e.line, e.message)))?;
+        for (line, key) in &conf.general.ignored {
+            eprintln!(
+                "warning: {}:{line}: {key} has no effect in mavstack",
+                path.display()
+            );
+        }
+        if tcp_server.is_none() {
+            tcp_server = conf.general.tcp_server_port.filter(|&p| p != 0);
+        }
+        if config.dedup.is_none() {
+            config.dedup = conf
+                .general
+                .dedup_ms
+                .map(Duration::from_millis)
+                .filter(|d| !d.is_zero());
+        }
+        if log.is_none() {
+            log.clone_from(&conf.general.log_dir);
+        }
+        if let Some(d) = conf.general.dialect.filter(|d| d != "auto") {
+            dialect_name = d;
+        }
+        for link in conf.links {
+            let spec = LinkSpec::parse(&link.link, &message_id)
+                .map_err(|e| Failure::Input(anyhow!("{}:{}: {e}", path.display(), link.line)))?;
+            specs.push(spec);
+        }
+    }
+    for text in &args.links {
+        specs.push(LinkSpec::parse(text, &message_id).map_err(|e| Failure::Input(anyhow!("{e}")))?);
+    }
+    if let Some(port) = tcp_server {
+        let text = format!("tcpin:0.0.0.0:{port}?name=tcp-server");
+        specs
+            .push(LinkSpec::parse(&text, &message_id).map_err(|e| Failure::Input(anyhow!("{e}")))?);
+    }
+    if specs.is_empty() {
+        return Err(Failure::Input(anyhow!(
+            "no links: give connection strings, --conf FILE or --tcp-server PORT"
+        )));
+    }
+    let stats_every = args.stats.map(|s| seconds(s, "--stats")).transpose()?;
+    let dialect = dialect(&dialect_name)?;
+    runtime()?.block_on(async move {
+        let mut builder = Node::builder().router(config).dialect(dialect);
+        for spec in specs {
+            builder = builder.link(spec);
+        }
+        if let Some(dir) = &log {
+            builder = builder.log_dir(dir);
+        }
+        let node = builder.start().await.map_err(crate::other)?;
+        eprintln!("mavstack router: ready");
+        let stop = interrupted();
+        tokio::pin!(stop);
+        if let Some(every) = stats_every {
+            let mut tick = tokio::time::interval(every);
+            tick.tick().await;
+            loop {
+                tokio::select! {
+                    () = &mut stop => break,
+                    _ = tick.tick() => {
+                        match node.report().await {
+                            Some(report) => print_stats(&report),
+                            None => break,
+                        }
+                    }
+                }
+            }
+        } else {
+            stop.await;
+        }
+        let report = node.shutdown().await.map_err(crate::other)?;
+        if stats_every.is_some() {
+            print_stats(&report);
+        }
+        Ok(())
+    })
+}
+
+/// One `--stats` line (shared/DESIGN.md, "Router").
+fn print_stats(report: &NodeReport) {
+    println!("{}", stats_json(report));
+}
+
+pub(crate) fn stats_json(report: &NodeReport) -> Value {
+    let links: Vec<Value> = report
+        .links
+        .iter()
+        .map(|l| {
+            let dropped: Map<String, Value> = l
+                .dropped
+                .iter()
+                .map(|(k, v)| ((*k).to_owned(), json!(v)))
+                .collect();
+            let conversions: Map<String, Value> = l
+                .conversions
+                .iter()
+                .map(|(k, v)| ((*k).to_owned(), json!(v)))
+                .collect();
+            json!({
+                "name": l.name,
+                "peer": l.peer,
+                "version": l.version,
+                "rx_frames": l.rx_frames,
+                "tx_frames": l.tx_frames,
+                "rx_bytes": l.rx_bytes,
+                "tx_bytes": l.tx_bytes,
+                "converted": l.converted,
+                "conversions": conversions,
+                "dropped": dropped,
+                "seq_lost": l.seq_lost,
+            })
+        })
+        .collect();
+    let routes: Vec<Value> = report
+        .routes
+        .iter()
+        .map(|(sysid, compid, link, peer, age)| {
+            json!({"sysid": sysid, "compid": compid, "link": link, "peer": peer,
+                   "age_s": (age * 10.0).round() / 10.0})
+        })
+        .collect();
+    json!({"t_s": (report.t_s * 10.0).round() / 10.0, "links": links, "routes": routes})
+}

@@ -1,0 +1,203 @@
+//! Batched UDP I/O: many datagrams per system call (`recvmmsg`, `sendmmsg` on Linux, through
+//! `nix`; one datagram per call elsewhere). The hot path of a router: at 100 k frames/s a
+//! system call per datagram costs more than everything else together.
+
+use core::net::SocketAddr;
+use std::io;
+
+use tokio::io::Interest;
+use tokio::net::UdpSocket;
+
+/// Datagrams taken per receive call.
+pub(crate) const RECV_BATCH: usize = 32;
+/// Bytes per receive slot: a datagram longer than this is cut and counted as an error
+/// (MAVLink datagrams hold a few frames of at most 280 bytes).
+pub(crate) const RECV_SLOT: usize = 8192;
+/// Datagrams per send call.
+pub(crate) const SEND_BATCH: usize = 64;
+
+/// Receive buffers for one socket.
+#[derive(Debug)]
+pub(crate) struct RecvBatch {
+    buf: Vec<u8>,
+    got: Vec<(usize, SocketAddr)>,
+    /// Datagrams cut because they were longer than a slot.
+    pub(crate) truncated: u64,
+}
+
+impl RecvBatch {
+    pub(crate) fn new() -> Self {
+        Self {
+            buf: vec![0; RECV_BATCH * RECV_SLOT],
+            got: Vec::with_capacity(RECV_BATCH),
+            truncated: 0,
+        }
+    }
+
+    /// Receives what is waiting (up to [`RECV_BATCH`] datagrams) without blocking; returns
+    /// how many, 0 when none is waiting.
+    ///
+    /// # Errors
+    /// A receive error other than "would block".
+    pub(crate) fn recv(&mut self, socket: &UdpSocket) -> io::Result<usize> {
+        self.got.clear();
+        match socket.try_io(Interest::READABLE, || self.recv_now(socket)) {
+            Ok(n) => Ok(n),
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => Ok(0),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Datagram `i` of the last receive: its bytes and sender.
+    pub(crate) fn get(&self, i: usize) -> Option<(&[u8], SocketAddr)> {
+        let &(len, from) = self.got.get(i)?;
+        let start = i * RECV_SLOT;
+        Some((&self.buf[start..start + len], from))
+    }
+
+    #[cfg(target_os = "linux")]
+    fn recv_now(&mut self, socket: &UdpSocket) -> io::Result<usize> {
+        use std::io::IoSliceMut;
+        use std::os::fd::AsRawFd as _;
+
+        use nix::sys::socket::{MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg};
+
+        let mut headers = MultiHeaders::<SockaddrStorage>::preallocate(RECV_BATCH, None);
+        let mut chunks = self.buf.chunks_exact_mut(RECV_SLOT);
+        let mut slices: [[IoSliceMut<'_>; 1]; RECV_BATCH] =
+            core::array::from_fn(|_| [IoSliceMut::new(chunks.next().unwrap_or(&mut []))]);
+        let results = recvmmsg(
+            socket.as_raw_fd(),
+            &mut headers,
+            slices.iter_mut(),
+            MsgFlags::MSG_DONTWAIT,
+            None,
+        )
+        .map_err(io::Error::from)?;
+        for r in results {
+            if r.flags.contains(MsgFlags::MSG_TRUNC) {
+                self.truncated += 1;
+            }
+            let from = r.address.and_then(|a| to_std(&a));
+            // A datagram without a usable sender (not IP) cannot be answered: skipped.
+            if let Some(from) = from {
+                self.got.push((r.bytes.min(RECV_SLOT), from));
+            }
+        }
+        Ok(self.got.len())
+    }
+
+    #[cfg(not(target_os = "linux"))]
+    fn recv_now(&mut self, socket: &UdpSocket) -> io::Result<usize> {
+        let (len, from) = socket.try_recv_from(&mut self.buf[..RECV_SLOT])?;
+        self.got.push((len, from));
+        Ok(1)
+    }
+}
+
+#[cfg(target_os = "linux")]
+fn to_std(addr: &nix::sys::socket::SockaddrStorage) -> Option<SocketAddr> {
+    if let Some(v4) = addr.as_sockaddr_in() {
+        return Some(SocketAddr::V4((*v4).into()));
+    }
+    addr.as_sockaddr_in6()
+        .map(|v6| SocketAddr::V6((*v6).into()))
+}
+
+/// Datagrams waiting to be sent on one socket.
+#[derive(Debug, Default)]
+pub(crate) struct SendBatch {
+    bytes: Vec<u8>,
+    items: Vec<(usize, usize, SocketAddr)>,
+}
+
+/// What one flush did.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Sent {
+    pub(crate) datagrams: u64,
+    pub(crate) bytes: u64,
+    /// Datagrams dropped: the socket's buffer was full, or a send error.
+    pub(crate) dropped: u64,
+    pub(crate) errors: u64,
+}
+
+impl SendBatch {
+    /// Queues one datagram; true when the batch is full and should be flushed.
+    pub(crate) fn push(&mut self, data: &[u8], to: SocketAddr) -> bool {
+        let start = self.bytes.len();
+        self.bytes.extend_from_slice(data);
+        self.items.push((start, data.len(), to));
+        self.items.len() >= SEND_BATCH
+    }
+
+    pub(crate) fn is_empty(&self) -> bool {
+        self.items.is_empty()
+    }
+
+    /// Sends everything queued without blocking. What the socket refuses (its buffer is
+    /// full) is dropped and counted: a router must not stall every link for one.
+    pub(crate) fn flush(&mut self, socket: &UdpSocket) -> Sent {
+        let mut sent = Sent::default();
+        let mut from = 0;
+        while from < self.items.len() {
+            match socket.try_io(Interest::WRITABLE, || self.send_now(socket, from)) {
+                Ok(n) => {
+                    for &(_, len, _) in &self.items[from..from + n] {
+                        sent.datagrams += 1;
+                        sent.bytes += len as u64;
+                    }
+                    from += n.max(1);
+                }
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                    sent.dropped += (self.items.len() - from) as u64;
+                    break;
+                }
+                Err(e) => {
+                    // One bad destination (ICMP unreachable, no route): skip that datagram.
+                    tracing::debug!("udp send to {} failed: {e}", self.items[from].2);
+                    sent.errors += 1;
+                    sent.dropped += 1;
+                    from += 1;
+                }
+            }
+        }
+        self.items.clear();
+        self.bytes.clear();
+        sent
+    }
+
+    #[cfg(target_os = "linux")]
+    fn send_now(&self, socket: &UdpSocket, from: usize) -> io::Result<usize> {
+        use std::io::IoSlice;
+        use std::os::fd::AsRawFd as _;
+
+        use nix::sys::socket::{ControlMessage, MsgFlags, MultiHeaders, SockaddrStorage, sendmmsg};
+
+        let items = &self.items[from..(from + SEND_BATCH).min(self.items.len())];
+        let mut headers = MultiHeaders::<SockaddrStorage>::preallocate(items.len(), None);
+        let slices: Vec<[IoSlice<'_>; 1]> = items
+            .iter()
+            .map(|&(start, len, _)| [IoSlice::new(&self.bytes[start..start + len])])
+            .collect();
+        let addrs: Vec<Option<SockaddrStorage>> =
+            items.iter().map(|&(_, _, to)| Some(to.into())).collect();
+        let cmsgs: [ControlMessage<'_>; 0] = [];
+        let results = sendmmsg(
+            socket.as_raw_fd(),
+            &mut headers,
+            slices.iter(),
+            &addrs,
+            cmsgs,
+            MsgFlags::MSG_DONTWAIT,
+        )
+        .map_err(io::Error::from)?;
+        Ok(results.count())
+    }
+
+    #[cfg(not(target_os = "linux"))]
+    fn send_now(&self, socket: &UdpSocket, from: usize) -> io::Result<usize> {
+        let (start, len, to) = self.items[from];
+        socket.try_send_to(&self.bytes[start..start + len], to)?;
+        Ok(1)
+    }
+}

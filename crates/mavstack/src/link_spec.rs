@@ -1,0 +1,70 @@
+//! A link as written on a command line: a connection string, then `?` and `&`-separated
+//! link options (shared/DESIGN.md, "Link options").
+//!
+//! ```
+//! use mavstack::LinkSpec;
+//! let spec = LinkSpec::parse("udpin:0.0.0.0:14550?version=1&name=legacy", &|_| None).unwrap();
+//! assert_eq!(spec.config.name, "legacy");
+//! assert_eq!(spec.conn.to_string(), "udpin:0.0.0.0:14550");
+//! let err = LinkSpec::parse("udpin:0.0.0.0:14550?version=3", &|_| None).unwrap_err();
+//! assert_eq!(err.to_string(), r#"link "udpin:0.0.0.0:14550?version=3": link option "version": "3" is not 1, 2 or auto"#);
+//! ```
+
+use mavstack_router::{LinkConfig, OptionError, options};
+use mavstack_transport::{ConnSpec, ConnSpecError};
+
+/// A link to open: where, and how the router treats it.
+#[derive(Clone, Debug)]
+pub struct LinkSpec {
+    /// Where the link goes.
+    pub conn: ConnSpec,
+    /// Its options (name, version, key, filters...).
+    pub config: LinkConfig,
+}
+
+/// A link string that cannot be used.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum LinkSpecError {
+    /// The connection string.
+    #[error("link \"{text}\": {source}")]
+    Conn {
+        /// The whole link string.
+        text: String,
+        /// What is wrong.
+        source: ConnSpecError,
+    },
+    /// An option.
+    #[error("link \"{text}\": {source}")]
+    Option {
+        /// The whole link string.
+        text: String,
+        /// What is wrong.
+        source: OptionError,
+    },
+}
+
+impl LinkSpec {
+    /// Parses `text`. `message_id` turns a message name into its id (filters and `rate`
+    /// take names as well as numbers).
+    ///
+    /// # Errors
+    /// [`LinkSpecError`] naming the connection string or the option at fault.
+    pub fn parse(
+        text: &str,
+        message_id: &dyn Fn(&str) -> Option<u32>,
+    ) -> Result<Self, LinkSpecError> {
+        let (conn_text, opts) = text.split_once('?').unwrap_or((text, ""));
+        let conn: ConnSpec = conn_text.parse().map_err(|source| LinkSpecError::Conn {
+            text: text.to_owned(),
+            source,
+        })?;
+        let config = options::parse(opts, &conn.to_string(), message_id).map_err(|source| {
+            LinkSpecError::Option {
+                text: text.to_owned(),
+                source,
+            }
+        })?;
+        Ok(Self { conn, config })
+    }
+}

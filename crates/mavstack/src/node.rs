@@ -1,0 +1,640 @@
+//! [`Node`]: one MAVLink component with many links, the router core between them, and one
+//! tokio task that owns every socket (the composition shared/DESIGN.md calls "One
+//! composition").
+//!
+//! ```text
+//!  Node handle ── commands (stats, shutdown) ──►  driver task
+//!                                                  │ poll every link (batched UDP reads)
+//!                                                  ▼
+//!      transport Link (udp/tcp/serial) ─peers─► Router (a channel per peer: version,
+//!                                               signing; routes; conversion; queues)
+//!                                                  │ poll_transmit
+//!                                                  ▼
+//!                                       Link::send (batched, never waits) ─► sockets
+//! ```
+
+use core::net::SocketAddr;
+use core::time::Duration;
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+use mavstack_core::time::Instant;
+use mavstack_core::wire::MAX_FRAME_LEN;
+use mavstack_router::{
+    Event, InfoFn, LinkConfig, LinkId, LinkMode, LocalDelivery, Router, RouterConfig,
+};
+use mavstack_transport::protocol::Framing;
+use mavstack_transport::{
+    Dest, Input, Link, LinkError, LinkStats, OpenError, Options, PeerId, PeerInfo, clock, tlog,
+};
+use tokio::sync::{mpsc, oneshot};
+use tokio::task::JoinHandle;
+
+use crate::link_spec::LinkSpec;
+
+/// Why a node could not start or ended badly.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum NodeError {
+    /// A link could not be opened.
+    #[error("link \"{name}\": {source}")]
+    Open {
+        /// The link's name.
+        name: String,
+        /// Why.
+        source: OpenError,
+    },
+    /// A link failed while running.
+    #[error("link \"{name}\": {source}")]
+    Link {
+        /// The link's name.
+        name: String,
+        /// Why.
+        source: LinkError,
+    },
+    /// The traffic log could not be written.
+    #[error("log {path}: {source}")]
+    Log {
+        /// The log file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The driver task ended abnormally.
+    #[error("node stopped: {0}")]
+    Stopped(String),
+}
+
+/// One router link's counters, as the node reports them.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct LinkReport {
+    /// The configured link's name.
+    pub name: String,
+    /// The peer (a UDP or TCP client of a server link, the target of `udpout`, ...), if
+    /// any yet.
+    pub peer: Option<String>,
+    /// What it carries now: `"1"`, `"2"`, `"signed"` or `"auto"`.
+    pub version: &'static str,
+    /// Frames accepted from it.
+    pub rx_frames: u64,
+    /// Bytes accepted from it.
+    pub rx_bytes: u64,
+    /// Frames written to it.
+    pub tx_frames: u64,
+    /// Bytes written to it.
+    pub tx_bytes: u64,
+    /// Frames converted on their way to it.
+    pub converted: u64,
+    /// Conversions by kind: `to_mavlink1`, `to_mavlink2`, `signature_removed`, `signed`.
+    pub conversions: [(&'static str, u64); 4],
+    /// Non-zero drops by reason.
+    pub dropped: Vec<(&'static str, u64)>,
+    /// Frames lost, by sequence numbers, summed over the sources heard on it.
+    pub seq_lost: u64,
+}
+
+/// A snapshot of a node.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub struct NodeReport {
+    /// Seconds since the node started.
+    pub t_s: f64,
+    /// One entry per router link; a server link without clients yet has one entry with no
+    /// peer.
+    pub links: Vec<LinkReport>,
+    /// Routes: (sysid, compid, link name, peer, age in seconds).
+    pub routes: Vec<(u8, u8, String, Option<String>, f64)>,
+    /// The transport counters of each configured link: (name, counters).
+    pub transport: Vec<(String, LinkStats)>,
+}
+
+enum Command {
+    Report(oneshot::Sender<NodeReport>),
+    Shutdown,
+}
+
+/// How to build a [`Node`].
+///
+/// ```no_run
+/// # async fn run() -> Result<(), Box<dyn std::error::Error>> {
+/// use mavstack::{LinkSpec, Node};
+/// let none = |_: &str| None;
+/// let node = Node::builder()
+///     .link(LinkSpec::parse("udpin:0.0.0.0:14550?name=gcs", &none)?)
+///     .link(LinkSpec::parse("serial:/dev/ttyS1:57600?version=1&name=legacy", &none)?)
+///     .start()
+///     .await?;
+/// println!("{:?}", node.report().await);
+/// node.shutdown().await?;
+/// # Ok(()) }
+/// ```
+#[derive(Debug)]
+pub struct NodeBuilder {
+    router: RouterConfig,
+    dialect: InfoFn,
+    links: Vec<LinkSpec>,
+    log_dir: Option<PathBuf>,
+    options: Options,
+}
+
+impl NodeBuilder {
+    /// Adds a link.
+    #[must_use]
+    pub fn link(mut self, spec: LinkSpec) -> Self {
+        self.links.push(spec);
+        self
+    }
+
+    /// The router's settings (route TTL, dedup, ids).
+    #[must_use]
+    pub fn router(mut self, config: RouterConfig) -> Self {
+        self.router = config;
+        self
+    }
+
+    /// The dialect whose CRC_EXTRA, lengths and target offsets the links use (default
+    /// `common`).
+    #[must_use]
+    pub const fn dialect(mut self, dialect: InfoFn) -> Self {
+        self.dialect = dialect;
+        self
+    }
+
+    /// Writes every accepted frame to a tlog in `dir` (`mavstack-YYYYmmdd-HHMMSS.tlog`,
+    /// named by the start time), with the link number in the timestamps' low two bits as
+    /// MAVProxy does (0, 1, 2 for the first three links, 2 for the rest).
+    #[must_use]
+    pub fn log_dir(mut self, dir: impl Into<PathBuf>) -> Self {
+        self.log_dir = Some(dir.into());
+        self
+    }
+
+    /// Transport options (socket buffers, peer timeout, reconnect back-off).
+    #[must_use]
+    pub fn transport_options(mut self, options: Options) -> Self {
+        self.options = options;
+        self
+    }
+
+    /// Opens every link and starts the node's task on the current tokio runtime.
+    ///
+    /// # Errors
+    /// [`NodeError::Open`] naming the first link that cannot be opened, or
+    /// [`NodeError::Log`].
+    ///
+    /// # Panics
+    /// Outside a tokio runtime.
+    pub async fn start(self) -> Result<Node, NodeError> {
+        let mut router_config = self.router;
+        // The log sees every frame through local delivery; a node that wants none itself
+        // only logs them.
+        let log_local_only = self.log_dir.is_some() && router_config.local == LocalDelivery::None;
+        if self.log_dir.is_some() {
+            router_config.local = LocalDelivery::All;
+        }
+        let mut slots = Vec::new();
+        let mut local_addrs = Vec::new();
+        for spec in self.links {
+            let io = Link::open(&spec.conn, &self.options)
+                .await
+                .map_err(|source| NodeError::Open {
+                    name: spec.config.name.clone(),
+                    source,
+                })?;
+            local_addrs.push(io.local_addr());
+            slots.push(Slot {
+                io,
+                template: spec.config,
+                peers: HashMap::new(),
+            });
+        }
+        let log = match self.log_dir {
+            Some(dir) => Some(open_log(&dir)?),
+            None => None,
+        };
+        let (tx, rx) = mpsc::channel(64);
+        let driver = Driver {
+            router: Router::new(router_config, self.dialect),
+            slots,
+            owners: Vec::new(),
+            commands: rx,
+            log,
+            log_local_only,
+            started: clock::now(),
+            buf: [0; MAX_FRAME_LEN],
+        };
+        let task = tokio::spawn(driver.run());
+        Ok(Node {
+            commands: tx,
+            task,
+            local_addrs,
+        })
+    }
+}
+
+fn open_log(dir: &std::path::Path) -> Result<(PathBuf, tlog::Writer<std::fs::File>), NodeError> {
+    let secs = clock::now().as_micros() / 1_000_000;
+    let path = dir.join(format!("mavstack-{secs}.tlog"));
+    let file = std::fs::File::create(&path).map_err(|source| NodeError::Log {
+        path: path.clone(),
+        source,
+    })?;
+    Ok((path, tlog::Writer::new(file)))
+}
+
+/// A running node: a handle on its task.
+#[derive(Debug)]
+pub struct Node {
+    commands: mpsc::Sender<Command>,
+    task: JoinHandle<Result<NodeReport, NodeError>>,
+    local_addrs: Vec<Option<SocketAddr>>,
+}
+
+impl Node {
+    /// How to build one.
+    #[must_use]
+    pub fn builder() -> NodeBuilder {
+        NodeBuilder {
+            router: RouterConfig::default(),
+            dialect: InfoFn(|id| {
+                <mavstack_dialects::common::MavMessage as mavstack_core::MessageSet>::info(id)
+                    .copied()
+            }),
+            links: Vec::new(),
+            log_dir: None,
+            options: Options::default(),
+        }
+    }
+
+    /// The local address of each link, in the order they were added (UDP sockets and TCP
+    /// listeners; useful after binding port 0).
+    #[must_use]
+    pub fn local_addrs(&self) -> &[Option<SocketAddr>] {
+        &self.local_addrs
+    }
+
+    /// A snapshot of every link and route; `None` once the node has stopped.
+    pub async fn report(&self) -> Option<NodeReport> {
+        let (tx, rx) = oneshot::channel();
+        self.commands.send(Command::Report(tx)).await.ok()?;
+        rx.await.ok()
+    }
+
+    /// Whether the node's task has ended (a link failed).
+    #[must_use]
+    pub fn is_finished(&self) -> bool {
+        self.task.is_finished()
+    }
+
+    /// Stops the node: queued frames go out, links close, the log is written out.
+    /// Returns the final report.
+    ///
+    /// # Errors
+    /// [`NodeError`] if a link failed or the log could not be written.
+    pub async fn shutdown(self) -> Result<NodeReport, NodeError> {
+        let _ = self.commands.send(Command::Shutdown).await;
+        self.task
+            .await
+            .map_err(|e| NodeError::Stopped(e.to_string()))?
+    }
+}
+
+/// One configured link and the router links of its peers.
+struct Slot {
+    io: Link,
+    template: LinkConfig,
+    peers: HashMap<PeerId, (LinkId, Framing, String)>,
+}
+
+struct Driver {
+    router: Router<InfoFn>,
+    slots: Vec<Slot>,
+    /// Router link → (slot, peer).
+    owners: Vec<Option<(usize, PeerId)>>,
+    commands: mpsc::Receiver<Command>,
+    log: Option<(PathBuf, tlog::Writer<std::fs::File>)>,
+    log_local_only: bool,
+    started: Instant,
+    buf: [u8; MAX_FRAME_LEN],
+}
+
+/// The [`Input`] a slot's link feeds: peers become router links.
+struct Feed<'a> {
+    router: &'a mut Router<InfoFn>,
+    slot: usize,
+    template: &'a LinkConfig,
+    peers: &'a mut HashMap<PeerId, (LinkId, Framing, String)>,
+    owners: &'a mut Vec<Option<(usize, PeerId)>>,
+}
+
+impl Input for Feed<'_> {
+    fn handle_peer_added(&mut self, _now: Instant, peer: &PeerInfo) {
+        match self.router.add_link(self.template.clone()) {
+            Ok(id) => {
+                tracing::debug!("{}: {} is {id}", self.template.name, peer.addr);
+                self.peers
+                    .insert(peer.id, (id, peer.framing, peer.addr.to_string()));
+                if self.owners.len() <= id.index() {
+                    self.owners.resize(id.index() + 1, None);
+                }
+                self.owners[id.index()] = Some((self.slot, peer.id));
+            }
+            Err(e) => tracing::warn!("{}: {e}", self.template.name),
+        }
+    }
+
+    fn handle_peer_removed(&mut self, _now: Instant, peer: PeerId) {
+        if let Some((id, _, addr)) = self.peers.remove(&peer) {
+            tracing::debug!("{}: {addr} went away", self.template.name);
+            self.router.remove_link(id);
+            if let Some(o) = self.owners.get_mut(id.index()) {
+                *o = None;
+            }
+        }
+    }
+
+    fn handle_input(&mut self, now: Instant, peer: PeerId, data: &[u8]) {
+        if let Some(&(id, framing, _)) = self.peers.get(&peer) {
+            match framing {
+                Framing::Datagram => self.router.handle_datagram(now, id, data),
+                Framing::Stream => self.router.handle_input(now, id, data),
+            }
+        }
+    }
+}
+
+impl Driver {
+    fn feed(&mut self, i: usize) -> (&mut Link, Feed<'_>) {
+        let slot = &mut self.slots[i];
+        (
+            &mut slot.io,
+            Feed {
+                router: &mut self.router,
+                slot: i,
+                template: &slot.template,
+                peers: &mut slot.peers,
+                owners: &mut self.owners,
+            },
+        )
+    }
+
+    async fn run(mut self) -> Result<NodeReport, NodeError> {
+        for i in 0..self.slots.len() {
+            let (io, mut feed) = self.feed(i);
+            io.start(&mut feed);
+        }
+        let mut ready = vec![false; self.slots.len()];
+        let sleep = tokio::time::sleep(Duration::from_secs(3600));
+        tokio::pin!(sleep);
+        let mut result = Ok(());
+        loop {
+            let deadline = self.next_deadline();
+            if let Some(d) = deadline {
+                sleep.as_mut().reset(clock::to_tokio(d));
+            }
+            let mut command = None;
+            let mut timer = false;
+            core::future::poll_fn(|cx| {
+                let mut any = false;
+                for (slot, r) in self.slots.iter_mut().zip(ready.iter_mut()) {
+                    if slot.io.finished().is_none() && slot.io.poll_ready(cx).is_ready() {
+                        *r = true;
+                        any = true;
+                    }
+                }
+                if let core::task::Poll::Ready(c) = self.commands.poll_recv(cx) {
+                    command = Some(c);
+                    any = true;
+                }
+                if deadline.is_some() && sleep.as_mut().poll(cx).is_ready() {
+                    timer = true;
+                    any = true;
+                }
+                if any {
+                    core::task::Poll::Ready(())
+                } else {
+                    core::task::Poll::Pending
+                }
+            })
+            .await;
+            for (i, r) in ready.iter_mut().enumerate() {
+                if core::mem::take(r) {
+                    let (io, mut feed) = self.feed(i);
+                    io.dispatch(&mut feed);
+                }
+            }
+            let now = clock::now();
+            if timer {
+                self.router.handle_timeout(now);
+                for i in 0..self.slots.len() {
+                    if self.slots[i]
+                        .io
+                        .next_housekeeping()
+                        .is_some_and(|t| now >= t)
+                    {
+                        let (io, mut feed) = self.feed(i);
+                        io.housekeeping(&mut feed);
+                    }
+                }
+            }
+            self.drain_events()?;
+            self.flush();
+            match command {
+                Some(Some(Command::Report(tx))) => {
+                    let _ = tx.send(self.report(clock::now()));
+                }
+                Some(Some(Command::Shutdown) | None) => break,
+                None => {}
+            }
+            if let Some((i, Err(e))) = self
+                .slots
+                .iter()
+                .enumerate()
+                .find_map(|(i, s)| s.io.finished().map(|r| (i, r.clone())))
+            {
+                result = Err(NodeError::Link {
+                    name: self.slots[i].template.name.clone(),
+                    source: e,
+                });
+                break;
+            }
+        }
+        self.flush();
+        for slot in &mut self.slots {
+            if let Err(e) = slot.io.shutdown().await {
+                tracing::warn!("{}: {e}", slot.template.name);
+            }
+        }
+        if let Some((path, log)) = &mut self.log {
+            log.flush().map_err(|source| NodeError::Log {
+                path: path.clone(),
+                source,
+            })?;
+        }
+        result.map(|()| self.report(clock::now()))
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        let housekeeping = self
+            .slots
+            .iter()
+            .filter_map(|s| s.io.next_housekeeping())
+            .min();
+        let log = self
+            .log
+            .as_ref()
+            .and_then(|(_, w)| w.flush_deadline())
+            .map(|_| clock::now() + Duration::from_secs(1));
+        [self.router.poll_timeout(), housekeeping, log]
+            .into_iter()
+            .flatten()
+            .min()
+    }
+
+    fn drain_events(&mut self) -> Result<(), NodeError> {
+        while let Some(event) = self.router.poll_event() {
+            match event {
+                Event::Local { link, frame } => {
+                    if let Some((path, log)) = &mut self.log {
+                        let slot = self
+                            .owners
+                            .get(link.index())
+                            .copied()
+                            .flatten()
+                            .map_or(2, |(s, _)| s);
+                        let bits = slot.min(2) as u64;
+                        let ts = (frame.received_at.as_micros() & !3) | bits;
+                        log.write_record(ts, frame.frame.as_bytes())
+                            .map_err(|source| NodeError::Log {
+                                path: path.clone(),
+                                source,
+                            })?;
+                    }
+                    if self.log_local_only {
+                        continue;
+                    }
+                }
+                Event::VersionChanged { link, from, to } => {
+                    tracing::info!("{}: {from} → {to}", self.link_label(link));
+                }
+                Event::Rejected { link, rejected } => {
+                    tracing::debug!("{}: rejected {:?}", self.link_label(link), rejected.reason);
+                }
+                _ => {}
+            }
+        }
+        if let Some((path, log)) = &mut self.log {
+            log.flush_if_due().map_err(|source| NodeError::Log {
+                path: path.clone(),
+                source,
+            })?;
+        }
+        Ok(())
+    }
+
+    fn link_label(&self, link: LinkId) -> String {
+        self.router
+            .link_config(link)
+            .map_or_else(|| link.to_string(), |c| c.name.clone())
+    }
+
+    /// Writes every queued frame to its link, then sends the batches.
+    fn flush(&mut self) {
+        while let Some(t) = self.router.poll_transmit(&mut self.buf) {
+            if let Some(Some((slot, peer))) = self.owners.get(t.link.index()) {
+                self.slots[*slot]
+                    .io
+                    .send(Dest::Peer(*peer), &self.buf[..t.len]);
+            }
+        }
+        for slot in &mut self.slots {
+            slot.io.flush();
+        }
+    }
+
+    fn report(&self, now: Instant) -> NodeReport {
+        let mut links = Vec::new();
+        let mut names: HashMap<LinkId, (String, Option<String>)> = HashMap::new();
+        for slot in &self.slots {
+            if slot.peers.is_empty() {
+                links.push(LinkReport {
+                    name: slot.template.name.clone(),
+                    peer: None,
+                    version: mode_of(&slot.template).as_str(),
+                    rx_frames: 0,
+                    rx_bytes: 0,
+                    tx_frames: 0,
+                    tx_bytes: 0,
+                    converted: 0,
+                    conversions: conversions(&mavstack_router::Conversions::default()),
+                    dropped: Vec::new(),
+                    seq_lost: 0,
+                });
+            }
+            let mut peers: Vec<_> = slot.peers.values().collect();
+            peers.sort_by_key(|(id, _, _)| *id);
+            for (id, _, addr) in peers {
+                let Some(status) = self.router.link_status(*id) else {
+                    continue;
+                };
+                let peer = Some(addr.clone());
+                names.insert(*id, (slot.template.name.clone(), peer.clone()));
+                let c = &status.counters;
+                links.push(LinkReport {
+                    name: slot.template.name.clone(),
+                    peer,
+                    version: status.mode.as_str(),
+                    rx_frames: c.rx_frames,
+                    rx_bytes: c.rx_bytes,
+                    tx_frames: c.tx_frames,
+                    tx_bytes: c.tx_bytes,
+                    converted: c.converted,
+                    conversions: conversions(&c.conversions),
+                    dropped: status.drops().into_iter().filter(|(_, n)| *n > 0).collect(),
+                    seq_lost: status.channel.lost,
+                });
+            }
+        }
+        let routes = self
+            .router
+            .routes()
+            .map(|r| {
+                let (name, peer) = names.get(&r.link).cloned().unwrap_or_default();
+                let age = now.saturating_duration_since(r.last_seen).as_secs_f64();
+                (r.sysid, r.compid, name, peer, age)
+            })
+            .collect();
+        NodeReport {
+            t_s: now.saturating_duration_since(self.started).as_secs_f64(),
+            links,
+            routes,
+            transport: self
+                .slots
+                .iter()
+                .map(|s| (s.template.name.clone(), s.io.stats()))
+                .collect(),
+        }
+    }
+}
+
+/// What a link with no peer yet will carry.
+const fn mode_of(config: &LinkConfig) -> LinkMode {
+    if config.signing.is_some() {
+        return LinkMode::Signed;
+    }
+    match config.version {
+        mavstack_router::VersionMode::Mavlink1 => LinkMode::Mavlink1,
+        mavstack_router::VersionMode::Mavlink2 => LinkMode::Mavlink2,
+        mavstack_router::VersionMode::Auto => LinkMode::Auto,
+    }
+}
+
+const fn conversions(c: &mavstack_router::Conversions) -> [(&'static str, u64); 4] {
+    [
+        ("to_mavlink1", c.to_mavlink1),
+        ("to_mavlink2", c.to_mavlink2),
+        ("signature_removed", c.signature_removed),
+        ("signed", c.signed),
+    ]
+}

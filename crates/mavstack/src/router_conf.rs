@@ -1,0 +1,2450 @@
+//! mavlink-router's configuration format (`main.conf`), read as it is.
+//!
+//! A mavlink-router user can point `mavstack router --conf` at the file they already have. The
+//! file is read the way mavlink-router's own parser reads it, and each endpoint section becomes a
+//! mavstack link string (a connection string, then `?` and `&`-separated options):
+//!
+//! | section | link |
+//! | --- | --- |
+//! | `[UdpEndpoint NAME]`, `Mode = Server` or `Eavesdropping` | `udpin:ADDRESS:PORT` |
+//! | `[UdpEndpoint NAME]`, `Mode = Normal` | `udpout:ADDRESS:PORT` |
+//! | `[TcpEndpoint NAME]` | `tcp:ADDRESS:PORT` |
+//! | `[UartEndpoint NAME]` | `serial:DEVICE:BAUD` |
+//!
+//! The options come in a fixed order: `name` (the section's NAME) first, then `version`, `key`,
+//! `link_id`, `secure`, `trusted`, the twelve filters, `rate` and `bytes_per_s`. An IPv6 address
+//! is written in brackets, as mavlink-router requires in the file: `udpin:[::]:14550`.
+//!
+//! # Syntax, as mavlink-router reads it
+//!
+//! - Lines are split at `\n` and trimmed of C whitespace (space, tab, CR, LF, VT, FF), so CRLF
+//!   files work. A trimmed line that starts with `#` or `;` is a comment. There are no trailing
+//!   comments: `Port = 5 # x` gives the value `5 # x`, which is an error here.
+//! - A header is `[TYPE]` or `[TYPE NAME]`: the first `]` ends the line, no space after `[` or
+//!   before `]`, one plain space at most, at most 100 characters inside the brackets.
+//! - `KEY = VALUE` splits at the first `=`; both sides are trimmed; an empty key or value is an
+//!   error. Nothing is unquoted: quotes are part of the value.
+//! - Section types, section names, keys and enumerated values (`Mode`, `true`, ...) compare
+//!   ASCII case-insensitively. A header seen again, in this file or an earlier one, reopens its
+//!   section; a key seen again in a section replaces the earlier value.
+//! - Numbers are C `strtoul`/`strtol` with base 0: decimal, `0x` hexadecimal, and a leading
+//!   `0` means octal (`014550` is 6504, as mavlink-router reads it). Booleans are `true` or
+//!   `false` in any case, or a number (non-zero is true).
+//! - Lists are comma-separated decimal numbers; spaces around items are allowed and empty items
+//!   are skipped (`1, 2,,3` is `1,2,3`). In the link they are written with bare commas.
+//! - The legacy UDP key `Filter` fills the same list as `AllowMsgIdOut`; with both, the list is
+//!   `Filter`'s items followed by `AllowMsgIdOut`'s, as in mavlink-router.
+//! - A UDP endpoint in normal mode without `Port` gets 14550, or 14551 when a UDP endpoint
+//!   mavlink-router collects before it (it visits sections newest first) already uses the same
+//!   address with 14550.
+//!
+//! # Where this parser is stricter or more lenient than mavlink-router
+//!
+//! mavlink-router silently drops what it does not understand; a router that silently loses a
+//! filter is worse than one that refuses to start, so this parser reports instead:
+//!
+//! - an unknown key (for the section's type) and an unknown section (including `[UdpEndpoint]`
+//!   without a name) are errors; mavlink-router ignores both;
+//! - a number out of range (a port above 65535, a component id above 255) is an error, where
+//!   mavlink-router truncates it; a list item must be a decimal number (mavlink-router's `atoi`
+//!   reads `abc` as 0 and `1 2` as 1); a negative value for an unsigned key is an error;
+//! - a section NAME must not hold `&`, `?` or `=`, nor a `Device` those or `,`: they cannot go
+//!   into a link string;
+//! - a line after the last `\n` is read (mavlink-router drops it);
+//! - an IPv6 address may use uppercase hex digits (mavlink-router's check wants lowercase);
+//! - [`RouterConf::links`] lists the endpoints in the order their sections first appear
+//!   (mavlink-router creates UART, then UDP, then TCP endpoints, each newest first).
+//!
+//! Keys that mavlink-router knows but that have no effect in mavstack are checked like the others
+//! and recorded in [`General::ignored`] for a warning: `DebugLogLevel`, `SnifferSysid`,
+//! `LogMode`, `MinFreeSpace`, `MaxLogFiles`, `LogSystemId`, `LogTelemetry` in `[General]`;
+//! `FlowControl` and baud rates after the first for UART; `RetryTimeout` for TCP; `Group` for
+//! every endpoint.
+//!
+//! # mavstack's own keys
+//!
+//! Any endpoint section may also hold `MavlinkVersion` (`1`, `2`, `auto`) → `version`,
+//! `SigningKey` (64 hex digits) → `key`, `SigningLinkId` (0–255) → `link_id`, `Trusted` and
+//! `Secure` (booleans) → `trusted`, `secure`, `RateLimit` (kept as written, e.g. `30:10,33:5`)
+//! → `rate`, and `BytesPerSecond` → `bytes_per_s`. A signing key never appears in an error.
+
+use core::fmt;
+use core::net::{Ipv4Addr, Ipv6Addr};
+use std::path::PathBuf;
+
+/// A parsed configuration: general settings and the links it defines.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct RouterConf {
+    /// The `[General]` section (defaults when the file has none).
+    pub general: General,
+    /// One link per endpoint section, in the order the sections first appear.
+    pub links: Vec<ConfLink>,
+}
+
+/// The `[General]` section, as written: a key that is absent stays `None` (or `false`), so the
+/// command line and mavstack's defaults can decide.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct General {
+    /// `TcpServerPort`: the TCP server's port (mavlink-router's default is 5760; 0 disables it).
+    pub tcp_server_port: Option<u16>,
+    /// `Log`: the directory for flight-stack logs.
+    pub log_dir: Option<PathBuf>,
+    /// `DeduplicationPeriod`, in milliseconds (0 disables de-duplication).
+    pub dedup_ms: Option<u64>,
+    /// `ReportStats`: print link statistics.
+    pub report_stats: bool,
+    /// `MavlinkDialect`, lowercase: `auto`, `common` or `ardupilotmega`.
+    pub dialect: Option<String>,
+    /// `(line, key)` of every key that is accepted but has no effect in mavstack, in file order,
+    /// for a warning. `key` is mavlink-router's spelling; baud rates after the first are
+    /// recorded as `Baud (rates after the first)`. With [`parse_dir`], lines are counted in the
+    /// file that set the key.
+    pub ignored: Vec<(usize, String)>,
+}
+
+/// One endpoint section, as a mavstack link.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConfLink {
+    /// The section's NAME, as first written.
+    pub name: String,
+    /// The line of the section's first header.
+    pub line: usize,
+    /// A mavstack link string: connection string, `?`, then `&`-separated options, e.g.
+    /// `udpin:0.0.0.0:14550?name=gcs&version=1`.
+    pub link: String,
+}
+
+/// A configuration error, at a line of the file.
+///
+/// `Display` writes `line N: message`; the caller puts the file name in front.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConfError {
+    /// The 1-based line the error is about.
+    pub line: usize,
+    /// What is wrong, naming the section, key and value (lowercase, no trailing period).
+    pub message: String,
+}
+
+impl fmt::Display for ConfError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "line {}: {}", self.line, self.message)
+    }
+}
+
+impl core::error::Error for ConfError {}
+
+/// Parses one configuration file.
+///
+/// # Errors
+///
+/// A [`ConfError`] for the first problem found: a line that is not a header, `key = value`,
+/// comment or blank; an unknown section or key; a bad value; a missing required key.
+pub fn parse(text: &str) -> Result<RouterConf, ConfError> {
+    parse_texts(&[text]).map_err(|(_, error)| error)
+}
+
+/// Parses several files `(name, text)` in the order given, merged the way mavlink-router merges
+/// its main file and the files of its conf directory (which it reads in `strcmp` order of their
+/// paths, after the main file): a header seen again reopens its section, so a later file adds
+/// endpoints, adds keys to a section, or replaces single keys. A key before the first header of
+/// its own file is an error, even when an earlier file ended inside a section.
+///
+/// # Errors
+///
+/// The name of the file the error is in, and the error (see [`parse`]). A missing required key
+/// is reported at the section's first header.
+pub fn parse_dir(files: &[(String, String)]) -> Result<RouterConf, (String, ConfError)> {
+    let texts: Vec<&str> = files.iter().map(|(_, text)| text.as_str()).collect();
+    parse_texts(&texts).map_err(|(file, error)| {
+        let name = files
+            .get(file)
+            .map(|(name, _)| name.clone())
+            .unwrap_or_default();
+        (name, error)
+    })
+}
+
+/// An error and the index of the file it is in.
+type Failure = (usize, ConfError);
+
+fn failure(file: usize, line: usize, message: String) -> Failure {
+    (file, ConfError { line, message })
+}
+
+fn parse_texts(texts: &[&str]) -> Result<RouterConf, Failure> {
+    let sections = read_sections(texts)?;
+    build(&sections)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Reading: lines → sections of key/value entries.
+
+/// The longest text mavlink-router accepts between `[` and `]`.
+const MAX_SECTION_NAME: usize = 100;
+
+/// C `isspace` in the C locale.
+fn is_c_space(c: char) -> bool {
+    matches!(c, ' ' | '\t' | '\n' | '\r' | '\x0b' | '\x0c')
+}
+
+fn trim(s: &str) -> &str {
+    s.trim_matches(is_c_space)
+}
+
+/// `s` quoted for a message, cut short when it is long.
+fn shown(s: &str) -> String {
+    const MAX_SHOWN: usize = 60;
+    match s.char_indices().nth(MAX_SHOWN) {
+        Some((cut, _)) => format!("{:?}...", &s[..cut]),
+        None => format!("{s:?}"),
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    General,
+    Uart,
+    Udp,
+    Tcp,
+}
+
+impl Kind {
+    fn label(self) -> &'static str {
+        match self {
+            Self::General => "General",
+            Self::Uart => "UartEndpoint",
+            Self::Udp => "UdpEndpoint",
+            Self::Tcp => "TcpEndpoint",
+        }
+    }
+}
+
+/// A key's last value in a section, and where it was set.
+struct Entry<'a> {
+    key: &'a str,
+    value: &'a str,
+    file: usize,
+    line: usize,
+}
+
+/// A section, merged over every header that names it.
+struct Section<'a> {
+    kind: Kind,
+    /// The text between the brackets of the first header (what headers are compared by).
+    header: &'a str,
+    /// The NAME part (empty for `[General]`).
+    name: &'a str,
+    file: usize,
+    line: usize,
+    entries: Vec<Entry<'a>>,
+}
+
+impl Section<'_> {
+    /// How messages name the section: `General` or `UdpEndpoint "alpha"`.
+    fn context(&self) -> String {
+        match self.kind {
+            Kind::General => "General".to_owned(),
+            kind => format!("{} {:?}", kind.label(), self.name),
+        }
+    }
+}
+
+fn read_sections<'a>(texts: &[&'a str]) -> Result<Vec<Section<'a>>, Failure> {
+    let mut sections: Vec<Section<'a>> = Vec::new();
+    for (file, text) in texts.iter().enumerate() {
+        // A file starts outside any section, whatever the previous file ended in.
+        let mut current: Option<usize> = None;
+        for (index, raw) in text.split('\n').enumerate() {
+            let line = index + 1;
+            let trimmed = trim(raw);
+            if trimmed.is_empty() || trimmed.starts_with(['#', ';']) {
+                continue;
+            }
+            if trimmed.starts_with('[') {
+                let (kind, header, name) =
+                    parse_header(trimmed).map_err(|message| failure(file, line, message))?;
+                let found = sections
+                    .iter()
+                    .position(|s| s.header.eq_ignore_ascii_case(header));
+                current = Some(found.unwrap_or_else(|| {
+                    sections.push(Section {
+                        kind,
+                        header,
+                        name,
+                        file,
+                        line,
+                        entries: Vec::new(),
+                    });
+                    sections.len() - 1
+                }));
+                continue;
+            }
+            let Some((key, value)) = trimmed.split_once('=') else {
+                return Err(failure(
+                    file,
+                    line,
+                    format!(
+                        "expected a [section] header, KEY = VALUE or a comment, found {}",
+                        shown(trimmed)
+                    ),
+                ));
+            };
+            let (key, value) = (trim(key), trim(value));
+            if key.is_empty() {
+                return Err(failure(
+                    file,
+                    line,
+                    format!("missing key before '=' in {}", shown(trimmed)),
+                ));
+            }
+            let Some(section) = current.and_then(|i| sections.get_mut(i)) else {
+                return Err(failure(
+                    file,
+                    line,
+                    format!("key {} comes before any [section] header", shown(key)),
+                ));
+            };
+            if value.is_empty() {
+                return Err(failure(
+                    file,
+                    line,
+                    format!("{}: {} has no value", section.context(), shown(key)),
+                ));
+            }
+            match section
+                .entries
+                .iter_mut()
+                .find(|e| e.key.eq_ignore_ascii_case(key))
+            {
+                Some(entry) => {
+                    *entry = Entry {
+                        key,
+                        value,
+                        file,
+                        line,
+                    }
+                }
+                None => section.entries.push(Entry {
+                    key,
+                    value,
+                    file,
+                    line,
+                }),
+            }
+        }
+    }
+    Ok(sections)
+}
+
+/// Checks a trimmed line that starts with `[`; returns the section's type, the text between the
+/// brackets and its NAME.
+fn parse_header(line: &str) -> Result<(Kind, &str, &str), String> {
+    let Some(close) = line.find(']') else {
+        return Err(format!("section header {} has no closing ']'", shown(line)));
+    };
+    if close + 1 != line.len() {
+        return Err(format!(
+            "unexpected text after ']' in section header {}",
+            shown(line)
+        ));
+    }
+    let inner = &line[1..close];
+    if inner.starts_with(is_c_space) || inner.ends_with(is_c_space) {
+        return Err(format!(
+            "section header {} has a space after '[' or before ']'",
+            shown(line)
+        ));
+    }
+    if inner.chars().any(|c| is_c_space(c) && c != ' ') {
+        return Err(format!(
+            "section header {} holds whitespace other than a space",
+            shown(line)
+        ));
+    }
+    if inner.matches(' ').count() > 1 {
+        return Err(format!(
+            "section header {} has more than one space: a section name cannot contain spaces",
+            shown(line)
+        ));
+    }
+    if inner.len() > MAX_SECTION_NAME {
+        return Err(format!(
+            "section header {} is longer than {MAX_SECTION_NAME} characters",
+            shown(line)
+        ));
+    }
+    let (type_name, name) = match inner.split_once(' ') {
+        Some((type_name, name)) => (type_name, Some(name)),
+        None => (inner, None),
+    };
+    let kind = [Kind::General, Kind::Uart, Kind::Udp, Kind::Tcp]
+        .into_iter()
+        .find(|kind| kind.label().eq_ignore_ascii_case(type_name));
+    match (kind, name) {
+        (None, _) => Err(format!(
+            "unknown section {}; expected [General], [UartEndpoint NAME], [UdpEndpoint NAME] \
+             or [TcpEndpoint NAME]",
+            shown(line)
+        )),
+        (Some(Kind::General), Some(_)) => Err(format!(
+            "section {} has a name; [General] takes none",
+            shown(line)
+        )),
+        (Some(Kind::General), None) => Ok((Kind::General, inner, "")),
+        (Some(kind), None) => Err(format!(
+            "section {} needs a name: [{} NAME]",
+            shown(line),
+            kind.label()
+        )),
+        (Some(kind), Some(name)) => {
+            if name.contains(['&', '?', '=']) {
+                return Err(format!(
+                    "{} {}: a name must not contain '&', '?' or '='",
+                    kind.label(),
+                    shown(name)
+                ));
+            }
+            Ok((kind, inner, name))
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Keys.
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Setting {
+    TcpServerPort,
+    ReportStats,
+    DebugLogLevel,
+    DeduplicationPeriod,
+    SnifferSysid,
+    Log,
+    LogMode,
+    MavlinkDialect,
+    MinFreeSpace,
+    MaxLogFiles,
+    LogSystemId,
+    LogTelemetry,
+    Device,
+    Baud,
+    FlowControl,
+    Mode,
+    Address,
+    Port,
+    Filter,
+    RetryTimeout,
+    Group,
+    /// One of [`FILTERS`], by index.
+    MsgFilter(usize),
+    MavlinkVersion,
+    SigningKey,
+    SigningLinkId,
+    Trusted,
+    Secure,
+    RateLimit,
+    BytesPerSecond,
+}
+
+const GENERAL_KEYS: &[(&str, Setting)] = &[
+    ("TcpServerPort", Setting::TcpServerPort),
+    ("ReportStats", Setting::ReportStats),
+    ("DebugLogLevel", Setting::DebugLogLevel),
+    ("DeduplicationPeriod", Setting::DeduplicationPeriod),
+    ("SnifferSysid", Setting::SnifferSysid),
+    ("Log", Setting::Log),
+    ("LogMode", Setting::LogMode),
+    ("MavlinkDialect", Setting::MavlinkDialect),
+    ("MinFreeSpace", Setting::MinFreeSpace),
+    ("MaxLogFiles", Setting::MaxLogFiles),
+    ("LogSystemId", Setting::LogSystemId),
+    ("LogTelemetry", Setting::LogTelemetry),
+];
+
+const UART_KEYS: &[(&str, Setting)] = &[
+    ("Device", Setting::Device),
+    ("Baud", Setting::Baud),
+    ("FlowControl", Setting::FlowControl),
+];
+
+const UDP_KEYS: &[(&str, Setting)] = &[
+    ("Address", Setting::Address),
+    ("Mode", Setting::Mode),
+    ("Port", Setting::Port),
+    ("Filter", Setting::Filter),
+];
+
+const TCP_KEYS: &[(&str, Setting)] = &[
+    ("Address", Setting::Address),
+    ("Port", Setting::Port),
+    ("RetryTimeout", Setting::RetryTimeout),
+];
+
+/// Keys of every endpoint section besides the filters: mavlink-router's `Group`, then mavstack's.
+const ENDPOINT_KEYS: &[(&str, Setting)] = &[
+    ("Group", Setting::Group),
+    ("MavlinkVersion", Setting::MavlinkVersion),
+    ("SigningKey", Setting::SigningKey),
+    ("SigningLinkId", Setting::SigningLinkId),
+    ("Trusted", Setting::Trusted),
+    ("Secure", Setting::Secure),
+    ("RateLimit", Setting::RateLimit),
+    ("BytesPerSecond", Setting::BytesPerSecond),
+];
+
+/// The largest message id: 24 bits.
+const MAX_MSG_ID: u32 = 0xFF_FFFF;
+
+/// A filter key, the link option it becomes, and the largest id it holds.
+struct FilterKey {
+    conf: &'static str,
+    option: &'static str,
+    max: u32,
+}
+
+/// The filters, in the order their options are written. `Filter` (UDP only) adds to the first.
+const FILTERS: [FilterKey; 12] = [
+    FilterKey {
+        conf: "AllowMsgIdOut",
+        option: "allow_msg_out",
+        max: MAX_MSG_ID,
+    },
+    FilterKey {
+        conf: "BlockMsgIdOut",
+        option: "block_msg_out",
+        max: MAX_MSG_ID,
+    },
+    FilterKey {
+        conf: "AllowSrcCompOut",
+        option: "allow_src_comp_out",
+        max: 255,
+    },
+    FilterKey {
+        conf: "BlockSrcCompOut",
+        option: "block_src_comp_out",
+        max: 255,
+    },
+    FilterKey {
+        conf: "AllowSrcSysOut",
+        option: "allow_src_sys_out",
+        max: 255,
+    },
+    FilterKey {
+        conf: "BlockSrcSysOut",
+        option: "block_src_sys_out",
+        max: 255,
+    },
+    FilterKey {
+        conf: "AllowMsgIdIn",
+        option: "allow_msg_in",
+        max: MAX_MSG_ID,
+    },
+    FilterKey {
+        conf: "BlockMsgIdIn",
+        option: "block_msg_in",
+        max: MAX_MSG_ID,
+    },
+    FilterKey {
+        conf: "AllowSrcCompIn",
+        option: "allow_src_comp_in",
+        max: 255,
+    },
+    FilterKey {
+        conf: "BlockSrcCompIn",
+        option: "block_src_comp_in",
+        max: 255,
+    },
+    FilterKey {
+        conf: "AllowSrcSysIn",
+        option: "allow_src_sys_in",
+        max: 255,
+    },
+    FilterKey {
+        conf: "BlockSrcSysIn",
+        option: "block_src_sys_in",
+        max: 255,
+    },
+];
+
+/// A key of a section type, as mavlink-router spells it.
+fn lookup(kind: Kind, key: &str) -> Option<(&'static str, Setting)> {
+    let specific = match kind {
+        Kind::General => return find_key(GENERAL_KEYS, key),
+        Kind::Uart => UART_KEYS,
+        Kind::Udp => UDP_KEYS,
+        Kind::Tcp => TCP_KEYS,
+    };
+    find_key(specific, key)
+        .or_else(|| find_key(ENDPOINT_KEYS, key))
+        .or_else(|| {
+            FILTERS
+                .iter()
+                .enumerate()
+                .find(|(_, f)| f.conf.eq_ignore_ascii_case(key))
+                .map(|(i, f)| (f.conf, Setting::MsgFilter(i)))
+        })
+}
+
+fn find_key(table: &[(&'static str, Setting)], key: &str) -> Option<(&'static str, Setting)> {
+    table
+        .iter()
+        .find(|(name, _)| name.eq_ignore_ascii_case(key))
+        .copied()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Values.
+
+/// C `strtoul(s, _, 0)` over the whole of `s`, without its wrap-around of negative numbers.
+fn c_unsigned(s: &str) -> Option<u64> {
+    let s = s.strip_prefix('+').unwrap_or(s);
+    let (digits, radix) = if let Some(hex) = s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        (hex, 16)
+    } else if s.len() > 1 && s.starts_with('0') {
+        (&s[1..], 8)
+    } else {
+        (s, 10)
+    };
+    if digits.is_empty() || !digits.chars().all(|c| c.is_digit(radix)) {
+        return None;
+    }
+    u64::from_str_radix(digits, radix).ok()
+}
+
+/// C `strtol(s, _, 0)` over the whole of `s`, in the range of a 32-bit `int`.
+fn c_int(s: &str) -> Option<i32> {
+    match s.strip_prefix('-') {
+        Some(rest) if !rest.starts_with(['+', '-']) => {
+            let magnitude = i64::try_from(c_unsigned(rest)?).ok()?;
+            i32::try_from(-magnitude).ok()
+        }
+        Some(_) => None,
+        None => i32::try_from(c_unsigned(s)?).ok(),
+    }
+}
+
+/// mavlink-router's boolean: `true`, `false` (any case) or a number, non-zero being true.
+fn c_bool(s: &str) -> Option<bool> {
+    if s.eq_ignore_ascii_case("true") {
+        Some(true)
+    } else if s.eq_ignore_ascii_case("false") {
+        Some(false)
+    } else {
+        c_int(s).map(|n| n != 0)
+    }
+}
+
+/// A comma-separated list of decimal numbers in `min..=max`; empty items are skipped.
+fn number_list(value: &str, min: u32, max: u32) -> Result<Vec<u32>, String> {
+    let mut items = Vec::new();
+    for item in value.split(',').map(trim).filter(|item| !item.is_empty()) {
+        let number = Some(item)
+            .filter(|item| item.bytes().all(|b| b.is_ascii_digit()))
+            .and_then(|item| item.parse::<u32>().ok())
+            .filter(|n| (min..=max).contains(n));
+        let Some(number) = number else {
+            let hint = if item.contains(['#', ';']) {
+                "; a comment must be on a line of its own"
+            } else if item.contains(is_c_space) {
+                "; separate items with commas"
+            } else {
+                ""
+            };
+            return Err(format!(
+                "item {} is not a number {min}-{max}{hint}",
+                shown(item)
+            ));
+        };
+        items.push(number);
+    }
+    Ok(items)
+}
+
+/// Two lists of numbers, one after the other, with bare commas.
+fn join(first: &[u32], second: &[u32]) -> String {
+    let items: Vec<String> = first.iter().chain(second).map(u32::to_string).collect();
+    items.join(",")
+}
+
+/// mavlink-router's address check: four dotted groups of 1-3 digits, or an IPv6 address in
+/// brackets. Hostnames are not accepted.
+fn check_address(value: &str) -> Result<(), &'static str> {
+    if let Some(inner) = value.strip_prefix('[').and_then(|v| v.strip_suffix(']')) {
+        return match inner.parse::<Ipv6Addr>() {
+            Ok(_) => Ok(()),
+            Err(_) => Err("is not an IPv6 address"),
+        };
+    }
+    let dotted = value.split('.').count() == 4
+        && value
+            .split('.')
+            .all(|g| (1..=3).contains(&g.len()) && g.bytes().all(|b| b.is_ascii_digit()));
+    if dotted && value.parse::<Ipv4Addr>().is_ok() {
+        Ok(())
+    } else if value.parse::<Ipv6Addr>().is_ok() {
+        Err("is an IPv6 address without brackets; write it as [ADDRESS]")
+    } else {
+        Err("is not an IPv4 address or an IPv6 address in brackets")
+    }
+}
+
+/// The choice `value` names, ignoring ASCII case.
+fn one_of(choices: &[&'static str], value: &str) -> Option<&'static str> {
+    choices
+        .iter()
+        .find(|c| c.eq_ignore_ascii_case(value))
+        .copied()
+}
+
+/// Characters a value must not hold to be a link option (or the device in `serial:DEVICE:BAUD`).
+const FORBIDDEN: [char; 4] = [',', '&', '?', '='];
+
+// ---------------------------------------------------------------------------------------------
+// Building: sections → general settings and links.
+
+/// The mode of a UDP endpoint.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum UdpMode {
+    /// `Normal`: send to a fixed address.
+    Client,
+    /// `Server` or `Eavesdropping`: bind and answer the last sender.
+    Server,
+}
+
+/// An endpoint section's settings, before its link is written.
+struct Endpoint<'a> {
+    section: &'a Section<'a>,
+    /// `Device` or `Address`.
+    host: Option<&'a str>,
+    /// `Port` or the first `Baud`.
+    number: Option<u32>,
+    mode: Option<UdpMode>,
+    version: Option<&'static str>,
+    /// `SigningKey`, and the file and line that set it.
+    key: Option<(&'a str, usize, usize)>,
+    link_id: Option<u8>,
+    secure: Option<bool>,
+    trusted: Option<bool>,
+    filters: [Vec<u32>; 12],
+    legacy_filter: Vec<u32>,
+    rate: Option<String>,
+    bytes_per_s: Option<u64>,
+}
+
+/// Where [`General::ignored`] entries are collected: file, line, key.
+type Ignored = Vec<(usize, usize, String)>;
+
+fn build(sections: &[Section<'_>]) -> Result<RouterConf, Failure> {
+    let mut general = General::default();
+    let mut ignored: Ignored = Vec::new();
+    let mut endpoints = Vec::new();
+    for section in sections {
+        if section.kind == Kind::General {
+            read_general(section, &mut general, &mut ignored)?;
+        } else {
+            endpoints.push(read_endpoint(section, &mut ignored)?);
+        }
+    }
+    assign_udp_ports(&mut endpoints);
+    ignored.sort_by_key(|&(file, line, _)| (file, line));
+    general.ignored = ignored
+        .into_iter()
+        .map(|(_, line, key)| (line, key))
+        .collect();
+    let links = endpoints.iter().map(Endpoint::link).collect();
+    Ok(RouterConf { general, links })
+}
+
+fn read_general(
+    section: &Section<'_>,
+    general: &mut General,
+    ignored: &mut Ignored,
+) -> Result<(), Failure> {
+    let context = section.context();
+    for entry in &section.entries {
+        let fail = |what: &str| failure(entry.file, entry.line, format!("{context}: {what}"));
+        let Some((name, key)) = lookup(Kind::General, entry.key) else {
+            return Err(fail(&format!("unknown key {}", shown(entry.key))));
+        };
+        let value = entry.value;
+        let bad = |what: &str| fail(&format!("{name} {} {what}", shown(value)));
+        let unsigned = || c_unsigned(value).ok_or_else(|| bad("is not an unsigned number"));
+        let choice =
+            |choices: &[&'static str], what: &str| one_of(choices, value).ok_or_else(|| bad(what));
+        let mut ignore = || ignored.push((entry.file, entry.line, name.to_owned()));
+        match key {
+            Setting::TcpServerPort => {
+                let port = c_unsigned(value).and_then(|p| u16::try_from(p).ok());
+                general.tcp_server_port = Some(port.ok_or_else(|| bad("is not a number 0-65535"))?);
+            }
+            Setting::ReportStats => {
+                general.report_stats =
+                    c_bool(value).ok_or_else(|| bad("is not true, false or a number"))?;
+            }
+            Setting::DeduplicationPeriod => general.dedup_ms = Some(unsigned()?),
+            Setting::Log => general.log_dir = Some(PathBuf::from(value)),
+            Setting::MavlinkDialect => {
+                let dialect = choice(
+                    &["auto", "common", "ardupilotmega"],
+                    "is not auto, common or ardupilotmega",
+                )?;
+                general.dialect = Some(dialect.to_owned());
+            }
+            Setting::DebugLogLevel => {
+                choice(
+                    &["error", "warning", "info", "debug", "trace"],
+                    "is not error, warning, info, debug or trace",
+                )?;
+                ignore();
+            }
+            Setting::LogMode => {
+                choice(&["always", "while-armed"], "is not always or while-armed")?;
+                ignore();
+            }
+            Setting::SnifferSysid | Setting::MinFreeSpace | Setting::MaxLogFiles => {
+                unsigned()?;
+                ignore();
+            }
+            Setting::LogSystemId => {
+                c_int(value)
+                    .filter(|id| (1..=255).contains(id))
+                    .ok_or_else(|| bad("is not a number 1-255"))?;
+                ignore();
+            }
+            Setting::LogTelemetry => {
+                c_bool(value).ok_or_else(|| bad("is not true, false or a number"))?;
+                ignore();
+            }
+            _ => return Err(fail(&format!("unknown key {}", shown(entry.key)))),
+        }
+    }
+    Ok(())
+}
+
+fn read_endpoint<'a>(
+    section: &'a Section<'a>,
+    ignored: &mut Ignored,
+) -> Result<Endpoint<'a>, Failure> {
+    let mut ep = Endpoint::new(section);
+    for entry in &section.entries {
+        ep.apply(entry, ignored)?;
+    }
+    ep.finish()?;
+    Ok(ep)
+}
+
+impl<'a> Endpoint<'a> {
+    fn new(section: &'a Section<'a>) -> Self {
+        Self {
+            section,
+            host: None,
+            number: None,
+            mode: None,
+            version: None,
+            key: None,
+            link_id: None,
+            secure: None,
+            trusted: None,
+            filters: Default::default(),
+            legacy_filter: Vec::new(),
+            rate: None,
+            bytes_per_s: None,
+        }
+    }
+
+    /// Checks one key of the section and keeps its value.
+    fn apply(&mut self, entry: &Entry<'a>, ignored: &mut Ignored) -> Result<(), Failure> {
+        let context = self.section.context();
+        let fail = |what: &str| failure(entry.file, entry.line, format!("{context}: {what}"));
+        let Some((name, setting)) = lookup(self.section.kind, entry.key) else {
+            return Err(fail(&format!("unknown key {}", shown(entry.key))));
+        };
+        let value = entry.value;
+        let bad = |what: &str| fail(&format!("{name} {} {what}", shown(value)));
+        let boolean = || c_bool(value).ok_or_else(|| bad("is not true, false or a number"));
+        let list = |min, max| {
+            number_list(value, min, max)
+                .map_err(|what| fail(&format!("{name} {}: {what}", shown(value))))
+        };
+        let mut ignore = |label: &str| ignored.push((entry.file, entry.line, label.to_owned()));
+        match setting {
+            Setting::Device => {
+                if value.contains(FORBIDDEN) {
+                    return Err(bad("must not contain ',', '&', '?' or '='"));
+                }
+                self.host = Some(value);
+            }
+            Setting::Baud => {
+                let bauds = list(1, u32::MAX)?;
+                if bauds.len() > 1 {
+                    ignore("Baud (rates after the first)");
+                }
+                self.number = bauds.first().copied();
+            }
+            Setting::FlowControl => {
+                boolean()?;
+                ignore(name);
+            }
+            Setting::Mode => {
+                self.mode = Some(if value.eq_ignore_ascii_case("normal") {
+                    UdpMode::Client
+                } else if value.eq_ignore_ascii_case("server")
+                    || value.eq_ignore_ascii_case("eavesdropping")
+                {
+                    UdpMode::Server
+                } else {
+                    return Err(bad("is not normal, server or eavesdropping"));
+                });
+            }
+            Setting::Address => {
+                check_address(value).map_err(bad)?;
+                self.host = Some(value);
+            }
+            Setting::Port => {
+                let port = c_unsigned(value)
+                    .and_then(|p| u32::try_from(p).ok())
+                    .filter(|p| (1..=65535).contains(p));
+                self.number = Some(port.ok_or_else(|| bad("is not a number 1-65535"))?);
+            }
+            Setting::Filter => self.legacy_filter = list(0, MAX_MSG_ID)?,
+            Setting::MsgFilter(index) => {
+                let max = FILTERS.get(index).map_or(0, |f| f.max);
+                let items = list(0, max)?;
+                if let Some(slot) = self.filters.get_mut(index) {
+                    *slot = items;
+                }
+            }
+            Setting::RetryTimeout => {
+                c_int(value).ok_or_else(|| bad("is not a whole number of seconds"))?;
+                ignore(name);
+            }
+            Setting::Group => ignore(name),
+            Setting::MavlinkVersion => {
+                let version = one_of(&["1", "2", "auto"], value);
+                self.version = Some(version.ok_or_else(|| bad("is not 1, 2 or auto"))?);
+            }
+            Setting::SigningKey => {
+                // The key is a secret: the message describes it without showing it.
+                let length = value.chars().count();
+                if length != 64 || !value.bytes().all(|b| b.is_ascii_hexdigit()) {
+                    let found = if length == 64 {
+                        "a character that is not a hex digit".to_owned()
+                    } else {
+                        format!("{length} characters")
+                    };
+                    return Err(fail(&format!(
+                        "{name} is not 64 hex digits (found {found})"
+                    )));
+                }
+                self.key = Some((value, entry.file, entry.line));
+            }
+            Setting::SigningLinkId => {
+                let id = c_unsigned(value).and_then(|id| u8::try_from(id).ok());
+                self.link_id = Some(id.ok_or_else(|| bad("is not a number 0-255"))?);
+            }
+            Setting::Trusted => self.trusted = Some(boolean()?),
+            Setting::Secure => self.secure = Some(boolean()?),
+            Setting::RateLimit => {
+                if value.contains(['&', '?', '=']) {
+                    return Err(bad("must not contain '&', '?' or '='"));
+                }
+                let items: Vec<&str> = value
+                    .split(',')
+                    .map(trim)
+                    .filter(|i| !i.is_empty())
+                    .collect();
+                if let Some(item) = items.iter().find(|i| i.contains(is_c_space)) {
+                    return Err(bad(&format!(
+                        "has an item {} with a space; separate items with commas",
+                        shown(item)
+                    )));
+                }
+                self.rate = Some(items.join(",")).filter(|rate| !rate.is_empty());
+            }
+            Setting::BytesPerSecond => {
+                let bytes = c_unsigned(value).ok_or_else(|| bad("is not an unsigned number"))?;
+                self.bytes_per_s = Some(bytes);
+            }
+            _ => return Err(fail(&format!("unknown key {}", shown(entry.key)))),
+        }
+        Ok(())
+    }
+
+    /// Checks the required keys once the whole section is read, and fills defaults.
+    fn finish(&mut self) -> Result<(), Failure> {
+        let section = self.section;
+        let context = section.context();
+        let missing = |what: &str| {
+            let message = format!("{context}: missing required key {what}");
+            failure(section.file, section.line, message)
+        };
+        match (section.kind, self.mode) {
+            (Kind::Uart, _) if self.host.is_none() => return Err(missing("Device")),
+            (Kind::Uart, _) => self.number = self.number.or(Some(DEFAULT_BAUD)),
+            (Kind::Udp | Kind::Tcp | Kind::General, _) if self.host.is_none() => {
+                return Err(missing("Address"));
+            }
+            (Kind::Udp, None) => return Err(missing("Mode (normal, server or eavesdropping)")),
+            (Kind::Udp, Some(UdpMode::Server)) if self.number.is_none() => {
+                return Err(missing("Port (required in server mode)"));
+            }
+            (Kind::Tcp | Kind::General, _) if self.number.is_none() => {
+                return Err(missing("Port"));
+            }
+            _ => {}
+        }
+        if let (Some("1"), Some((_, file, line))) = (self.version, self.key) {
+            let message = format!("{context}: SigningKey needs MAVLink 2 but MavlinkVersion is 1");
+            return Err(failure(file, line, message));
+        }
+        Ok(())
+    }
+
+    /// The link string, once every port is known.
+    fn link(&self) -> ConfLink {
+        let host = self.host.unwrap_or_default();
+        let number = self.number.unwrap_or_default();
+        let connection = match (self.section.kind, self.mode) {
+            (Kind::Uart, _) => format!("serial:{host}:{number}"),
+            (Kind::Udp, Some(UdpMode::Server)) => format!("udpin:{host}:{number}"),
+            (Kind::Udp, _) => format!("udpout:{host}:{number}"),
+            (Kind::Tcp | Kind::General, _) => format!("tcp:{host}:{number}"),
+        };
+        let mut options = vec![format!("name={}", self.section.name)];
+        if let Some(version) = self.version {
+            options.push(format!("version={version}"));
+        }
+        if let Some((key, _, _)) = self.key {
+            options.push(format!("key={key}"));
+        }
+        if let Some(id) = self.link_id {
+            options.push(format!("link_id={id}"));
+        }
+        if let Some(secure) = self.secure {
+            options.push(format!("secure={secure}"));
+        }
+        if let Some(trusted) = self.trusted {
+            options.push(format!("trusted={trusted}"));
+        }
+        for (index, (filter, items)) in FILTERS.iter().zip(&self.filters).enumerate() {
+            // `Filter` is mavlink-router's older name for the first list; its items come first.
+            let legacy: &[u32] = if index == 0 { &self.legacy_filter } else { &[] };
+            if !legacy.is_empty() || !items.is_empty() {
+                options.push(format!("{}={}", filter.option, join(legacy, items)));
+            }
+        }
+        if let Some(rate) = &self.rate {
+            options.push(format!("rate={rate}"));
+        }
+        if let Some(bytes) = self.bytes_per_s {
+            options.push(format!("bytes_per_s={bytes}"));
+        }
+        ConfLink {
+            name: self.section.name.to_owned(),
+            line: self.section.line,
+            link: format!("{connection}?{}", options.join("&")),
+        }
+    }
+}
+
+/// mavlink-router's baud rate when `Baud` is absent.
+const DEFAULT_BAUD: u32 = 115_200;
+
+/// The first port mavlink-router gives a normal-mode UDP endpoint without `Port`.
+const AUTO_UDP_PORT: u32 = 14550;
+
+/// Gives normal-mode UDP endpoints without `Port` mavlink-router's automatic port: it visits
+/// the UDP sections newest first and moves to 14551 when one visited before has the same
+/// address with 14550 (once: it is not a search for a free port).
+fn assign_udp_ports(endpoints: &mut [Endpoint<'_>]) {
+    let mut visited: Vec<(&str, u32)> = Vec::new();
+    for ep in endpoints
+        .iter_mut()
+        .rev()
+        .filter(|ep| ep.section.kind == Kind::Udp)
+    {
+        let host = ep.host.unwrap_or_default();
+        let port = *ep.number.get_or_insert_with(|| {
+            let taken = visited
+                .iter()
+                .any(|&(h, p)| h == host && p == AUTO_UDP_PORT);
+            if taken {
+                AUTO_UDP_PORT + 1
+            } else {
+                AUTO_UDP_PORT
+            }
+        });
+        visited.push((host, port));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `examples/config.sample` of github.com/mavlink-router/mavlink-router at commit
+    /// c20337bbc61abda21463e7482172d58b654e66b6 (blob 66b1c7e6ea1095139d1d08918b01ed23106ed924),
+    /// verbatim (Apache-2.0). It is the only configuration file in `examples/`.
+    const CONFIG_SAMPLE: &str = r"# This is the mavlink-router configuration file.
+
+# Syntax
+#
+# The configuration file is composed of sections, each containing a set of
+# key-value-pairs. Section names, keys and pre-defined values are case
+# insensitive. Sections can have names when they have multiple instances.
+#
+# Lines starting with a `#` symbol are considered a comment and ignored.
+# Comments at the end of a line are not allowed.
+#
+# A section starts with `[$section_type name-of-section]`. The name must not
+# contain any blanks.
+# Keys-value-pairs are separated by a `=` sign, the surrounding whitespace is
+# ignored. So `key=value` is the same as `key = value`.
+#
+# Boolean values can either be defined as <true>/ <false> or <1>/ <0>.
+# Lists are comma separated.
+#
+
+##
+## General Configuration
+##
+
+[General]
+# this section only has one instance and therefore no name
+
+# Print traffic statistics to stdout
+# Default: <false>
+#ReportStats = false
+
+# Logging verbosity (stderr)
+# Valid values: <error>, <warning>, <info>, <debug> or <trace>
+# Default: <info>
+#DebugLogLevel = info
+
+# Enable de-duplication of incoming messages. If a message is received another
+# time in the configured time period (in milliseconds), it will be dropped. The
+# second message will reset the timer.
+# It should be a bit higher, than the latency of the slowest link. More than
+# 1000 ms might drop packets unintentionally though.
+# Default: 0 (de-duplication disabled)
+#DeDuplicationPeriod = 0
+
+## TCP Server Endpoints
+
+# Listen for TCP connections on this port. Set to 0 to disable.
+# Default: 5760
+#TcpServerPort = 5760
+
+## Flight Stack Logging
+
+# Define the MAVLink dialect used by the flight stack, so mavlink-router can
+# log appropiately. In <auto> mode, the flight stack will be deferred from the
+# heartbeat message.
+# Valid values: <auto>, <common> or <ardupilotmega>
+# Default: <auto>
+#MavlinkDialect = auto
+
+# Enable flight stack logging and specify directory to save log files in.
+# No default/ disabled by default.
+#Log = /some/path
+
+# Define when to store flight stack or telemetry logs. From the start of
+# mavlink-router until it's stopped or just while the vehicle is armed.
+# Valid values: <always>, <while-armed>
+# Default: <always>
+#LogMode = always
+
+# Preset the FCU MAVLink ID from which logs should be received. If absent, it
+# will be set to the system ID of the first flight stack heartbeat received.
+# No default value.
+#LogSystemId = 
+
+# Auto-delete old log files until there's at least the configured amount of
+# bytes free on the storage device. Set to 0 to disable this functionality.
+# Default: 0 (disabled)
+#MinFreeSpace = 0
+
+# Auto-delete old log files to not have more files than configured. Set to 0 to
+# disable this functionality.
+# Default: 0 (disabled)
+#MaxLogFiles = 0
+
+# SnifferSysid
+# Forward all traffic to endpoints on which this MAVLink system ID is connected.
+# This can be used to log or view all messages flowing though mavlink-router.
+# Default: 0 (disabled)
+#SnifferSysid=254
+
+# Log raw mavlink telemetry data as tlog files to disc. Only works if Logging path 
+# is defined. This also uses LogMode to control the recording.
+# Valid values: <true>, <false>
+# Default: <false>
+# LogTelemetry = false
+
+
+##
+## UART Endpoint Configurations
+## Duplicate sections (with a different name) to create multiple endpoints
+##
+
+#[UartEndpoint $name]
+
+# Path to UART device. like `/dev/ttyS0`
+# Mandatory, no default value
+#Device = 
+
+# List of baudrates to use for the UART connection. The values will be cycled
+# through until valid MAVLink packets are received.
+# Format: Comma separated list of integers
+# Default: 115200
+#Baud = 115200
+
+# Enable flow control on device
+# Default: <false>
+#FlowControl = false
+
+# Only allow specified MAVLink message IDs to be sent via this endpoint. An
+# empty list allows all message IDs.
+# Format: Comma separated list of integers
+# Default: Empty list (disabled)
+#AllowMsgIdOut = 
+
+# Block specified MAVLink message IDs to be sent via this endpoint. An
+# empty list won't block any message IDs.
+# Format: Comma separated list of integers
+# Default: Empty list (disabled)
+#BlockMsgIdOut = 
+
+# Only allow messages from the specified MAVLink source component IDs to be
+# sent via this endpoint. An empty list allows all source components.
+# Format: Comma separated list of integers
+# Default: Empty list (disabled)
+#AllowSrcCompOut = 
+
+# Block messages from the specified MAVLink source component IDs to be
+# sent via this endpoint. An empty list won't block any source components.
+# Format: Comma separated list of integers
+# Default: Empty list (disabled)
+#BlockSrcCompOut = 
+
+# Only allow messages from the specified MAVLink source systems to be sent via
+# this endpoint. An empty list allows all source components.
+# Format: Comma separated list of integers
+# Default: Empty list (disabled)
+#AllowSrcSysOut = 
+
+# Block messages from the specified MAVLink source systems to be sent via
+# this endpoint. An empty list won't block any source systems.
+# Format: Comma separated list of integers
+# Default: Empty list (disabled)
+#BlockSrcSysOut = 
+
+# Only allow specified MAVLink message IDs to be received on this endpoint.
+# An empty list allows all message IDs.
+# Format: Comma separated list of integers
+# Default: Empty list (disabled)
+#AllowMsgIdIn = 
+
+# Block specified MAVLink message IDs to be received on this endpoint.
+# An empty list won't block any message IDs.
+# Format: Comma separated list of integers
+# Default: Empty list (disabled)
+#BlockMsgIdIn = 
+
+# Only allow messages from the specified MAVLink source component IDs to be
+# received on this endpoint. An empty list allows all source components.
+# Format: Comma separated list of integers
+# Default: Empty list (disabled)
+#AllowSrcCompIn = 
+
+# Block messages from the specified MAVLink source component IDs to be
+# received on this endpoint. An empty list won't block any source components.
+# Format: Comma separated list of integers
+# Default: Empty list (disabled)
+#BlockSrcCompIn = 
+
+# Only allow messages from the specified MAVLink source systems to be received
+# on this endpoint. An empty list allows all source components.
+# Format: Comma separated list of integers
+# Default: Empty list (disabled)
+#AllowSrcSysIn = 
+
+# Block messages from the specified MAVLink source systems to be received
+# on this endpoint. An empty list won't block any source systems.
+# Format: Comma separated list of integers
+# Default: Empty list (disabled)
+#BlockSrcSysIn = 
+
+# Group parallel/ redundant data links to use the same list of connected
+# systems. This is needed to prevent messages from one of the parallel links
+# being send back on the other one right away.
+# Set the same name (arbitrary string) on multiple endpoints to group them.
+# Default: Empty (no group)
+#Group = 
+
+## Example
+[UartEndpoint alpha]
+Device = /dev/ttyS0
+Baud = 52000
+
+
+##
+## UDP Endpoint Configurations
+## Duplicate sections (with a different name) to create multiple endpoints
+##
+
+#[UdpEndpoint $name]
+
+# Mode of operation. See the readme for a detailed description of the endpoint
+# behavior (client mode is <normal> in the configuraiton).
+# Valid values: <normal>, <server>
+# Mandatory, no default value
+#Mode = 
+
+# Binding or target IP address (depending on mode).
+# IPv6 addresses must be encosed in square brackets like `[::1]`.
+# Binding to `0.0.0.0` or `[::]` will listen on all interfaces.
+# Mandatory, no default value
+#Address = 
+
+# UDP port to be used with the configured address.
+# Mandatory in <server> mode, no default value
+# Optional in <normal> mode, will select the next port not used by mavlink-router
+#   starting from 14550 when not speciifed.
+#Port = 
+
+# See description at UartEndpoint
+#AllowMsgIdOut = 
+
+## Examples
+# bind to 0.0.0.0:10000
+[UdpEndpoint bravo]
+Mode = Server
+Address = 0.0.0.0
+Port = 10000
+
+# send to 127.0.0.1:11000
+[UdpEndpoint charlie]
+Mode = Normal
+Address = 127.0.0.1
+Port = 11000
+
+
+##
+## TCP Client Endpoint Configurations
+## Duplicate sections (with a different name) to create multiple endpoints
+##
+
+#[TcpEndpoint $name]
+
+# Server IP address to connect to.
+# IPv6 addresses must be encosed in square brackets like `[::1]`.
+# Mandatory, no default value
+#Address = 
+
+# TCP port to be used with the configured address.
+# Mandatory, no default value
+#Port = 
+
+# Enable automatic reconnect after the configured timeout in seconds. Set to 0
+# to disable reconnection.
+# Default: 5 seconds
+#RetryTimeout = 5
+
+# See description at UartEndpoint
+#AllowMsgIdOut = 
+
+## Example
+# connect to 127.0.0.1:25760 (e.g. another mavlink-router)
+[TcpEndpoint delta]
+Address = 127.0.0.1
+Port = 25760
+";
+
+    fn conf_link(name: &str, line: usize, link: &str) -> ConfLink {
+        ConfLink {
+            name: name.to_owned(),
+            line,
+            link: link.to_owned(),
+        }
+    }
+
+    fn links(text: &str) -> Vec<String> {
+        parse(text)
+            .expect("parses")
+            .links
+            .into_iter()
+            .map(|l| l.link)
+            .collect()
+    }
+
+    fn error(text: &str) -> String {
+        parse(text).expect_err("is rejected").to_string()
+    }
+
+    fn ignored(list: &[(usize, &str)]) -> Vec<(usize, String)> {
+        list.iter()
+            .map(|&(line, key)| (line, key.to_owned()))
+            .collect()
+    }
+
+    const KEY: &str = "00112233445566778899aabbccddeeff00112233445566778899AABBCCDDEEFF";
+
+    #[test]
+    fn config_sample_parses_to_its_four_endpoints() {
+        let conf = parse(CONFIG_SAMPLE).expect("the sample parses");
+        assert_eq!(conf.general, General::default());
+        assert_eq!(
+            conf.links,
+            [
+                conf_link("alpha", 199, "serial:/dev/ttyS0:52000?name=alpha"),
+                conf_link("bravo", 234, "udpin:0.0.0.0:10000?name=bravo"),
+                conf_link("charlie", 240, "udpout:127.0.0.1:11000?name=charlie"),
+                conf_link("delta", 272, "tcp:127.0.0.1:25760?name=delta"),
+            ]
+        );
+    }
+
+    #[test]
+    fn config_sample_with_its_templates_filled_in() {
+        // Every key the sample documents, given a value, in the sample's spelling.
+        let text = CONFIG_SAMPLE
+            .replace("#ReportStats = false", "ReportStats = true")
+            .replace("#DebugLogLevel = info", "DebugLogLevel = debug")
+            .replace("#DeDuplicationPeriod = 0", "DeDuplicationPeriod = 100")
+            .replace("#TcpServerPort = 5760", "TcpServerPort = 0")
+            .replace("#MavlinkDialect = auto", "MavlinkDialect = ArduPilotMega")
+            .replace("#Log = /some/path", "Log = /some/path")
+            .replace("#LogMode = always", "LogMode = while-armed")
+            .replace("#LogSystemId = ", "LogSystemId = 1")
+            .replace("#MinFreeSpace = 0", "MinFreeSpace = 1000000")
+            .replace("#MaxLogFiles = 0", "MaxLogFiles = 10")
+            .replace("#SnifferSysid=254", "SnifferSysid=254")
+            .replace("# LogTelemetry = false", "LogTelemetry = true")
+            .replace(
+                "Baud = 52000",
+                "Baud = 52000, 57600\nFlowControl = true\nGroup = radios",
+            )
+            .replace(
+                "Port = 11000",
+                "Port = 11000\nAllowMsgIdOut = 0, 1,2\nBlockSrcSysIn = 255",
+            )
+            .replace("Port = 25760", "Port = 25760\nRetryTimeout = 0");
+        let conf = parse(&text).expect("the filled-in sample parses");
+        assert_eq!(
+            conf.general,
+            General {
+                tcp_server_port: Some(0),
+                log_dir: Some(PathBuf::from("/some/path")),
+                dedup_ms: Some(100),
+                report_stats: true,
+                dialect: Some("ardupilotmega".to_owned()),
+                ignored: ignored(&[
+                    (35, "DebugLogLevel"),
+                    (68, "LogMode"),
+                    (73, "LogSystemId"),
+                    (78, "MinFreeSpace"),
+                    (83, "MaxLogFiles"),
+                    (89, "SnifferSysid"),
+                    (95, "LogTelemetry"),
+                    (201, "Baud (rates after the first)"),
+                    (202, "FlowControl"),
+                    (203, "Group"),
+                    (279, "RetryTimeout"),
+                ]),
+            }
+        );
+        assert_eq!(
+            conf.links
+                .iter()
+                .map(|l| l.link.as_str())
+                .collect::<Vec<_>>(),
+            [
+                "serial:/dev/ttyS0:52000?name=alpha",
+                "udpin:0.0.0.0:10000?name=bravo",
+                "udpout:127.0.0.1:11000?name=charlie&allow_msg_out=0,1,2&block_src_sys_in=255",
+                "tcp:127.0.0.1:25760?name=delta",
+            ]
+        );
+    }
+
+    #[test]
+    fn every_filter_maps_to_its_option_in_order() {
+        let text = "[TcpEndpoint t]\nAddress = 10.0.0.1\nPort = 5760\n\
+            BlockSrcSysIn = 12\nAllowSrcSysIn = 11\nBlockSrcCompIn = 10\nAllowSrcCompIn = 9\n\
+            BlockMsgIdIn = 8\nAllowMsgIdIn = 7\nBlockSrcSysOut = 6\nAllowSrcSysOut = 5\n\
+            BlockSrcCompOut = 4\nAllowSrcCompOut = 3\nBlockMsgIdOut = 2\nAllowMsgIdOut = 16777215\n";
+        assert_eq!(
+            links(text),
+            [
+                "tcp:10.0.0.1:5760?name=t&allow_msg_out=16777215&block_msg_out=2\
+              &allow_src_comp_out=3&block_src_comp_out=4&allow_src_sys_out=5&block_src_sys_out=6\
+              &allow_msg_in=7&block_msg_in=8&allow_src_comp_in=9&block_src_comp_in=10\
+              &allow_src_sys_in=11&block_src_sys_in=12"
+            ]
+        );
+    }
+
+    #[test]
+    fn legacy_filter_and_allow_msg_id_out_fill_one_list() {
+        let text = "[UdpEndpoint u]\nMode = normal\nAddress = 127.0.0.1\nPort = 14550\n\
+            AllowMsgIdOut = 33\nFilter = 0 , 30\n";
+        assert_eq!(
+            links(text),
+            ["udpout:127.0.0.1:14550?name=u&allow_msg_out=0,30,33"]
+        );
+        // Filter is a UDP key only, as in mavlink-router.
+        assert_eq!(
+            error("[TcpEndpoint t]\nAddress = 127.0.0.1\nPort = 1\nFilter = 0\n"),
+            "line 4: TcpEndpoint \"t\": unknown key \"Filter\""
+        );
+    }
+
+    #[test]
+    fn lists_are_comma_separated_with_optional_spaces() {
+        let text = "[UdpEndpoint u]\nMode = normal\nAddress = 127.0.0.1\nPort = 1\n\
+            AllowSrcCompOut = ,1,, 2 ,\t3,\nBlockSrcSysOut = ,\n";
+        // Empty items are skipped; a list of none is no filter.
+        assert_eq!(
+            links(text),
+            ["udpout:127.0.0.1:1?name=u&allow_src_comp_out=1,2,3"]
+        );
+    }
+
+    #[test]
+    fn mavstack_keys_become_link_options_in_order() {
+        let text = format!(
+            "[UdpEndpoint gcs]\nBytesPerSecond = 0x400\nRateLimit = 30:10, 33:5\nTrusted = 1\n\
+             Secure = TRUE\nSigningLinkId = 7\nSigningKey = {KEY}\nMavlinkVersion = Auto\n\
+             BlockMsgIdOut = 1\nMode = server\nAddress = 0.0.0.0\nPort = 14550\n\
+             [UartEndpoint legacy]\nDevice = /dev/ttyUSB0\nBaud = 57600\nMavlinkVersion = 1\n\
+             Trusted = false\n[TcpEndpoint up]\nAddress = 127.0.0.1\nPort = 5760\n\
+             MavlinkVersion = 2\nSecure = 0\n"
+        );
+        assert_eq!(
+            links(&text),
+            [
+                format!(
+                    "udpin:0.0.0.0:14550?name=gcs&version=auto&key={KEY}&link_id=7&secure=true\
+                     &trusted=true&block_msg_out=1&rate=30:10,33:5&bytes_per_s=1024"
+                ),
+                "serial:/dev/ttyUSB0:57600?name=legacy&version=1&trusted=false".to_owned(),
+                "tcp:127.0.0.1:5760?name=up&version=2&secure=false".to_owned(),
+            ]
+        );
+    }
+
+    #[test]
+    fn udp_modes_and_ports_follow_mavlink_router() {
+        let text = "[UdpEndpoint a]\nMode = Normal\nAddress = 192.168.1.255\n\
+            [UdpEndpoint b]\nMode = Eavesdropping\nAddress = 0.0.0.0\nPort = 14551\n\
+            [UdpEndpoint c]\nMode = SERVER\nAddress = 127.0.0.1\nPort = 14552\n";
+        assert_eq!(
+            links(text),
+            [
+                "udpout:192.168.1.255:14550?name=a",
+                "udpin:0.0.0.0:14551?name=b",
+                "udpin:127.0.0.1:14552?name=c",
+            ]
+        );
+    }
+
+    #[test]
+    fn automatic_udp_port_moves_once_in_mavlink_routers_visiting_order() {
+        // mavlink-router visits sections newest first: "third" is on another address, "late"
+        // takes 14550, and "early" then finds 14550 taken on its address and gets 14551.
+        let text = "[UdpEndpoint early]\nMode = normal\nAddress = 10.0.0.1\n\
+            [UdpEndpoint late]\nMode = normal\nAddress = 10.0.0.1\n\
+            [UdpEndpoint third]\nMode = normal\nAddress = 10.0.0.2\n";
+        assert_eq!(
+            links(text),
+            [
+                "udpout:10.0.0.1:14551?name=early",
+                "udpout:10.0.0.1:14550?name=late",
+                "udpout:10.0.0.2:14550?name=third",
+            ]
+        );
+        // An explicit 14550 on the same address, visited first, moves it too; a third one
+        // without Port gets 14551 again: it is not a search for a free port.
+        let text = "[UdpEndpoint x]\nMode = normal\nAddress = 10.0.0.1\n\
+            [UdpEndpoint y]\nMode = normal\nAddress = 10.0.0.1\n\
+            [UdpEndpoint z]\nMode = server\nAddress = 10.0.0.1\nPort = 14550\n";
+        assert_eq!(
+            links(text),
+            [
+                "udpout:10.0.0.1:14551?name=x",
+                "udpout:10.0.0.1:14551?name=y",
+                "udpin:10.0.0.1:14550?name=z",
+            ]
+        );
+    }
+
+    #[test]
+    fn uart_baud_defaults_to_115200_and_uses_the_first_of_a_list() {
+        let text = "[UartEndpoint a]\nDevice = /dev/ttyS1\n\
+            [UartEndpoint b]\nDevice = /dev/ttyS2\nBaud = ,\n\
+            [UartEndpoint c]\nDevice = /dev/serial/by-id/usb-FTDI_FT232R-if00-port0\nBaud = 921600, 57600\n";
+        let conf = parse(text).expect("parses");
+        assert_eq!(
+            conf.links
+                .iter()
+                .map(|l| l.link.as_str())
+                .collect::<Vec<_>>(),
+            [
+                "serial:/dev/ttyS1:115200?name=a",
+                "serial:/dev/ttyS2:115200?name=b",
+                "serial:/dev/serial/by-id/usb-FTDI_FT232R-if00-port0:921600?name=c",
+            ]
+        );
+        assert_eq!(
+            conf.general.ignored,
+            ignored(&[(8, "Baud (rates after the first)")])
+        );
+    }
+
+    #[test]
+    fn ipv6_addresses_go_in_brackets() {
+        let text = "[UdpEndpoint any]\nMode = server\nAddress = [::]\nPort = 14550\n\
+            [UdpEndpoint mcast]\nMode = normal\nAddress = [ff02::1]\nPort = 14551\n\
+            [TcpEndpoint loop]\nAddress = [::1]\nPort = 5760\n\
+            [TcpEndpoint upper]\nAddress = [FE80::1]\nPort = 5761\n";
+        assert_eq!(
+            links(text),
+            [
+                "udpin:[::]:14550?name=any",
+                "udpout:[ff02::1]:14551?name=mcast",
+                "tcp:[::1]:5760?name=loop",
+                "tcp:[FE80::1]:5761?name=upper",
+            ]
+        );
+        assert_eq!(
+            error("[UdpEndpoint a]\nMode = server\nAddress = ::1\nPort = 1\n"),
+            "line 3: UdpEndpoint \"a\": Address \"::1\" is an IPv6 address without brackets; \
+             write it as [ADDRESS]"
+        );
+        assert_eq!(
+            error("[TcpEndpoint a]\nAddress = [::g]\nPort = 1\n"),
+            "line 2: TcpEndpoint \"a\": Address \"[::g]\" is not an IPv6 address"
+        );
+    }
+
+    #[test]
+    fn comments_blank_lines_and_whitespace() {
+        let text = "# a comment\n; another\n   # indented\n\n\t\n[General]\r\n\
+            \x0b TcpServerPort\t=\t6000 \x0c\r\n;TcpServerPort = 7000\n\
+            [UdpEndpoint a] \r\n  Mode=server\r\nAddress= 0.0.0.0\nPort =14550\n#Port = 1\n";
+        let conf = parse(text).expect("parses");
+        assert_eq!(conf.general.tcp_server_port, Some(6000));
+        assert_eq!(
+            conf.links,
+            [conf_link("a", 9, "udpin:0.0.0.0:14550?name=a")]
+        );
+        // There are no trailing comments: the '#' is part of the value.
+        assert_eq!(
+            error("[General]\nTcpServerPort = 5760 # default\n"),
+            "line 2: General: TcpServerPort \"5760 # default\" is not a number 0-65535"
+        );
+        assert_eq!(
+            error("[General] # general\n"),
+            "line 1: unexpected text after ']' in section header \"[General] # general\""
+        );
+        assert_eq!(
+            error(
+                "[UdpEndpoint a]\nMode = server\nAddress = 0.0.0.0\nPort = 1\nAllowMsgIdOut = 0,1 # hb\n"
+            ),
+            "line 5: UdpEndpoint \"a\": AllowMsgIdOut \"0,1 # hb\": item \"1 # hb\" is not a number \
+             0-16777215; a comment must be on a line of its own"
+        );
+    }
+
+    #[test]
+    fn values_are_not_unquoted() {
+        let conf = parse("[General]\nLog = \"/var/log/mav\"\n").expect("parses");
+        assert_eq!(
+            conf.general.log_dir,
+            Some(PathBuf::from("\"/var/log/mav\""))
+        );
+        assert_eq!(
+            error("[TcpEndpoint a]\nAddress = \"127.0.0.1\"\nPort = 1\n"),
+            "line 2: TcpEndpoint \"a\": Address \"\\\"127.0.0.1\\\"\" is not an IPv4 address or \
+             an IPv6 address in brackets"
+        );
+        // A value may hold '=' (the line splits at the first one) and keep inner spaces.
+        let conf = parse("[General]\nLog = /var/log/a=b c\n").expect("parses");
+        assert_eq!(conf.general.log_dir, Some(PathBuf::from("/var/log/a=b c")));
+    }
+
+    #[test]
+    fn sections_keys_and_values_are_case_insensitive() {
+        let text = "[GENERAL]\nreportstats = TRUE\nMAVLINKDIALECT = Common\n\
+            [udpendpoint Gcs]\nMODE = SeRvEr\naddress = 0.0.0.0\n\
+            [UartEndpoint radio]\nDEVICE = /dev/ttyS0\n\
+            [UDPENDPOINT gcs]\nport = 14550\nallowmsgidout = 0\n\
+            [general]\nTcpServerPort = 5761\n";
+        let conf = parse(text).expect("parses");
+        assert!(conf.general.report_stats);
+        assert_eq!(conf.general.dialect.as_deref(), Some("common"));
+        assert_eq!(conf.general.tcp_server_port, Some(5761));
+        // [UDPENDPOINT gcs] reopens [udpendpoint Gcs]: the first spelling and line are kept.
+        assert_eq!(
+            conf.links,
+            [
+                conf_link("Gcs", 4, "udpin:0.0.0.0:14550?name=Gcs&allow_msg_out=0"),
+                conf_link("radio", 7, "serial:/dev/ttyS0:115200?name=radio"),
+            ]
+        );
+    }
+
+    #[test]
+    fn a_key_set_again_replaces_the_earlier_value() {
+        let text = "[TcpEndpoint t]\nAddress = 1.2.3.4\nPort = bad\nPort = 5760\nport = 5761\n\
+            AllowMsgIdOut = 1,2\n[TcpEndpoint t]\nALLOWMSGIDOUT = 3\n";
+        assert_eq!(links(text), ["tcp:1.2.3.4:5761?name=t&allow_msg_out=3"]);
+        // The line of a replaced key is where it was last set.
+        assert_eq!(
+            error("[General]\nReportStats = 1\nreportstats = maybe\n"),
+            "line 3: General: ReportStats \"maybe\" is not true, false or a number"
+        );
+    }
+
+    #[test]
+    fn boolean_spellings() {
+        for (value, expected) in [
+            ("true", true),
+            ("TRUE", true),
+            ("True", true),
+            ("1", true),
+            ("2", true),
+            ("-1", true),
+            ("0x1", true),
+            ("false", false),
+            ("FALSE", false),
+            ("0", false),
+            ("00", false),
+            ("0x0", false),
+        ] {
+            let conf = parse(&format!("[General]\nReportStats = {value}\n")).expect(value);
+            assert_eq!(conf.general.report_stats, expected, "{value}");
+        }
+        for value in ["yes", "no", "on", "off", "t", "1.0", "0x", "--1"] {
+            assert_eq!(
+                error(&format!("[General]\nReportStats = {value}\n")),
+                format!("line 2: General: ReportStats \"{value}\" is not true, false or a number")
+            );
+        }
+    }
+
+    #[test]
+    fn numbers_are_read_like_strtoul_base_0() {
+        let port = |value: &str| {
+            parse(&format!("[General]\nTcpServerPort = {value}\n"))
+                .map(|c| c.general.tcp_server_port)
+        };
+        assert_eq!(port("5760"), Ok(Some(5760)));
+        assert_eq!(port("+5760"), Ok(Some(5760)));
+        assert_eq!(port("0x1680"), Ok(Some(5760)));
+        assert_eq!(port("0X1680"), Ok(Some(5760)));
+        assert_eq!(port("013200"), Ok(Some(5760))); // octal, as mavlink-router reads it
+        assert_eq!(port("0"), Ok(Some(0)));
+        assert_eq!(port("65535"), Ok(Some(65535)));
+        for bad in [
+            "65536",
+            "-1",
+            "08",
+            "0x",
+            "5760.0",
+            "5_760",
+            "1e3",
+            "99999999999999999999999",
+        ] {
+            assert_eq!(
+                port(bad).map_err(|e| e.message),
+                Err(format!(
+                    "General: TcpServerPort \"{bad}\" is not a number 0-65535"
+                ))
+            );
+        }
+        let conf = parse("[General]\nDeduplicationPeriod = 0x64\n").expect("parses");
+        assert_eq!(conf.general.dedup_ms, Some(100));
+    }
+
+    #[test]
+    fn a_last_line_without_newline_is_read() {
+        // mavlink-router drops text after the last '\n'; reading it is more useful.
+        assert_eq!(
+            links("[TcpEndpoint t]\nAddress = 1.2.3.4\nPort = 1"),
+            ["tcp:1.2.3.4:1?name=t"]
+        );
+    }
+
+    #[test]
+    fn empty_input_and_empty_general() {
+        assert_eq!(parse(""), Ok(RouterConf::default()));
+        assert_eq!(
+            parse("\n\n# nothing\n[General]\n"),
+            Ok(RouterConf::default())
+        );
+    }
+
+    #[test]
+    fn parse_dir_merges_like_a_conf_directory() {
+        let files = [
+            (
+                "main.conf".to_owned(),
+                "[General]\nTcpServerPort = 5760\nDebugLogLevel = info\n\
+                 [UdpEndpoint gcs]\nMode = server\nAddress = 0.0.0.0\nPort = 14550\n"
+                    .to_owned(),
+            ),
+            (
+                "config.d/10-override.conf".to_owned(),
+                "[udpendpoint GCS]\nPort = 14560\nMavlinkVersion = 1\n\
+                 [TcpEndpoint up]\nAddress = 10.0.0.1\nPort = 5760\n[general]\nTcpServerPort=0\n"
+                    .to_owned(),
+            ),
+        ];
+        let conf = parse_dir(&files).expect("parses");
+        assert_eq!(conf.general.tcp_server_port, Some(0));
+        assert_eq!(conf.general.ignored, ignored(&[(3, "DebugLogLevel")]));
+        assert_eq!(
+            conf.links,
+            [
+                conf_link("gcs", 4, "udpin:0.0.0.0:14560?name=gcs&version=1"),
+                conf_link("up", 4, "tcp:10.0.0.1:5760?name=up"),
+            ]
+        );
+        assert_eq!(parse_dir(&[]), Ok(RouterConf::default()));
+    }
+
+    #[test]
+    fn parse_dir_names_the_file_of_an_error() {
+        let main = (
+            "main.conf".to_owned(),
+            "[UdpEndpoint gcs]\nMode = server\n".to_owned(),
+        );
+        // The key is before any header of its own file, although main.conf ended in a section.
+        let bad = (
+            "config.d/a.conf".to_owned(),
+            "\nAddress = 0.0.0.0\n".to_owned(),
+        );
+        assert_eq!(
+            parse_dir(&[main.clone(), bad]),
+            Err((
+                "config.d/a.conf".to_owned(),
+                ConfError {
+                    line: 2,
+                    message: "key \"Address\" comes before any [section] header".to_owned()
+                }
+            ))
+        );
+        // A bad value is reported in the file that set it.
+        let bad = (
+            "config.d/b.conf".to_owned(),
+            "[UdpEndpoint gcs]\nPort = x\n".to_owned(),
+        );
+        let (file, error) = parse_dir(&[main.clone(), bad]).expect_err("is rejected");
+        assert_eq!(
+            (file.as_str(), error.to_string().as_str()),
+            (
+                "config.d/b.conf",
+                "line 2: UdpEndpoint \"gcs\": Port \"x\" is not a number 1-65535"
+            )
+        );
+        // A missing key is reported at the section's first header.
+        let more = (
+            "config.d/c.conf".to_owned(),
+            "[UdpEndpoint gcs]\nPort = 1\n".to_owned(),
+        );
+        let (file, error) = parse_dir(&[main, more]).expect_err("is rejected");
+        assert_eq!(
+            (file.as_str(), error.to_string().as_str()),
+            (
+                "main.conf",
+                "line 1: UdpEndpoint \"gcs\": missing required key Address"
+            )
+        );
+    }
+
+    #[test]
+    fn error_display_is_line_then_message() {
+        let e = ConfError {
+            line: 12,
+            message: "x".to_owned(),
+        };
+        assert_eq!(e.to_string(), "line 12: x");
+    }
+
+    #[test]
+    fn line_errors() {
+        assert_eq!(
+            error("[General]\nReportStats\n"),
+            "line 2: expected a [section] header, KEY = VALUE or a comment, found \"ReportStats\""
+        );
+        assert_eq!(
+            error("[General]\n= 1\n"),
+            "line 2: missing key before '=' in \"= 1\""
+        );
+        assert_eq!(
+            error("[General]\nReportStats =  \n"),
+            "line 2: General: \"ReportStats\" has no value"
+        );
+        assert_eq!(
+            error("Port = 1\n"),
+            "line 1: key \"Port\" comes before any [section] header"
+        );
+    }
+
+    #[test]
+    fn section_header_errors() {
+        let cases = [
+            ("[General", "section header \"[General\" has no closing ']'"),
+            (
+                "[General]x",
+                "unexpected text after ']' in section header \"[General]x\"",
+            ),
+            (
+                "[UdpEndpoint a]]",
+                "unexpected text after ']' in section header \"[UdpEndpoint a]]\"",
+            ),
+            (
+                "[ General]",
+                "section header \"[ General]\" has a space after '[' or before ']'",
+            ),
+            (
+                "[UdpEndpoint a ]",
+                "section header \"[UdpEndpoint a ]\" has a space after '[' or before ']'",
+            ),
+            (
+                "[UdpEndpoint\ta]",
+                "section header \"[UdpEndpoint\\ta]\" holds whitespace other than a space",
+            ),
+            (
+                "[UdpEndpoint a b]",
+                "section header \"[UdpEndpoint a b]\" has more than one space: a section name cannot contain spaces",
+            ),
+            (
+                "[UdpEndpoint  a]",
+                "section header \"[UdpEndpoint  a]\" has more than one space: a section name cannot contain spaces",
+            ),
+            (
+                "[UdpEndpoint]",
+                "section \"[UdpEndpoint]\" needs a name: [UdpEndpoint NAME]",
+            ),
+            (
+                "[tcpendpoint]",
+                "section \"[tcpendpoint]\" needs a name: [TcpEndpoint NAME]",
+            ),
+            (
+                "[General main]",
+                "section \"[General main]\" has a name; [General] takes none",
+            ),
+            (
+                "[Log]",
+                "unknown section \"[Log]\"; expected [General], [UartEndpoint NAME], [UdpEndpoint NAME] or [TcpEndpoint NAME]",
+            ),
+            (
+                "[]",
+                "unknown section \"[]\"; expected [General], [UartEndpoint NAME], [UdpEndpoint NAME] or [TcpEndpoint NAME]",
+            ),
+            (
+                "[TcpServer x]",
+                "unknown section \"[TcpServer x]\"; expected [General], [UartEndpoint NAME], [UdpEndpoint NAME] or [TcpEndpoint NAME]",
+            ),
+            (
+                "[UdpEndpoint a&b]",
+                "UdpEndpoint \"a&b\": a name must not contain '&', '?' or '='",
+            ),
+            (
+                "[UartEndpoint x=y]",
+                "UartEndpoint \"x=y\": a name must not contain '&', '?' or '='",
+            ),
+            (
+                "[TcpEndpoint why?]",
+                "TcpEndpoint \"why?\": a name must not contain '&', '?' or '='",
+            ),
+        ];
+        for (header, message) in cases {
+            assert_eq!(
+                error(&format!("\n{header}\n")),
+                format!("line 2: {message}"),
+                "{header}"
+            );
+        }
+        let long = format!("[UdpEndpoint {}]", "n".repeat(89));
+        assert_eq!(
+            error(&long),
+            format!(
+                "line 1: section header \"[UdpEndpoint {}\"... is longer than 100 characters",
+                "n".repeat(47)
+            )
+        );
+        // 100 characters between the brackets are allowed.
+        let name = "n".repeat(88);
+        let ok = format!("[UdpEndpoint {name}]\nMode = normal\nAddress = 1.2.3.4\n");
+        assert_eq!(links(&ok), [format!("udpout:1.2.3.4:14550?name={name}")]);
+    }
+
+    #[test]
+    fn unknown_keys_are_errors() {
+        assert_eq!(
+            error("[General]\nTcpServer = 1\n"),
+            "line 2: General: unknown key \"TcpServer\""
+        );
+        assert_eq!(
+            error("[UdpEndpoint a]\nMode = server\nBaud = 57600\n"),
+            "line 3: UdpEndpoint \"a\": unknown key \"Baud\""
+        );
+        assert_eq!(
+            error("[UartEndpoint a]\nDevice = /dev/ttyS0\nAddress = 1.2.3.4\n"),
+            "line 3: UartEndpoint \"a\": unknown key \"Address\""
+        );
+        assert_eq!(
+            error("[TcpEndpoint a]\nAllow Msg Id Out = 1\n"),
+            "line 2: TcpEndpoint \"a\": unknown key \"Allow Msg Id Out\""
+        );
+        assert_eq!(
+            error("[UdpEndpoint a]\nReportStats = 1\n"),
+            "line 2: UdpEndpoint \"a\": unknown key \"ReportStats\""
+        );
+        assert_eq!(
+            error("[General]\nMavlinkVersion = 1\n"),
+            "line 2: General: unknown key \"MavlinkVersion\""
+        );
+    }
+
+    #[test]
+    fn missing_required_keys() {
+        let cases = [
+            (
+                "[UdpEndpoint a]\nMode = normal\n",
+                "UdpEndpoint \"a\": missing required key Address",
+            ),
+            (
+                "[UdpEndpoint a]\nAddress = 1.2.3.4\nPort = 1\n",
+                "UdpEndpoint \"a\": missing required key Mode (normal, server or eavesdropping)",
+            ),
+            (
+                "[UdpEndpoint a]\nAddress = 0.0.0.0\nMode = server\n",
+                "UdpEndpoint \"a\": missing required key Port (required in server mode)",
+            ),
+            (
+                "[UdpEndpoint a]\nAddress = 0.0.0.0\nMode = eavesdropping\n",
+                "UdpEndpoint \"a\": missing required key Port (required in server mode)",
+            ),
+            (
+                "[TcpEndpoint a]\nPort = 1\n",
+                "TcpEndpoint \"a\": missing required key Address",
+            ),
+            (
+                "[TcpEndpoint a]\nAddress = 1.2.3.4\n",
+                "TcpEndpoint \"a\": missing required key Port",
+            ),
+            (
+                "[UartEndpoint a]\nBaud = 57600\n",
+                "UartEndpoint \"a\": missing required key Device",
+            ),
+        ];
+        for (text, message) in cases {
+            assert_eq!(
+                error(&format!("\n{text}")),
+                format!("line 2: {message}"),
+                "{text}"
+            );
+        }
+    }
+
+    #[test]
+    fn bad_values() {
+        let udp = "[UdpEndpoint alpha]\nMode = server\nAddress = 0.0.0.0\nPort = 1\n";
+        let uart = "[UartEndpoint alpha]\nDevice = /dev/ttyS0\n";
+        let cases = [
+            (
+                format!("{udp}Port = 14a50"),
+                "UdpEndpoint \"alpha\": Port \"14a50\" is not a number 1-65535",
+            ),
+            (
+                format!("{udp}Port = 65536"),
+                "UdpEndpoint \"alpha\": Port \"65536\" is not a number 1-65535",
+            ),
+            (
+                format!("{udp}Port = 0"),
+                "UdpEndpoint \"alpha\": Port \"0\" is not a number 1-65535",
+            ),
+            (
+                format!("{udp}Port = -1"),
+                "UdpEndpoint \"alpha\": Port \"-1\" is not a number 1-65535",
+            ),
+            (
+                format!("{udp}Mode = client"),
+                "UdpEndpoint \"alpha\": Mode \"client\" is not normal, server or eavesdropping",
+            ),
+            (
+                format!("{udp}Address = localhost"),
+                "UdpEndpoint \"alpha\": Address \"localhost\" is not an IPv4 address or an IPv6 address in brackets",
+            ),
+            (
+                format!("{udp}Address = 256.0.0.1"),
+                "UdpEndpoint \"alpha\": Address \"256.0.0.1\" is not an IPv4 address or an IPv6 address in brackets",
+            ),
+            (
+                format!("{udp}Address = 0.0.0.0:14550"),
+                "UdpEndpoint \"alpha\": Address \"0.0.0.0:14550\" is not an IPv4 address or an IPv6 address in brackets",
+            ),
+            (
+                format!("{udp}Trusted = yes"),
+                "UdpEndpoint \"alpha\": Trusted \"yes\" is not true, false or a number",
+            ),
+            (
+                format!("{udp}Secure = on"),
+                "UdpEndpoint \"alpha\": Secure \"on\" is not true, false or a number",
+            ),
+            (
+                format!("{udp}Group = a # b\nFlowControl = 1"),
+                "UdpEndpoint \"alpha\": unknown key \"FlowControl\"",
+            ),
+            (
+                format!("{udp}MavlinkVersion = 3"),
+                "UdpEndpoint \"alpha\": MavlinkVersion \"3\" is not 1, 2 or auto",
+            ),
+            (
+                format!("{udp}MavlinkVersion = v2"),
+                "UdpEndpoint \"alpha\": MavlinkVersion \"v2\" is not 1, 2 or auto",
+            ),
+            (
+                format!("{udp}SigningKey = abcd"),
+                "UdpEndpoint \"alpha\": SigningKey is not 64 hex digits (found 4 characters)",
+            ),
+            (
+                format!("{udp}SigningKey = {}", "g".repeat(64)),
+                "UdpEndpoint \"alpha\": SigningKey is not 64 hex digits (found a character that is not a hex digit)",
+            ),
+            (
+                format!("{udp}SigningKey = {KEY}0"),
+                "UdpEndpoint \"alpha\": SigningKey is not 64 hex digits (found 65 characters)",
+            ),
+            (
+                format!("{udp}MavlinkVersion = 1\nSigningKey = {KEY}"),
+                "UdpEndpoint \"alpha\": SigningKey needs MAVLink 2 but MavlinkVersion is 1",
+            ),
+            (
+                format!("{udp}SigningLinkId = 256"),
+                "UdpEndpoint \"alpha\": SigningLinkId \"256\" is not a number 0-255",
+            ),
+            (
+                format!("{udp}BytesPerSecond = fast"),
+                "UdpEndpoint \"alpha\": BytesPerSecond \"fast\" is not an unsigned number",
+            ),
+            (
+                format!("{udp}RateLimit = 30:10&x"),
+                "UdpEndpoint \"alpha\": RateLimit \"30:10&x\" must not contain '&', '?' or '='",
+            ),
+            (
+                format!("{udp}RateLimit = 30:10 33:5"),
+                "UdpEndpoint \"alpha\": RateLimit \"30:10 33:5\" has an item \"30:10 33:5\" with a space; separate items with commas",
+            ),
+            (
+                format!("{udp}AllowSrcSysOut = 1,300"),
+                "UdpEndpoint \"alpha\": AllowSrcSysOut \"1,300\": item \"300\" is not a number 0-255",
+            ),
+            (
+                format!("{udp}BlockSrcCompIn = -1"),
+                "UdpEndpoint \"alpha\": BlockSrcCompIn \"-1\": item \"-1\" is not a number 0-255",
+            ),
+            (
+                format!("{udp}AllowMsgIdIn = 0x10"),
+                "UdpEndpoint \"alpha\": AllowMsgIdIn \"0x10\": item \"0x10\" is not a number 0-16777215",
+            ),
+            (
+                format!("{udp}BlockMsgIdOut = 16777216"),
+                "UdpEndpoint \"alpha\": BlockMsgIdOut \"16777216\": item \"16777216\" is not a number 0-16777215",
+            ),
+            (
+                format!("{udp}AllowMsgIdOut = 1 2 3"),
+                "UdpEndpoint \"alpha\": AllowMsgIdOut \"1 2 3\": item \"1 2 3\" is not a number 0-16777215; separate items with commas",
+            ),
+            (
+                format!("{uart}Baud = 0"),
+                "UartEndpoint \"alpha\": Baud \"0\": item \"0\" is not a number 1-4294967295",
+            ),
+            (
+                format!("{uart}Baud = 57600 115200"),
+                "UartEndpoint \"alpha\": Baud \"57600 115200\": item \"57600 115200\" is not a number 1-4294967295; separate items with commas",
+            ),
+            (
+                format!("{uart}FlowControl = maybe"),
+                "UartEndpoint \"alpha\": FlowControl \"maybe\" is not true, false or a number",
+            ),
+            (
+                format!("{uart}Device = /dev/tty,1"),
+                "UartEndpoint \"alpha\": Device \"/dev/tty,1\" must not contain ',', '&', '?' or '='",
+            ),
+            (
+                "[TcpEndpoint alpha]\nAddress = 1.2.3.4\nPort = 1\nRetryTimeout = soon".to_owned(),
+                "TcpEndpoint \"alpha\": RetryTimeout \"soon\" is not a whole number of seconds",
+            ),
+            (
+                "[TcpEndpoint alpha]\nAddress = 1.2.3.4\nPort = 1\nRetryTimeout = 0x80000000"
+                    .to_owned(),
+                "TcpEndpoint \"alpha\": RetryTimeout \"0x80000000\" is not a whole number of seconds",
+            ),
+        ];
+        for (text, message) in &cases {
+            let line = text.lines().count();
+            assert_eq!(error(text), format!("line {line}: {message}"), "{text}");
+        }
+    }
+
+    #[test]
+    fn bad_general_values() {
+        let cases = [
+            (
+                "TcpServerPort = 70000",
+                "TcpServerPort \"70000\" is not a number 0-65535",
+            ),
+            (
+                "ReportStats = yes",
+                "ReportStats \"yes\" is not true, false or a number",
+            ),
+            (
+                "DebugLogLevel = verbose",
+                "DebugLogLevel \"verbose\" is not error, warning, info, debug or trace",
+            ),
+            (
+                "DeduplicationPeriod = 100ms",
+                "DeduplicationPeriod \"100ms\" is not an unsigned number",
+            ),
+            (
+                "SnifferSysid = -1",
+                "SnifferSysid \"-1\" is not an unsigned number",
+            ),
+            (
+                "LogMode = armed",
+                "LogMode \"armed\" is not always or while-armed",
+            ),
+            (
+                "MavlinkDialect = px4",
+                "MavlinkDialect \"px4\" is not auto, common or ardupilotmega",
+            ),
+            (
+                "MinFreeSpace = 1G",
+                "MinFreeSpace \"1G\" is not an unsigned number",
+            ),
+            (
+                "MaxLogFiles = many",
+                "MaxLogFiles \"many\" is not an unsigned number",
+            ),
+            ("LogSystemId = 0", "LogSystemId \"0\" is not a number 1-255"),
+            (
+                "LogSystemId = 256",
+                "LogSystemId \"256\" is not a number 1-255",
+            ),
+            (
+                "LogTelemetry = enabled",
+                "LogTelemetry \"enabled\" is not true, false or a number",
+            ),
+        ];
+        for (entry, message) in cases {
+            assert_eq!(
+                error(&format!("[General]\n{entry}\n")),
+                format!("line 2: General: {message}")
+            );
+        }
+        // A long value is cut short in the message.
+        let long = "9".repeat(1000);
+        assert_eq!(
+            error(&format!("[General]\nTcpServerPort = {long}\n")),
+            format!(
+                "line 2: General: TcpServerPort \"{}\"... is not a number 0-65535",
+                "9".repeat(60)
+            )
+        );
+    }
+
+    #[test]
+    fn a_signing_key_never_appears_in_an_error() {
+        let secret = format!("{}x", &KEY[..63]);
+        let text = format!("[UdpEndpoint a]\nSigningKey = {secret}\n");
+        assert!(!error(&text).contains(&secret[..20]));
+    }
+
+    #[test]
+    fn every_mavlink_router_key_is_known() {
+        // mavlink-router's own tables (src/main.cpp, src/logendpoint.cpp, src/endpoint.cpp).
+        let general = [
+            "TcpServerPort",
+            "ReportStats",
+            "DebugLogLevel",
+            "DeduplicationPeriod",
+            "SnifferSysid",
+            "Log",
+            "LogMode",
+            "MavlinkDialect",
+            "MinFreeSpace",
+            "MaxLogFiles",
+            "LogSystemId",
+            "LogTelemetry",
+        ];
+        let filters = [
+            "AllowMsgIdOut",
+            "BlockMsgIdOut",
+            "AllowSrcCompOut",
+            "BlockSrcCompOut",
+            "AllowSrcSysOut",
+            "BlockSrcSysOut",
+            "AllowMsgIdIn",
+            "BlockMsgIdIn",
+            "AllowSrcCompIn",
+            "BlockSrcCompIn",
+            "AllowSrcSysIn",
+            "BlockSrcSysIn",
+            "Group",
+        ];
+        for key in general {
+            assert_eq!(
+                lookup(Kind::General, &key.to_ascii_lowercase()).map(|k| k.0),
+                Some(key)
+            );
+        }
+        for (kind, own) in [
+            (Kind::Uart, &["Baud", "Device", "FlowControl"][..]),
+            (Kind::Udp, &["Address", "Mode", "Port", "Filter"][..]),
+            (Kind::Tcp, &["Address", "Port", "RetryTimeout"][..]),
+        ] {
+            for key in own.iter().chain(&filters) {
+                assert_eq!(
+                    lookup(kind, &key.to_ascii_uppercase()).map(|k| k.0),
+                    Some(*key)
+                );
+            }
+        }
+    }
+
+    /// A small deterministic generator for the garbage test.
+    struct XorShift(u64);
+
+    impl XorShift {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            self.0
+        }
+
+        fn below(&mut self, n: usize) -> usize {
+            usize::try_from(self.next() % n as u64).unwrap_or(0)
+        }
+    }
+
+    /// Every option of a link is `key=value` with a value free of `&`, `?` and `=`.
+    fn assert_well_formed(conf: &RouterConf) {
+        for l in &conf.links {
+            let (connection, options) = l.link.split_once('?').expect("options");
+            assert!(
+                ["udpin:", "udpout:", "tcp:", "serial:"]
+                    .iter()
+                    .any(|s| connection.starts_with(s)),
+                "{connection}"
+            );
+            assert!(options.starts_with(&format!("name={}", l.name)));
+            for option in options.split('&') {
+                assert_eq!(option.matches('=').count(), 1, "{}", l.link);
+            }
+        }
+    }
+
+    #[test]
+    fn garbage_never_panics() {
+        const PIECES: &[&str] = &[
+            "[",
+            "]",
+            "=",
+            "#",
+            ";",
+            " ",
+            "\t",
+            "\r",
+            "\n",
+            "\x0b",
+            ",",
+            ":",
+            "&",
+            "?",
+            "\"",
+            "é",
+            "\u{0}",
+            "[General]\n",
+            "[UdpEndpoint a]\n",
+            "[udpendpoint A]\n",
+            "[TcpEndpoint t]\n",
+            "[UartEndpoint u]\n",
+            "Mode = server\n",
+            "Mode=normal\n",
+            "Address = 0.0.0.0\n",
+            "Address = [::1]\n",
+            "Port = 14550\n",
+            "Port=",
+            "0x",
+            "0",
+            "9",
+            "-",
+            "+",
+            "Device = /dev/x\n",
+            "Baud = 1,2\n",
+            "Filter = 1\n",
+            "AllowMsgIdOut = ",
+            "SigningKey = ",
+            KEY,
+            "MavlinkVersion = 1\n",
+            "TcpServerPort = ",
+            "ReportStats = ",
+            "Group = g\n",
+            "RateLimit = ",
+            "[",
+            "[]",
+            "\u{10FFFF}",
+            "ä]",
+        ];
+        let mut rng = XorShift(0x9E37_79B9_7F4A_7C15);
+        for _ in 0..20_000 {
+            let mut text = String::new();
+            for _ in 0..rng.below(40) {
+                text.push_str(PIECES[rng.below(PIECES.len())]);
+            }
+            if let Ok(conf) = parse(&text) {
+                assert_well_formed(&conf);
+            }
+        }
+        // Random characters, including every ASCII control character.
+        for _ in 0..5_000 {
+            let text: String = (0..rng.below(200))
+                .map(|_| {
+                    char::from_u32(u32::try_from(rng.below(0x250)).unwrap_or(0)).unwrap_or('x')
+                })
+                .collect();
+            if let Ok(conf) = parse(&text) {
+                assert_well_formed(&conf);
+            }
+        }
+        // Every prefix of the sample.
+        for (cut, _) in CONFIG_SAMPLE.char_indices() {
+            if let Ok(conf) = parse(&CONFIG_SAMPLE[..cut]) {
+                assert_well_formed(&conf);
+            }
+        }
+    }
+
+    #[test]
+    fn long_lines_are_handled() {
+        let long = "x".repeat(1 << 20);
+        assert!(parse(&long).is_err());
+        assert!(parse(&format!("[{long}]")).is_err());
+        assert!(parse(&format!("[General]\nLog = {long}\n")).is_ok());
+        let message = error(&format!("[General]\n{long}\n"));
+        assert!(message.len() < 200, "{message}");
+        let list = format!(
+            "[TcpEndpoint t]\nAddress = 1.2.3.4\nPort = 1\nAllowMsgIdOut = {}\n",
+            "1,".repeat(100_000)
+        );
+        let conf = parse(&list).expect("parses");
+        assert_well_formed(&conf);
+    }
+}
