@@ -5,9 +5,11 @@ conversion, signing boundaries, stats.
 Usage: router_interop.py SCENARIO --mavstack BIN
 
 Each scenario starts its own router (`mavstack router LINK ... --stats 1`, free ports, waits
-for `mavstack router: ready` on stderr, always stopped at the end: SIGTERM, exit 0 expected,
-the last stats object read) and plays every peer with pymavlink. The peers are raw UDP
-sockets driven by pymavlink MAVLink objects, so the exact bytes sent and received are known:
+for `mavstack router: ready` on stderr, always stopped at the end: SIGTERM (SIGINT in
+v2_link), exit 0 expected, the last stats object read) and plays every peer with pymavlink.
+The peers are raw UDP sockets driven by pymavlink MAVLink objects, so the exact bytes sent and
+received are known (ground stations send a HEARTBEAT a second where a scenario waits long:
+the router forgets a udpin client after about 10 s of silence):
 MAVLink 2 peers use the dialect mavgen generates from our definitions (mavstack_dialect.py:
 ardupilotmega + PROTOCOL_VERSION), MAVLink 1-only peers pymavlink's own v1.0 module
 (`pymavlink.dialects.v10.ardupilotmega`, WIRE_PROTOCOL_VERSION 1.0: it packs nothing but
@@ -30,7 +32,8 @@ Scenarios:
                   v1 link
   v2_link         a MAVLink 1 sender on an auto link, a receiver on a version=2 udpout link:
                   pymavlink's MAVLink 2 packing (truncated, down to a 1-byte payload) of the
-                  sender's values, same header; an auto observer gets the v1 bytes unchanged
+                  sender's values, same header; an auto observer gets the v1 bytes unchanged;
+                  stopped with SIGINT (exit 0, a last stats object)
   signing         peers S (key=K&trusted=false&link_id=7) and S2 (key=K, link_id=8), plain P,
                   trusted T: S and S2 get only frames that pymavlink verifies with K (S2's and
                   S's byte for byte, T's signed by the router with the link's own link id and
@@ -245,6 +248,7 @@ class Peer:
         self.bad = []  # (raw, reason) pymavlink refused
         self.datagrams = []
         self.lock = threading.Lock()
+        self.send_lock = threading.Lock()
         self.stop = False
         self.thread = threading.Thread(target=self._run, daemon=True)
         self.thread.start()
@@ -302,11 +306,26 @@ class Peer:
         return raw
 
     def send(self, msg, v1=False, sign=True, key=None, timestamp=None, pause=0.03):
-        raw = self.pack(msg, v1=v1, sign=sign, key=key, timestamp=timestamp)
-        self.write(raw, pause=pause)
-        f = Frame(raw, decode(self.mod, raw))
-        self.sent.append(f)
+        with self.send_lock:
+            raw = self.pack(msg, v1=v1, sign=sign, key=key, timestamp=timestamp)
+            self.write(raw, pause=0)
+            f = Frame(raw, decode(self.mod, raw))
+            self.sent.append(f)
+        time.sleep(pause)
         return f
+
+    def keep_alive(self, msg, v1=False, period=1.0):
+        """Sends msg (a HEARTBEAT) every period s from now on, as a ground station does."""
+        def run():
+            while not self.stop:
+                try:
+                    self.send(msg, v1=v1, pause=0)
+                except OSError:  # closed under it
+                    return
+                deadline = time.monotonic() + period
+                while not self.stop and time.monotonic() < deadline:
+                    time.sleep(0.05)
+        threading.Thread(target=run, daemon=True).start()
 
     def write(self, raw, pause=0.03):
         if self.addr is None:
@@ -667,7 +686,7 @@ def v2_link(bin_):
         ]
         check(all(s.version == 1 for s in sent), "the v1.0 pymavlink module packed MAVLink 2 frames")
         settle()
-        stats = router.stop()
+        stats = router.stop(signal.SIGINT)
         got = rcv.frames()
         check(not [f for f in got if f.version != 2], "receiver on a version=2 link got non-MAVLink 2 frames: %s" % (
             [f for f in got if f.version != 2][:5]))
@@ -930,6 +949,8 @@ def targeting(bin_):
             check(ra[0].raw == after.raw, "after the echo: A got %s, B sent %s" % (ra[0].raw.hex(), after.raw.hex()))
         check(not [f for f in B.frames(echo_at) if f.key == after.key], "after the echo: B got its own command back")
         notes.append("after the echo C %s the command" % ("also got" if [f for f in C.frames(echo_at) if f.key == after.key] else "did not get"))
+        notes.append("the echo itself reached %s" % (",".join(p.name for p in (A, B) if [f for f in p.frames(echo_at) if f.raw == a_hb.raw])
+                                                       or "nobody"))
         stats = router.stop()
         for p in peers:
             check(not p.bad, "%s: pymavlink refused frames: %s" % (p.name, p.bad[:5]))
@@ -1000,8 +1021,8 @@ def handshake(bin_):
     g1 = Peer("gcs1", M, 250, 190, dest=ports[2])
     notes = []
     try:
-        # A MAVLink 2 ground station on a plain link.
-        g2.send(heartbeat())
+        # A MAVLink 2 ground station on a plain link (HEARTBEAT at 1 Hz, as ground stations do).
+        g2.keep_alive(heartbeat())
         hb = g2.wait_for(lambda f: f.type == "HEARTBEAT" and f.src == (1, 1), 8)
         if not check(hb is not None, "gcs on a plain link: no HEARTBEAT of mavstack vehicle through the router within 8 s "
                      "(vehicle %s); vehicle log:\n%s" % ("running" if veh.poll() is None else "exited %s" % veh.returncode, veh_tail())):
@@ -1022,7 +1043,7 @@ def handshake(bin_):
         check(not wrong, "gcs on a plain link (it sent MAVLink 2 first): MAVLink 1 frames: %s" % wrong[:5])
 
         # The same from a version=1 link.
-        g1.send(heartbeat(), v1=True)
+        g1.keep_alive(heartbeat(), v1=True)
         hb1 = g1.wait_for(lambda f: f.type == "HEARTBEAT" and f.src == (1, 1), 5)
         check(hb1 is not None, "gcs on a version=1 link: no HEARTBEAT of the vehicle within 5 s")
         t1 = time.monotonic()

@@ -14,7 +14,7 @@ use mavstack::{LinkSpec, Node, NodeReport, router_conf};
 use serde_json::{Map, Value, json};
 
 use crate::Failure;
-use crate::link_cmd::{interrupted, runtime};
+use crate::link_cmd::interrupted;
 
 /// `mavstack router` arguments.
 #[derive(Debug, Args)]
@@ -135,7 +135,13 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
     }
     let stats_every = args.stats.map(|s| seconds(s, "--stats")).transpose()?;
     let dialect = dialect(&dialect_name)?;
-    runtime()?.block_on(async move {
+    // One thread: the node's task owns every socket, and a second worker would only add
+    // cross-thread wake-ups (and spin) to each datagram.
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(crate::other)?;
+    runtime.block_on(async move {
         let mut builder = Node::builder().router(config).dialect(dialect);
         for spec in specs {
             builder = builder.link(spec);

@@ -128,6 +128,9 @@ pub struct LinkConfig {
     /// How many frames may wait to be sent, per priority (default 1024 telemetry, 256
     /// control). More are dropped and counted (`queue_full`).
     pub queue_frames: usize,
+    /// The transport may pack several frames into one UDP datagram (the `pack` option, read
+    /// by the driver, not the router; default off).
+    pub pack: bool,
 }
 
 impl LinkConfig {
@@ -145,6 +148,7 @@ impl LinkConfig {
             filters_out: DirectionFilters::default(),
             limits: RateLimits::default(),
             queue_frames: 1024,
+            pack: false,
         }
     }
 

@@ -56,6 +56,22 @@ pub use route::Route;
 pub use router::{Event, LinkId, Router, Transmit};
 pub use stats::{Conversions, Counters, DropReason, Drops, LinkMode, LinkStatus};
 
+/// Fuzzing entry point for link options: any text is parsed (message names resolve to
+/// nothing) and either gives a link or an error naming an option; never a panic.
+#[doc(hidden)]
+pub fn fuzz_link_options(data: &[u8]) {
+    let text = alloc::string::String::from_utf8_lossy(data);
+    match options::parse(&text, "fuzz", &|name| (name == "ATTITUDE").then_some(30)) {
+        Ok(link) => assert!(!(link.signing.is_some() && link.version == VersionMode::Mavlink1)),
+        Err(e) => assert!(
+            !e.option.is_empty()
+                || text.contains("&&")
+                || text.starts_with('&')
+                || e.reason.contains("expected")
+        ),
+    }
+}
+
 /// Fuzzing entry point for the router: the data itself picks, piece by piece, which of six
 /// links (MAVLink 1, 2, auto, signed, a second signed key, trusted) a piece arrives on,
 /// whether as a datagram or a stream, and how far time moves; everything emitted is drained

@@ -60,6 +60,7 @@ pub const NAMES: &[&str] = &[
     "rate",
     "bytes_per_s",
     "queue",
+    "pack",
 ];
 
 /// Parses `options` (the text after `?`, `&`-separated `name=value` pairs; may be empty)
@@ -117,6 +118,7 @@ pub fn parse(
             }
             "secure" => link.secure = boolean(name, value)?,
             "trusted" => link.trusted = boolean(name, value)?,
+            "pack" => link.pack = boolean(name, value)?,
             "name" => {
                 if value.is_empty() {
                     return Err(err(name, "empty"));

@@ -15,6 +15,8 @@ pub(crate) const RECV_BATCH: usize = 32;
 pub(crate) const RECV_SLOT: usize = 8192;
 /// Datagrams per send call.
 pub(crate) const SEND_BATCH: usize = 64;
+/// The largest datagram frames are packed into: an Ethernet MTU less the IP and UDP headers.
+pub(crate) const PACK_LIMIT: usize = 1472;
 
 /// Receive buffers for one socket.
 #[derive(Debug)]
@@ -122,8 +124,19 @@ pub(crate) struct Sent {
 }
 
 impl SendBatch {
-    /// Queues one datagram; true when the batch is full and should be flushed.
-    pub(crate) fn push(&mut self, data: &[u8], to: SocketAddr) -> bool {
+    /// Queues `data` for `to`; true when the batch is full and should be flushed. With
+    /// `pack` above 0, `data` joins the previous datagram when that one goes to the same
+    /// address and both fit in `pack` bytes (MAVLink frames delimit themselves, so several
+    /// can share a datagram; only what is already waiting is packed, so no frame waits).
+    pub(crate) fn push(&mut self, data: &[u8], to: SocketAddr, pack: usize) -> bool {
+        if let Some(last) = self.items.last_mut()
+            && last.2 == to
+            && last.1 + data.len() <= pack
+        {
+            self.bytes.extend_from_slice(data);
+            last.1 += data.len();
+            return false;
+        }
         let start = self.bytes.len();
         self.bytes.extend_from_slice(data);
         self.items.push((start, data.len(), to));

@@ -195,13 +195,19 @@ impl NodeBuilder {
         }
         let mut slots = Vec::new();
         let mut local_addrs = Vec::new();
+        // A quiet UDP client stays a link (and keeps getting broadcasts) as long as its
+        // routes would live.
+        let mut options = self.options;
+        options.peer_timeout = options.peer_timeout.max(router_config.route_ttl);
         for spec in self.links {
-            let io = Link::open(&spec.conn, &self.options)
-                .await
-                .map_err(|source| NodeError::Open {
-                    name: spec.config.name.clone(),
-                    source,
-                })?;
+            let mut io =
+                Link::open(&spec.conn, &options)
+                    .await
+                    .map_err(|source| NodeError::Open {
+                        name: spec.config.name.clone(),
+                        source,
+                    })?;
+            io.set_packing(spec.config.pack);
             local_addrs.push(io.local_addr());
             slots.push(Slot {
                 io,

@@ -133,6 +133,22 @@ impl fmt::Display for ConfError {
 
 impl core::error::Error for ConfError {}
 
+/// Fuzzing entry point: any bytes, as text, parse to a configuration or a positioned error,
+/// never a panic; every link string produced parses as a link.
+#[doc(hidden)]
+pub fn fuzz_router_conf(data: &[u8]) {
+    let text = String::from_utf8_lossy(data);
+    if let Ok(conf) = parse(&text) {
+        for link in conf.links {
+            assert!(
+                crate::LinkSpec::parse(&link.link, &|_| None).is_ok(),
+                "conf produced a link that does not parse: {}",
+                link.link
+            );
+        }
+    }
+}
+
 /// Parses one configuration file.
 ///
 /// # Errors
