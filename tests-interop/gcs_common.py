@@ -4,6 +4,7 @@ failures with a clear message, and the JSON summary."""
 import json
 import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -73,6 +74,155 @@ class Vehicle:
                 self.proc.kill()
                 self.proc.wait()
         self._log.close()
+
+
+class Router:
+    """`mavstack router LINK... --stats S` between the vehicle and a ground station (the
+    `--via-router` runs): stdout (the stats JSON lines) and stderr in files of workdir; started
+    once it printed `mavstack router: ready`; stop() sends SIGTERM and fails unless it exits 0."""
+
+    def __init__(self, binary, links, workdir, stats=1, name="router", ready_timeout=10.0):
+        self.workdir = workdir
+        self.name = name
+        self.cmd = [binary, "router", *links, "--stats", str(stats)]
+        self.stats_path = os.path.join(workdir, f"{name}.stats.jsonl")
+        self.log_path = os.path.join(workdir, f"{name}.log")
+        self._out = open(self.stats_path, "wb")
+        self._err = open(self.log_path, "wb")
+        self.proc = subprocess.Popen(self.cmd, stdin=subprocess.DEVNULL, stdout=self._out,
+                                     stderr=self._err)
+        self.rc = None
+        deadline = time.monotonic() + ready_timeout
+        while "mavstack router: ready" not in self.log():
+            if self.proc.poll() is not None:
+                fail(f"router exited at once ({self.proc.returncode}): {' '.join(self.cmd)}\n"
+                     f"{self.log()}")
+            if time.monotonic() > deadline:
+                self.kill()
+                fail(f"router did not print 'mavstack router: ready' within {ready_timeout} s: "
+                     f"{' '.join(self.cmd)}\n{self.log()}")
+            time.sleep(0.02)
+
+    def log(self, tail=4000):
+        try:
+            with open(self.log_path, "rb") as f:
+                return f.read().decode("utf-8", "replace")[-tail:]
+        except OSError:
+            return ""
+
+    def stats(self):
+        """Every stats object printed so far (a line that is not a JSON object fails)."""
+        self._out.flush()
+        out = []
+        with open(self.stats_path, "rb") as f:
+            for line in f.read().decode("utf-8", "replace").splitlines():
+                if not line.strip():
+                    continue
+                try:
+                    obj = json.loads(line)
+                except ValueError as e:
+                    fail(f"router stdout line is not JSON ({e}): {line!r}")
+                if not isinstance(obj, dict):
+                    fail(f"router stdout line is not a JSON object: {line!r}")
+                out.append(obj)
+        return out
+
+    def last_stats(self):
+        s = self.stats()
+        return s[-1] if s else None
+
+    def describe(self):
+        """The last stats object and the log tail, for a failure message."""
+        return (f"--- {self.name} last stats ---\n{json.dumps(self.last_stats())}\n"
+                f"--- {self.name} log (tail) ---\n{self.log(1500)}")
+
+    def check_alive(self):
+        if self.proc.poll() is not None:
+            fail(f"the router died ({self.proc.returncode}): {' '.join(self.cmd)}\n{self.log()}")
+
+    def stop(self):
+        """SIGTERM; fails unless it exits 0 within 5 s. Returns the last stats object."""
+        if self.rc is not None:
+            return self.last_stats()
+        self.check_alive()
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            self.rc = self.proc.wait(5)
+        except subprocess.TimeoutExpired:
+            self.kill()
+            fail(f"router did not exit within 5 s of SIGTERM\n{self.describe()}")
+        self._out.close()
+        self._err.close()
+        if self.rc != 0:
+            fail(f"router exited {self.rc} on SIGTERM, expected 0\n{self.describe()}")
+        return self.last_stats()
+
+    def kill(self):
+        """For cleanup after a failure: no check."""
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        self.rc = self.proc.returncode if self.rc is None else self.rc
+        self._out.close()
+        self._err.close()
+
+
+def link_stats(stats, name):
+    """The entries of router link `name` in a stats object: the link and, for a udpin server
+    link, its clients (named NAME or NAME followed by the client's address)."""
+    return [e for e in (stats or {}).get("links", [])
+            if isinstance(e, dict) and str(e.get("name", "")).startswith(name)]
+
+
+def link_total(stats, name, field):
+    return sum(int(e.get(field) or 0) for e in link_stats(stats, name))
+
+
+def link_dropped(stats, name):
+    """{reason: count} summed over the entries of link `name`."""
+    out = {}
+    for e in link_stats(stats, name):
+        for k, v in (e.get("dropped") or {}).items():
+            out[k] = out.get(k, 0) + int(v or 0)
+    return out
+
+
+def via_router(binary, workdir, gcs_links, vehicle_opts=""):
+    """A router between the vehicle and the ground station(s) (the `--via-router` runs): the
+    vehicle's link `udpin:127.0.0.1:R?name=vehicle[&vehicle_opts]` (the vehicle then runs
+    `udpout:127.0.0.1:R`), and for each (NAME, OPTS) of gcs_links a link
+    `udpout:127.0.0.1:P?name=NAME[&OPTS]` towards a ground station listening (udpin) on P.
+    Returns (router, R, {NAME: P}); ports taken before the router bound them are picked again
+    (3 tries)."""
+    for attempt in range(3):
+        vport = free_udp_port()
+        ports = {name: free_udp_port() for name, _ in gcs_links}
+        opts = "name=vehicle" + (f"&{vehicle_opts}" if vehicle_opts else "")
+        links = [f"udpin:127.0.0.1:{vport}?{opts}"]
+        links += [f"udpout:127.0.0.1:{ports[name]}?name={name}" + (f"&{o}" if o else "")
+                  for name, o in gcs_links]
+        try:
+            return Router(binary, links, workdir), vport, ports
+        except Failure as e:
+            if attempt == 2 or "in use" not in str(e).lower():
+                raise
+    raise AssertionError("unreachable")
+
+
+def check_router_carried(stats, names, what):
+    """Every named link received and sent frames, and nothing was dropped for lack of a route
+    or conversion (the routing the ground station's session needs)."""
+    for name in names:
+        rx, tx = link_total(stats, name, "rx_frames"), link_total(stats, name, "tx_frames")
+        if not link_stats(stats, name):
+            fail(f"{what}: no link {name!r} in the router's stats: {json.dumps(stats)}")
+        if rx == 0 or tx == 0:
+            fail(f"{what}: router link {name} received {rx} and sent {tx} frames: "
+                 f"{json.dumps(stats)}")
+        bad = {k: v for k, v in link_dropped(stats, name).items()
+               if k in ("unknown_target", "cannot_convert", "bad_crc", "queue_full") and v}
+        if bad:
+            fail(f"{what}: router link {name} dropped {bad}: {json.dumps(stats)}")
 
 
 class Timer:

@@ -61,6 +61,10 @@ pub struct Options {
     pub socket_buffer: usize,
     /// Read or write a `file:` connection (default read).
     pub file_mode: FileMode,
+    /// A TCP client whose first connection fails keeps trying in the background (with the
+    /// reconnect back-off) instead of failing to open: a router's endpoint may come up later
+    /// (default false: a refused first connection is an open error).
+    pub keep_trying: bool,
 }
 
 impl Default for Options {
@@ -75,6 +79,7 @@ impl Default for Options {
             write_queue: 1024,
             socket_buffer: 4 << 20,
             file_mode: FileMode::Read,
+            keep_trying: false,
         }
     }
 }

@@ -205,18 +205,35 @@ impl Link {
             ConnSpec::Tcp { host, port } => {
                 let what = format!("tcp {hp}");
                 let addr = resolve(host, *port, &what).await?;
-                let stream =
-                    tcp_connect(addr, options.connect_timeout)
-                        .await
-                        .map_err(|reason| OpenError::Connect {
-                            what: what.clone(),
-                            reason,
-                        })?;
-                let local = stream.local_addr().ok();
                 let timeout = options.connect_timeout;
                 let reconnect = move || tcp_connect(addr, timeout);
-                let tasks = supervise(stream, PeerAddr::Tcp(addr), what, ids, options, reconnect);
-                (Kind::Tasks(tasks), local)
+                match tcp_connect(addr, timeout).await {
+                    Ok(stream) => {
+                        let local = stream.local_addr().ok();
+                        let tasks = supervise(
+                            Some(stream),
+                            PeerAddr::Tcp(addr),
+                            what,
+                            ids,
+                            options,
+                            reconnect,
+                        );
+                        (Kind::Tasks(tasks), local)
+                    }
+                    Err(reason) if options.keep_trying => {
+                        tracing::info!("{what}: {reason}; trying again in the background");
+                        let tasks = supervise::<TcpStream, _, _>(
+                            None,
+                            PeerAddr::Tcp(addr),
+                            what,
+                            ids,
+                            options,
+                            reconnect,
+                        );
+                        (Kind::Tasks(tasks), None)
+                    }
+                    Err(reason) => return Err(OpenError::Connect { what, reason }),
+                }
             }
             ConnSpec::TcpIn { host, port } => {
                 let what = format!("tcp {hp}");
@@ -242,7 +259,7 @@ impl Link {
                 };
                 let addr = PeerAddr::Serial(device.clone());
                 let what = format!("serial {device}");
-                let tasks = supervise(port, addr, what, ids, options, reopen);
+                let tasks = supervise(Some(port), addr, what, ids, options, reopen);
                 (Kind::Tasks(tasks), None)
             }
             ConnSpec::File { path, format } => {
@@ -958,9 +975,10 @@ async fn read_peer<R: AsyncRead + Unpin>(
 }
 
 /// A link over one stream that is reopened when it drops (a TCP client connection, a
-/// serial port). `first` is already open: it becomes the first peer at once.
+/// serial port). `first`, when already open, becomes the first peer at once; without it the
+/// supervisor starts by reconnecting.
 fn supervise<S, F, Fut>(
-    first: S,
+    first: Option<S>,
     addr: PeerAddr,
     what: String,
     ids: PeerIds,
@@ -974,23 +992,27 @@ where
 {
     let (tx, rx) = mpsc::channel(LINK_QUEUE);
     let mut tasks = Tasks::new(rx);
-    let info = PeerInfo {
-        id: ids.next(),
-        addr,
-        framing: Framing::Stream,
-    };
-    let (reader, writer) = tokio::io::split(first);
-    let writer = spawn_writer(writer, what.clone(), options.write_queue);
-    tasks.writers.insert(info.id, writer);
+    let first_id = ids.next();
+    let reader = first.map(|stream| {
+        let info = PeerInfo {
+            id: first_id,
+            addr: addr.clone(),
+            framing: Framing::Stream,
+        };
+        let (reader, writer) = tokio::io::split(stream);
+        let writer = spawn_writer(writer, what.clone(), options.write_queue);
+        tasks.writers.insert(info.id, writer);
+        tasks.initial.push(info);
+        reader
+    });
     let supervisor = Supervisor {
-        first_id: info.id,
-        addr: info.addr.clone(),
+        first_id,
+        addr,
         what,
         ids,
         tx,
         options: options.clone(),
     };
-    tasks.initial.push(info);
     tokio::spawn(supervisor.run(reader, reopen));
     tasks
 }
@@ -1006,7 +1028,7 @@ struct Supervisor {
 }
 
 impl Supervisor {
-    async fn run<S, F, Fut>(self, first: tokio::io::ReadHalf<S>, mut reopen: F)
+    async fn run<S, F, Fut>(self, first: Option<tokio::io::ReadHalf<S>>, mut reopen: F)
     where
         S: AsyncRead + AsyncWrite + Send + 'static,
         F: FnMut() -> Fut,
@@ -1017,7 +1039,9 @@ impl Supervisor {
         let mut reader = first;
         let mut id = self.first_id;
         loop {
-            if !read_peer(reader, id, &self.what, &self.tx).await {
+            if let Some(r) = reader.take()
+                && !read_peer(r, id, &self.what, &self.tx).await
+            {
                 return;
             }
             let mut delay = min;
@@ -1057,7 +1081,7 @@ impl Supervisor {
             if self.tx.send(added).await.is_err() {
                 return;
             }
-            reader = r;
+            reader = Some(r);
         }
     }
 }

@@ -31,7 +31,7 @@ pub mod link_spec;
 pub mod node;
 pub mod router_conf;
 
-pub use link_spec::{LinkSpec, LinkSpecError};
+pub use link_spec::{LinkSpec, LinkSpecError, redacted};
 pub use node::{LinkReport, Node, NodeBuilder, NodeError, NodeReport};
 
 pub use mavstack_channel as channel;

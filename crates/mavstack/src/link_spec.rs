@@ -8,6 +8,9 @@
 //! assert_eq!(spec.conn.to_string(), "udpin:0.0.0.0:14550");
 //! let err = LinkSpec::parse("udpin:0.0.0.0:14550?version=3", &|_| None).unwrap_err();
 //! assert_eq!(err.to_string(), r#"link "udpin:0.0.0.0:14550?version=3": link option "version": "3" is not 1, 2 or auto"#);
+//! let key = "ab".repeat(32);
+//! let err = LinkSpec::parse(&format!("udpin:0.0.0.0:1?key={key}&version=1"), &|_| None).unwrap_err();
+//! assert!(!err.to_string().contains(&key), "keys never appear in messages");
 //! ```
 
 use mavstack_router::{LinkConfig, OptionError, options};
@@ -44,6 +47,23 @@ pub enum LinkSpecError {
     },
 }
 
+/// `text` with the value of a `key` option replaced by `***`: link strings appear in errors
+/// and logs, keys never do.
+#[must_use]
+pub fn redacted(text: &str) -> String {
+    let Some((conn, opts)) = text.split_once('?') else {
+        return text.to_owned();
+    };
+    let opts: Vec<String> = opts
+        .split('&')
+        .map(|o| match o.split_once('=') {
+            Some(("key", _)) => "key=***".to_owned(),
+            _ => o.to_owned(),
+        })
+        .collect();
+    format!("{conn}?{}", opts.join("&"))
+}
+
 impl LinkSpec {
     /// Parses `text`. `message_id` turns a message name into its id (filters and `rate`
     /// take names as well as numbers).
@@ -56,12 +76,12 @@ impl LinkSpec {
     ) -> Result<Self, LinkSpecError> {
         let (conn_text, opts) = text.split_once('?').unwrap_or((text, ""));
         let conn: ConnSpec = conn_text.parse().map_err(|source| LinkSpecError::Conn {
-            text: text.to_owned(),
+            text: redacted(text),
             source,
         })?;
         let config = options::parse(opts, &conn.to_string(), message_id).map_err(|source| {
             LinkSpecError::Option {
-                text: text.to_owned(),
+                text: redacted(text),
                 source,
             }
         })?;

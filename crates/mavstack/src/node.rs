@@ -199,6 +199,8 @@ impl NodeBuilder {
         // routes would live.
         let mut options = self.options;
         options.peer_timeout = options.peer_timeout.max(router_config.route_ttl);
+        // An endpoint that is not up yet is tried again, as mavlink-router does.
+        options.keep_trying = true;
         for spec in self.links {
             let mut io =
                 Link::open(&spec.conn, &options)
@@ -401,6 +403,7 @@ impl Driver {
             }
             let mut command = None;
             let mut timer = false;
+            let mut waited = false;
             core::future::poll_fn(|cx| {
                 let mut any = false;
                 for (slot, r) in self.slots.iter_mut().zip(ready.iter_mut()) {
@@ -420,6 +423,7 @@ impl Driver {
                 if any {
                     core::task::Poll::Ready(())
                 } else {
+                    waited = true;
                     core::task::Poll::Pending
                 }
             })
@@ -452,6 +456,12 @@ impl Driver {
                 }
                 Some(Some(Command::Shutdown) | None) => break,
                 None => {}
+            }
+            if !waited {
+                // Busy (a link always has input): let the runtime poll its I/O driver, so
+                // the other sockets' readiness is seen, and run its other tasks (signals,
+                // statistics). One flooding link cannot starve the rest.
+                tokio::task::yield_now().await;
             }
             if let Some((i, Err(e))) = self
                 .slots

@@ -1,0 +1,392 @@
+//! `mavstack router` as a process: usage errors, mavlink-router's configuration file run as
+//! it is, and faults (a TCP client that vanishes and comes back, a flooding link while
+//! commands pass, a truncated or corrupted datagram).
+
+use core::sync::atomic::{AtomicBool, Ordering};
+use core::time::Duration;
+use std::io::{BufRead as _, BufReader, Read as _, Write as _};
+use std::net::{TcpListener, TcpStream, UdpSocket};
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::time::Instant;
+
+use mavstack_core::message::Message;
+use mavstack_core::wire::{self, Frame, FrameHeader, MAX_FRAME_LEN, Version};
+use mavstack_dialects::common::{Attitude, CommandLong, Heartbeat, MavCmd};
+
+fn mavstack() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_mavstack"))
+}
+
+fn frame<M: Message>(m: &M, sysid: u8, seq: u8) -> Vec<u8> {
+    let mut buf = [0u8; MAX_FRAME_LEN];
+    let header = FrameHeader {
+        version: Version::V2,
+        seq,
+        sysid,
+        compid: 1,
+        signed: false,
+    };
+    let len = wire::emit_message(&header, m, &mut buf).unwrap();
+    buf[..len].to_vec()
+}
+
+fn command_to(sysid: u8, n: u16) -> CommandLong {
+    CommandLong {
+        command: MavCmd(n),
+        target_system: sysid,
+        target_component: 1,
+        ..CommandLong::default()
+    }
+}
+
+fn free_udp() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+fn free_tcp() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// A router process; stopped (SIGTERM, exit 0 asserted) by `stop`.
+struct Router(Child);
+
+impl Router {
+    fn start(args: &[String]) -> Self {
+        let mut child = mavstack()
+            .arg("router")
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut err = BufReader::new(child.stderr.take().unwrap());
+        let mut line = String::new();
+        loop {
+            line.clear();
+            assert!(
+                err.read_line(&mut line).unwrap() > 0,
+                "router exited before it was ready"
+            );
+            if line.contains("mavstack router: ready") {
+                break;
+            }
+        }
+        std::thread::spawn(move || {
+            let mut rest = String::new();
+            let _ = err.read_to_string(&mut rest);
+        });
+        Self(child)
+    }
+
+    fn stop(mut self) -> String {
+        let pid = self.0.id().to_string();
+        Command::new("kill").args(["-TERM", &pid]).status().unwrap();
+        self.0.wait_with_output_timeout()
+    }
+}
+
+trait WaitTimeout {
+    fn wait_with_output_timeout(&mut self) -> String;
+}
+
+impl WaitTimeout for Child {
+    fn wait_with_output_timeout(&mut self) -> String {
+        let start = Instant::now();
+        loop {
+            if let Some(status) = self.try_wait().unwrap() {
+                assert!(status.success(), "router exit status {status}");
+                let mut out = String::new();
+                self.stdout
+                    .take()
+                    .unwrap()
+                    .read_to_string(&mut out)
+                    .unwrap();
+                return out;
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(10),
+                "router did not stop"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+fn recv_frames(sock: &UdpSocket, wait: Duration) -> Vec<Vec<u8>> {
+    sock.set_read_timeout(Some(wait)).unwrap();
+    let mut out = Vec::new();
+    let mut buf = [0u8; 2048];
+    while let Ok(n) = sock.recv(&mut buf) {
+        let mut rest = &buf[..n];
+        while let Ok(f) = Frame::new_checked(rest) {
+            let len = f.frame_len();
+            out.push(rest[..len].to_vec());
+            rest = &rest[len..];
+        }
+    }
+    out
+}
+
+#[test]
+fn bad_options_and_files_are_usage_errors_naming_what_is_wrong() {
+    let key = "ab".repeat(32);
+    let cases = [
+        (
+            vec!["udpin:127.0.0.1:0?version=3".to_owned()],
+            "error: link \"udpin:127.0.0.1:0?version=3\": link option \"version\": \"3\" is not 1, 2 or auto",
+        ),
+        (
+            vec![format!("udpin:127.0.0.1:0?version=1&key={key}")],
+            "link option \"key\": a signed link is MAVLink 2",
+        ),
+        (
+            vec!["udpin:127.0.0.1:0?colour=red".to_owned()],
+            "link option \"colour\": unknown option",
+        ),
+        (vec!["foo:1.2.3.4:5".to_owned()], "unknown scheme \"foo\""),
+        (vec![], "error: no links"),
+        (
+            vec![
+                "udpin:127.0.0.1:0".to_owned(),
+                "--dialect".to_owned(),
+                "nope".to_owned(),
+            ],
+            "unknown dialect \"nope\"",
+        ),
+    ];
+    for (args, want) in cases {
+        let out = mavstack().arg("router").args(&args).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
+        assert!(!err.contains(&key), "the key is never printed");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let conf = dir.path().join("main.conf");
+    std::fs::write(
+        &conf,
+        "[UdpEndpoint alpha]\nMode = Server\nAddress = 0.0.0.0\nPort = 14a50\n",
+    )
+    .unwrap();
+    let out = mavstack()
+        .arg("router")
+        .arg("--conf")
+        .arg(&conf)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.starts_with(&format!("error: {}:4: ", conf.display())),
+        "{err}"
+    );
+    assert!(err.contains("Port") && err.contains("14a50"), "{err}");
+}
+
+#[test]
+fn mavlink_router_sample_configuration_runs_as_it_is() {
+    // mavlink-router's examples/config.sample with its addresses pointed at this test: a
+    // pseudo-terminal for the UART, free ports for the UDP and TCP endpoints.
+    let sample = include_str!("../../mavstack/tests/data/config.sample");
+    let pty = nix::pty::openpty(None, None).unwrap();
+    let tty = nix::unistd::ttyname(&pty.slave).unwrap();
+    let (bravo, charlie, delta) = (free_udp(), free_udp(), free_tcp());
+    let tcp = TcpListener::bind(("127.0.0.1", delta)).unwrap();
+    let text = sample
+        .replace("/dev/ttyS0", &tty.display().to_string())
+        .replace("Port = 10000", &format!("Port = {bravo}"))
+        .replace("Port = 11000", &format!("Port = {charlie}"))
+        .replace("Port = 25760", &format!("Port = {delta}"));
+    assert_ne!(text, sample);
+    let dir = tempfile::tempdir().unwrap();
+    let conf = dir.path().join("main.conf");
+    std::fs::write(&conf, text).unwrap();
+    let gcs = UdpSocket::bind(("127.0.0.1", charlie)).unwrap();
+    let router = Router::start(&[
+        "--conf".into(),
+        conf.display().to_string(),
+        "--tcp-server".into(),
+        free_tcp().to_string(),
+        "--stats".into(),
+        "1".into(),
+    ]);
+    let (mut companion, _) = tcp.accept().unwrap();
+    // A vehicle sends into bravo (a UDP server endpoint).
+    let vehicle = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let hb = frame(&Heartbeat::default(), 1, 0);
+    vehicle.send_to(&hb, ("127.0.0.1", bravo)).unwrap();
+    assert_eq!(
+        recv_frames(&gcs, Duration::from_millis(500)),
+        vec![hb.clone()],
+        "charlie (udpout) gets it"
+    );
+    companion
+        .set_read_timeout(Some(Duration::from_secs(2)))
+        .unwrap();
+    let mut got = vec![0u8; hb.len()];
+    companion.read_exact(&mut got).unwrap();
+    assert_eq!(got, hb, "delta (tcp client) gets it");
+    let mut master = std::fs::File::from(pty.master);
+    let mut got = vec![0u8; hb.len()];
+    master.read_exact(&mut got).unwrap();
+    assert_eq!(got, hb, "alpha (the UART) gets it");
+    let stats = router.stop();
+    let last: serde_json::Value = serde_json::from_str(stats.lines().last().unwrap()).unwrap();
+    let names: Vec<&str> = last["links"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l["name"].as_str().unwrap())
+        .collect();
+    for name in ["alpha", "bravo", "charlie", "delta", "tcp-server"] {
+        assert!(names.contains(&name), "{name} in {names:?}");
+    }
+}
+
+#[test]
+fn a_tcp_client_that_vanishes_and_comes_back_is_served_again() {
+    let port = free_tcp();
+    let out = free_udp();
+    let listener = UdpSocket::bind(("127.0.0.1", out)).unwrap();
+    let router = Router::start(&[
+        format!("tcpin:127.0.0.1:{port}?name=tcp"),
+        format!("udpout:127.0.0.1:{out}?name=gcs"),
+    ]);
+    for round in 0..3u8 {
+        let mut client = TcpStream::connect(("127.0.0.1", port)).unwrap();
+        let hb = frame(&Heartbeat::default(), 1, round);
+        // Half a frame, then the rest: a stream link reassembles it.
+        client.write_all(&hb[..7]).unwrap();
+        std::thread::sleep(Duration::from_millis(20));
+        client.write_all(&hb[7..]).unwrap();
+        assert_eq!(
+            recv_frames(&listener, Duration::from_millis(500)),
+            vec![hb],
+            "round {round}"
+        );
+        drop(client);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // A router endpoint that is not up yet: the router keeps trying (as mavlink-router does).
+    let later = free_tcp();
+    let router2 = Router::start(&[
+        format!("tcp:127.0.0.1:{later}?name=late"),
+        format!("udpout:127.0.0.1:{out}"),
+    ]);
+    std::thread::sleep(Duration::from_millis(300));
+    let server = TcpListener::bind(("127.0.0.1", later)).unwrap();
+    server.set_nonblocking(false).unwrap();
+    let (mut conn, _) = server.accept().unwrap();
+    let hb = frame(&Heartbeat::default(), 2, 0);
+    conn.write_all(&hb).unwrap();
+    assert_eq!(
+        recv_frames(&listener, Duration::from_millis(1000)),
+        vec![hb]
+    );
+    router2.stop();
+    router.stop();
+}
+
+#[test]
+fn commands_pass_while_another_link_floods_and_bad_datagrams_cost_only_themselves() {
+    let (veh_port, gcs_port, flood_port) = (free_udp(), free_udp(), free_udp());
+    let router = Router::start(&[
+        // The vehicle is behind a radio with a byte budget: the flood's telemetry is cut to
+        // it, control traffic never is.
+        format!("udpin:127.0.0.1:{veh_port}?name=vehicle&bytes_per_s=20000"),
+        format!("udpin:127.0.0.1:{gcs_port}?name=gcs"),
+        format!("udpin:127.0.0.1:{flood_port}?name=flood"),
+        "--stats".into(),
+        "1".into(),
+    ]);
+    let vehicle = UdpSocket::bind("127.0.0.1:0").unwrap();
+    vehicle
+        .send_to(&frame(&Heartbeat::default(), 1, 0), ("127.0.0.1", veh_port))
+        .unwrap();
+    let gcs = UdpSocket::bind("127.0.0.1:0").unwrap();
+    gcs.send_to(
+        &frame(&Heartbeat::default(), 255, 0),
+        ("127.0.0.1", gcs_port),
+    )
+    .unwrap();
+    std::thread::sleep(Duration::from_millis(100));
+    let stop = Arc::new(AtomicBool::new(false));
+    let flooding = {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            let s = UdpSocket::bind("127.0.0.1:0").unwrap();
+            let att = frame(&Attitude::default(), 9, 0);
+            let mut n = 0u64;
+            while !stop.load(Ordering::Relaxed) {
+                let _ = s.send_to(&att, ("127.0.0.1", flood_port));
+                n += 1;
+            }
+            n
+        })
+    };
+    std::thread::sleep(Duration::from_millis(200));
+    // 50 commands, each with a deadline of the command protocol's timeout (0.5 s), while the
+    // flood runs; plus a truncated and a corrupted datagram on the ground station's link.
+    vehicle
+        .set_read_timeout(Some(Duration::from_millis(500)))
+        .unwrap();
+    let mut buf = [0u8; 65536];
+    for i in 0..50u16 {
+        if i == 10 {
+            let hb = frame(&Heartbeat::default(), 255, 1);
+            gcs.send_to(&hb[..hb.len() - 4], ("127.0.0.1", gcs_port))
+                .unwrap();
+            let mut bad = hb.clone();
+            bad[14] ^= 0x55;
+            gcs.send_to(&bad, ("127.0.0.1", gcs_port)).unwrap();
+        }
+        let cmd = frame(&command_to(1, 1000 + i), 255, u8::try_from(i).unwrap());
+        gcs.send_to(&cmd, ("127.0.0.1", gcs_port)).unwrap();
+        let deadline = Instant::now() + Duration::from_millis(500);
+        let mut found = false;
+        while !found && Instant::now() < deadline {
+            let Ok(n) = vehicle.recv(&mut buf) else { break };
+            let mut rest = &buf[..n];
+            while let Ok(f) = Frame::new_checked(rest) {
+                let len = f.frame_len();
+                found |= rest[..len] == cmd[..];
+                rest = &rest[len..];
+            }
+        }
+        if !found {
+            stop.store(true, Ordering::Relaxed);
+            let stats = router.stop();
+            panic!(
+                "command {i} did not reach the vehicle within 0.5 s of a flood: {}",
+                stats.lines().last().unwrap_or("")
+            );
+        }
+    }
+    stop.store(true, Ordering::Relaxed);
+    let flooded = flooding.join().unwrap();
+    assert!(flooded > 10_000, "the flood was real: {flooded} frames");
+    let stats = router.stop();
+    let last: serde_json::Value = serde_json::from_str(stats.lines().last().unwrap()).unwrap();
+    let gcs_link = last["links"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|l| l["name"] == "gcs")
+        .unwrap()
+        .clone();
+    assert_eq!(gcs_link["dropped"]["bad_crc"], 1, "{gcs_link}");
+    assert_eq!(
+        gcs_link["rx_frames"], 51,
+        "every good frame of the link was accepted: {gcs_link}"
+    );
+}
