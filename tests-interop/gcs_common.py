@@ -112,7 +112,6 @@ class Router:
 
     def stats(self):
         """Every stats object printed so far (a line that is not a JSON object fails)."""
-        self._out.flush()
         out = []
         with open(self.stats_path, "rb") as f:
             for line in f.read().decode("utf-8", "replace").splitlines():
@@ -168,10 +167,10 @@ class Router:
 
 
 def link_stats(stats, name):
-    """The entries of router link `name` in a stats object: the link and, for a udpin server
-    link, its clients (named NAME or NAME followed by the client's address)."""
+    """The entries of router link `name` in a stats object: the link or, for a udpin server
+    link, each of its clients (named as the link, their address in `peer`)."""
     return [e for e in (stats or {}).get("links", [])
-            if isinstance(e, dict) and str(e.get("name", "")).startswith(name)]
+            if isinstance(e, dict) and e.get("name") == name]
 
 
 def link_total(stats, name, field):
@@ -187,7 +186,7 @@ def link_dropped(stats, name):
     return out
 
 
-def via_router(binary, workdir, gcs_links, vehicle_opts=""):
+def via_router(binary, workdir, gcs_links, vehicle_opts="", name="router"):
     """A router between the vehicle and the ground station(s) (the `--via-router` runs): the
     vehicle's link `udpin:127.0.0.1:R?name=vehicle[&vehicle_opts]` (the vehicle then runs
     `udpout:127.0.0.1:R`), and for each (NAME, OPTS) of gcs_links a link
@@ -202,7 +201,7 @@ def via_router(binary, workdir, gcs_links, vehicle_opts=""):
         links += [f"udpout:127.0.0.1:{ports[name]}?name={name}" + (f"&{o}" if o else "")
                   for name, o in gcs_links]
         try:
-            return Router(binary, links, workdir), vport, ports
+            return Router(binary, links, workdir, name=name), vport, ports
         except Failure as e:
             if attempt == 2 or "in use" not in str(e).lower():
                 raise

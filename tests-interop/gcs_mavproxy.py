@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """MAVProxy 1.8.75 (the real ground station, from PyPI) against `mavstack vehicle` on loopback UDP.
 
-    gcs_mavproxy.py [--mavstack BIN] [--keep DIR]
+    gcs_mavproxy.py [--mavstack BIN] [--keep DIR] [--via-router]
     gcs_mavproxy.py --bench N_PARAMS N_ITEMS [--loss 0.2] [--seed 1] [--mavstack BIN]
 
 The vehicle (`BIN vehicle udpout:127.0.0.1:PORT --secure --params FILE`, BIN from --mavstack or
@@ -24,6 +24,18 @@ is checked, plus its telemetry log (every frame it received, signature bytes inc
     and a full param fetch again (only signed frames reach MAVProxy now), and the log shows the
     vehicle's frames signed from then on with MAVProxy's key (checked with pymavlink's signing).
 
+--via-router: the same session with `mavstack router` in the middle: the vehicle sends to the
+router's `udpin:...?name=vehicle&trusted=true` link, the router's `udpout:...?name=gcs` link
+sends to MAVProxy's `--master=udpin:`; checks 1-6 as above. SETUP_SIGNING cannot work through
+a router link without a key (the router removes signatures there, by design), so 7 becomes: a
+second MAVProxy on the router's signed link `udpout:...?name=gcs_signed&key=K` (K = the
+passphrase's SHA-256, as MAVProxy derives it): `signing key` (local), `set allow_unsigned 0`, a
+full fetch, and every vehicle frame in its log signed with K (by the router, from the trusted
+vehicle link). Then a MAVLink 1 hop: a `--mavlink1-only` vehicle on a `version=1` router link,
+MAVProxy on a plain one: fetch, set + read back, wp load/save compared, arm/disarm, through
+the router's conversion (its stats show the versions and conversions). The router is stopped
+with SIGTERM and must exit 0; its stats (per link frames, conversions, drops) are in the JSON.
+
 Prints one JSON line with timings on success, exits 1 with the reason (and MAVProxy's and the
 vehicle's last output) on any failure.
 
@@ -35,6 +47,7 @@ gives up: it never resends MISSION_COUNT) and download them again; JSON with bot
 
 import argparse
 import hashlib
+import json
 import os
 import re
 import sys
@@ -46,6 +59,10 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from gcs_common import (  # noqa: E402
     Failure,
     Timer,
+    check_router_carried,
+    link_dropped,
+    link_stats,
+    link_total,
     Vehicle,
     compare_missions,
     fail,
@@ -54,6 +71,7 @@ from gcs_common import (  # noqa: E402
     read_qgc_wpl,
     run_main,
     survey_mission,
+    via_router,
     write_params_file,
     write_qgc_wpl,
 )
@@ -82,9 +100,10 @@ def mavproxy_exe():
 class MavProxy:
     """MAVProxy in a pty: send console commands, wait for console lines."""
 
-    def __init__(self, master, workdir, vehicle, extra=()):
+    def __init__(self, master, workdir, vehicle, extra=(), router=None):
         self.workdir = workdir
         self.vehicle = vehicle
+        self.router = router
         self.out_path = os.path.join(workdir, "mavproxy.out")
         self.out = open(self.out_path, "w")
         self.state = os.path.join(workdir, "state")
@@ -96,6 +115,8 @@ class MavProxy:
             "--aircraft=gcs",
             f"--default-modules={MODULES}",
             "--cmd=set param_ftp 0",
+            # the telemetry log is checked after MAVProxy is killed: unflushed, its tail was lost
+            "--cmd=set flushlogs 1",
             *extra,
         ]
         self.p = pexpect.spawn(sys.executable, [mavproxy_exe(), *args], cwd=workdir, env=env,
@@ -130,9 +151,12 @@ class MavProxy:
             i = self.p.expect(patterns, timeout=timeout)
         except pexpect.TIMEOUT:
             self.vehicle.check_alive()
+            if self.router is not None:
+                self.router.check_alive()
             fail(f"{what}: MAVProxy did not print /{'/ or /'.join(patterns)}/ within {timeout} s\n"
                  f"--- MAVProxy output (tail) ---\n{self.tail()}\n"
-                 f"--- vehicle log (tail) ---\n{self.vehicle.log(1500)}")
+                 f"--- vehicle log (tail) ---\n{self.vehicle.log(1500)}"
+                 + (f"\n{self.router.describe()}" if self.router is not None else ""))
         except pexpect.EOF:
             fail(f"{what}: MAVProxy exited\n{self.tail()}")
         return i, self.p.match
@@ -299,17 +323,30 @@ def heartbeat_armed(tlog):
     return False
 
 
-def full(binary, keep):
+def full(binary, keep, via=False):
     timer = Timer()
     work = keep or tempfile.mkdtemp(prefix="gcs-mavproxy-")
     os.makedirs(work, exist_ok=True)
-    port = free_udp_port()
-    vehicle = Vehicle(binary, f"udpout:127.0.0.1:{port}", ["--secure"], work)
+    router = None
+    if via:
+        key_hex = hashlib.sha256(PASSPHRASE.encode()).hexdigest()
+        router, port, gcs_ports = via_router(
+            binary, work, [("gcs", ""), ("gcs_signed", f"key={key_hex}")], "trusted=true")
+        master = f"udpin:127.0.0.1:{gcs_ports['gcs']}"
+    else:
+        port = free_udp_port()
+        master = f"udpin:127.0.0.1:{port}"
+    try:
+        vehicle = Vehicle(binary, f"udpout:127.0.0.1:{port}", ["--secure"], work)
+    except Failure:
+        if router is not None:
+            router.kill()
+        raise
     mp = None
     summary = {}
     try:
         t = time.monotonic()
-        mp = MavProxy(f"udpin:127.0.0.1:{port}", work, vehicle)
+        mp = MavProxy(master, work, vehicle, router=router)
         mp.expect(r"Detected vehicle 1:1", 20, "connect")
         summary["connect_s"] = timer.mark("connect", t)
 
@@ -372,6 +409,21 @@ def full(binary, keep):
         mp.expect(r"DISARMED", 10, "disarm: disarmed HEARTBEAT")
 
         # 7. signing
+        if router is not None:
+            mp.close()
+            if not heartbeat_armed(mp.tlog()):
+                fail("arm: no HEARTBEAT with MAV_MODE_FLAG_SAFETY_ARMED in MAVProxy's log")
+            mp = None
+            summary.update(signed_via_router(vehicle, router, gcs_ports["gcs_signed"], work, n))
+            stats = router.stop()
+            summary["router"] = router_summary(stats, ["vehicle", "gcs", "gcs_signed"])
+            check_router_carried(stats, ["vehicle", "gcs", "gcs_signed"], "through the router")
+            if not link_dropped(stats, "gcs_signed").get("unsigned"):
+                fail("signed router link: no unsigned frame of MAVProxy's (those sent before "
+                     f"`signing key`) was dropped: {json.dumps(stats)}")
+            vehicle.stop()
+            summary["mavlink1_hop"] = mavlink1_hop(binary, os.path.join(work, "mavlink1-hop"))
+            return summary
         t = time.monotonic()
         setup_wall = time.time()
         mp.cmd(f"signing setup {PASSPHRASE}")
@@ -397,7 +449,132 @@ def full(binary, keep):
         if mp is not None:
             mp.close()
         vehicle.stop()
+        if router is not None:
+            router.kill()
     return summary
+
+
+def router_summary(stats, names):
+    """Per router link: frames in/out, conversions, drops (from the router's last stats)."""
+    return {name: {"version": sorted({str(e.get("version")) for e in link_stats(stats, name)}),
+                   "rx": link_total(stats, name, "rx_frames"),
+                   "tx": link_total(stats, name, "tx_frames"),
+                   "converted": link_total(stats, name, "converted"),
+                   "dropped": link_dropped(stats, name)}
+            for name in names}
+
+
+def signed_via_router(vehicle, router, port, work, n):
+    """Check 7 through the router: a second MAVProxy on the router's link keyed with
+    sha256(PASSPHRASE) sets the same key locally and refuses unsigned frames; a full fetch
+    must complete, and every vehicle frame it logged is signed with the key (the router signs
+    the trusted vehicle link's unsigned frames onto its signed link)."""
+    res = {}
+    work2 = os.path.join(work, "signed")
+    os.makedirs(work2, exist_ok=True)
+    start_wall = time.time()
+    t = time.monotonic()
+    mp = MavProxy(f"udpin:127.0.0.1:{port}", work2, vehicle, router=router)
+    try:
+        mp.expect(r"Detected vehicle 1:1", 20, "signed router link: connect")
+        mp.cmd(f"signing key {PASSPHRASE}")
+        mp.expect(r"Setup signing key", 10, "signing key")
+        mp.cmd("set allow_unsigned 0")
+        n2, secs = fetch_all(mp, 30, "param fetch over the router's signed link (allow_unsigned 0)")
+        if n2 != n:
+            fail(f"signed param fetch through the router: {n2} parameters, {n} before")
+        res.update(signed_param_fetch_s=secs)
+        mp.cmd("param show WPNAV_SPEED")
+        mp.expect(r"WPNAV_SPEED\s+750\.5", 10, "signed: the value set before")
+        res["signing_s"] = round(time.monotonic() - t, 3)
+        time.sleep(1.0)
+        vehicle.check_alive()
+        router.check_alive()
+    finally:
+        mp.close()
+    key = hashlib.sha256(PASSPHRASE.encode()).digest()
+    # every vehicle frame this MAVProxy logged, from its start on, is signed with the key
+    signed, _ = check_signed_tail(mp.tlog(), start_wall - 2.0, key)
+    res.update(signed_frames=signed)
+    return res
+
+
+def mavlink1_hop(binary, work):
+    """A `--mavlink1-only` vehicle on the router's `version=1` link, MAVProxy (MAVLink 2) on a
+    plain one: parameters, a mission and arm/disarm through the router's conversion."""
+    os.makedirs(work, exist_ok=True)
+    res = {}
+    router, port, gcs_ports = via_router(binary, work, [("gcs", "")], "version=1",
+                                         name="router-v1")
+    mp = None
+    try:
+        vehicle = Vehicle(binary, f"udpout:127.0.0.1:{port}", ["--mavlink1-only"], work)
+    except Failure:
+        router.kill()
+        raise
+    try:
+        t = time.monotonic()
+        mp = MavProxy(f"udpin:127.0.0.1:{gcs_ports['gcs']}", work, vehicle, router=router)
+        mp.expect(r"Detected vehicle 1:1", 20, "MAVLink 1 hop: connect")
+        res["connect_s"] = round(time.monotonic() - t, 3)
+        n, secs = fetch_all(mp, 30, "MAVLink 1 hop: param fetch")
+        res.update(params=n, param_fetch_s=secs)
+        saved = os.path.join(work, "fetched.parm")
+        mp.cmd(f"param save {saved}")
+        # (MAVProxy also saves a fetch to its own mav.parm and says so: match our path only)
+        _, m = mp.expect(rf"Saved (\d+) parameters to {re.escape(saved)}", 10,
+                         "MAVLink 1 hop: param save")
+        if int(m.group(1)) != n:
+            fail(f"MAVLink 1 hop: param save wrote {m.group(1)} parameters, the vehicle reports {n}")
+        values = read_param_file(saved)
+        for name, want in ARDUPILOT_PARAMS.items():
+            if name not in values or abs(values[name] - want) > 1e-6 * max(1, abs(want)):
+                fail(f"MAVLink 1 hop: param fetch: {name} = {values.get(name)}, expected {want}")
+        for name, new in (("WPNAV_SPEED", 612.25), ("RTL_ALT", 1800)):
+            mp.cmd(f"param set {name} {new}")
+            time.sleep(0.3)
+            param_read_back(mp, name, new, f"MAVLink 1 hop: param set {name} {new}")
+        items = survey_mission(12)
+        mission = os.path.join(work, "mission.txt")
+        write_qgc_wpl(mission, items)
+        secs, _, _ = upload(mp, mission, len(items), 20)
+        back = os.path.join(work, "downloaded.txt")
+        dsecs, _ = download(mp, back, len(items), 20)
+        compare_missions(read_qgc_wpl(mission), read_qgc_wpl(back), "MAVLink 1 hop: wp load/save")
+        res.update(wp_items=len(items), wp_upload_s=secs, wp_download_s=dsecs)
+        mp.cmd("arm throttle")
+        mp.expect(r"Got COMMAND_ACK: COMPONENT_ARM_DISARM: ACCEPTED", 10, "MAVLink 1 hop: arm ACK")
+        mp.expect(r"\bARMED", 10, "MAVLink 1 hop: armed HEARTBEAT")
+        mp.cmd("disarm")
+        mp.expect(r"Got COMMAND_ACK: COMPONENT_ARM_DISARM: ACCEPTED", 10, "MAVLink 1 hop: disarm ACK")
+        mp.expect(r"DISARMED", 10, "MAVLink 1 hop: disarmed HEARTBEAT")
+        vehicle.check_alive()
+        mp.close()
+        v1 = v2 = 0
+        for m in tlog_frames(mp.tlog()):
+            if m.get_srcSystem() == 1 and m.get_type() != "BAD_DATA":
+                if bytes(m.get_msgbuf())[0] == 0xFD:
+                    v2 += 1
+                else:
+                    v1 += 1
+        stats = router.stop()
+        res["router"] = router_summary(stats, ["vehicle", "gcs"])
+        check_router_carried(stats, ["vehicle", "gcs"], "MAVLink 1 hop")
+        if res["router"]["vehicle"]["version"] != ["1"]:
+            fail(f"MAVLink 1 hop: the vehicle's router link has version {res['router']['vehicle']['version']}, "
+                 f"expected [\"1\"]: {json.dumps(stats)}")
+        # MAVProxy speaks MAVLink 2: from its first frame on, the vehicle's MAVLink 1 frames
+        # reach it converted to MAVLink 2
+        if res["router"]["gcs"]["converted"] == 0 or v2 == 0:
+            fail(f"MAVLink 1 hop: no conversion to MAVLink 2 towards MAVProxy ({v2} MAVLink 2 and "
+                 f"{v1} MAVLink 1 vehicle frames in its log): {json.dumps(stats)}")
+        res.update(vehicle_frames_v2_at_gcs=v2, vehicle_frames_v1_at_gcs=v1)
+    finally:
+        if mp is not None:
+            mp.close()
+        vehicle.stop()
+        router.kill()
+    return res
 
 
 def bench_run(binary, n_params, n_items, loss, seed, work):
@@ -485,13 +662,15 @@ def main():
     ap.add_argument("--loss", type=float, action="append",
                     help="bench: loss rates to run (default 0 and 0.2)")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--via-router", action="store_true",
+                    help="the session through `mavstack router` (and a MAVLink 1 hop)")
     args = ap.parse_args()
 
     def body():
         binary = mavstack_bin(args.mavstack)
         if args.bench:
             return bench(binary, *args.bench, args.loss or [0.0, 0.2], args.seed, args.keep)
-        return full(binary, args.keep)
+        return full(binary, args.keep, args.via_router)
 
     run_main("gcs_mavproxy", body)
 

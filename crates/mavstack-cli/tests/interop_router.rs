@@ -19,7 +19,9 @@
 //!   broadcasts everywhere but back, and the mavlink-router #452 echo case;
 //! - `handshake`: `mavstack vehicle` behind the router: the MAVLink 2 handshake works through a
 //!   plain link (pymavlink and `mavstack probe`) and cannot through a `version=1` link;
-//! - `stats_and_exit`: `--stats 1` JSON lines (names, versions, counts), exit 0 on SIGTERM.
+//! - `stats_and_exit`: `--stats 1` JSON lines (names, versions, counts), exit 0 on SIGTERM;
+//! - `tlog`: `--log DIR` writes every accepted frame, bytes as sent, read back by pymavlink's
+//!   own tlog reader with the link number in `msg._link` (MAVProxy's timestamp bits).
 //!
 //! Never skipped: without pymavlink 2.4.50 they fail.
 
@@ -101,4 +103,9 @@ fn router_carries_the_mavlink2_handshake_only_where_it_can() {
 #[test]
 fn router_prints_stats_and_exits_on_sigterm() {
     scenario("stats_and_exit");
+}
+
+#[test]
+fn router_logs_all_traffic_in_a_tlog_pymavlink_reads() {
+    scenario("tlog");
 }

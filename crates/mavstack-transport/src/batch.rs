@@ -44,7 +44,18 @@ impl RecvBatch {
     pub(crate) fn recv(&mut self, socket: &UdpSocket) -> io::Result<usize> {
         self.got.clear();
         match socket.try_io(Interest::READABLE, || self.recv_now(socket)) {
-            Ok(n) => Ok(n),
+            Ok(n) => {
+                if n < RECV_BATCH {
+                    // Fewer than asked for: the queue was empty when the call returned. Say
+                    // so to the runtime now rather than with another system call (a datagram
+                    // that arrived meanwhile raised readiness again: the runtime's ticks see
+                    // to that).
+                    let _ = socket.try_io(Interest::READABLE, || {
+                        Err::<(), _>(io::Error::from(io::ErrorKind::WouldBlock))
+                    });
+                }
+                Ok(n)
+            }
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => Ok(0),
             Err(e) => Err(e),
         }
