@@ -198,6 +198,13 @@ pub(crate) fn stats_json(report: &NodeReport) -> Value {
                 .iter()
                 .map(|(k, v)| ((*k).to_owned(), json!(v)))
                 .collect();
+            let sources: Vec<Value> = l
+                .sources
+                .iter()
+                .map(|(sysid, compid, received, lost)| {
+                    json!({"sysid": sysid, "compid": compid, "received": received, "lost": lost})
+                })
+                .collect();
             json!({
                 "name": l.name,
                 "peer": l.peer,
@@ -210,6 +217,7 @@ pub(crate) fn stats_json(report: &NodeReport) -> Value {
                 "conversions": conversions,
                 "dropped": dropped,
                 "seq_lost": l.seq_lost,
+                "sources": sources,
             })
         })
         .collect();

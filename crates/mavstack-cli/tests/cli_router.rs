@@ -390,3 +390,36 @@ fn commands_pass_while_another_link_floods_and_bad_datagrams_cost_only_themselve
         "every good frame of the link was accepted: {gcs_link}"
     );
 }
+
+#[test]
+fn two_ground_stations_on_one_udp_port_each_get_answers_at_their_own_address() {
+    let port = free_udp();
+    let router = Router::start(&[format!("udpin:127.0.0.1:{port}?name=gcs")]);
+    let (a, b) = (
+        UdpSocket::bind("127.0.0.1:0").unwrap(),
+        UdpSocket::bind("127.0.0.1:0").unwrap(),
+    );
+    let (ha, hb) = (
+        frame(&Heartbeat::default(), 254, 0),
+        frame(&Heartbeat::default(), 255, 0),
+    );
+    a.send_to(&ha, ("127.0.0.1", port)).unwrap();
+    std::thread::sleep(Duration::from_millis(50));
+    b.send_to(&hb, ("127.0.0.1", port)).unwrap();
+    assert_eq!(
+        recv_frames(&a, Duration::from_millis(300)),
+        vec![hb.clone()],
+        "a sees b"
+    );
+    a.send_to(&ha, ("127.0.0.1", port)).unwrap();
+    assert_eq!(
+        recv_frames(&b, Duration::from_millis(300)),
+        vec![ha],
+        "b sees a"
+    );
+    assert!(
+        recv_frames(&a, Duration::from_millis(100)).is_empty(),
+        "nothing back to a"
+    );
+    router.stop();
+}

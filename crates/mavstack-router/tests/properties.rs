@@ -50,7 +50,10 @@ struct Send {
     kind: u8,
     v1: bool,
     target: u8,
+    /// The previous datagram again (a duplicate on the link).
     repeat: bool,
+    /// Lost on the way in: never fed.
+    lost: bool,
 }
 
 fn send() -> impl Strategy<Value = Send> {
@@ -60,13 +63,15 @@ fn send() -> impl Strategy<Value = Send> {
         any::<bool>(),
         0u8..18,
         prop::bool::weighted(0.1),
+        prop::bool::weighted(0.2),
     )
-        .prop_map(|(link, kind, v1, target, repeat)| Send {
+        .prop_map(|(link, kind, v1, target, repeat, lost)| Send {
             link,
             kind,
             v1,
             target,
             repeat,
+            lost,
         })
 }
 
@@ -126,7 +131,11 @@ proptest! {
                 }
             };
             last = Some((link, bytes.clone()));
-            r.handle_datagram(T0, links[link], &bytes);
+            if s.lost {
+                continue;
+            }
+            let now = T0 + core::time::Duration::from_millis(u64::try_from(n).unwrap() * 7);
+            r.handle_datagram(now, links[link], &bytes);
             let mut buf = [0u8; MAX_FRAME_LEN];
             while let Some(t) = r.poll_transmit(&mut buf) {
                 let out = links.iter().position(|&l| l == t.link).unwrap();

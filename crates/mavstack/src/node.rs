@@ -92,6 +92,8 @@ pub struct LinkReport {
     pub dropped: Vec<(&'static str, u64)>,
     /// Frames lost, by sequence numbers, summed over the sources heard on it.
     pub seq_lost: u64,
+    /// Per source heard on it: (sysid, compid, frames received, frames lost by sequence).
+    pub sources: Vec<(u8, u8, u64, u64)>,
 }
 
 /// A snapshot of a node.
@@ -586,6 +588,7 @@ impl Driver {
                     conversions: conversions(&mavstack_router::Conversions::default()),
                     dropped: Vec::new(),
                     seq_lost: 0,
+                    sources: Vec::new(),
                 });
             }
             let mut peers: Vec<_> = slot.peers.values().collect();
@@ -609,6 +612,12 @@ impl Driver {
                     conversions: conversions(&c.conversions),
                     dropped: status.drops().into_iter().filter(|(_, n)| *n > 0).collect(),
                     seq_lost: status.channel.lost,
+                    sources: self.router.channel(*id).map_or_else(Vec::new, |ch| {
+                        ch.sources()
+                            .iter()
+                            .map(|s| (s.sysid, s.compid, s.received, s.lost))
+                            .collect()
+                    }),
                 });
             }
         }
