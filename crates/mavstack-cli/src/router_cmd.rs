@@ -22,7 +22,8 @@ pub(crate) struct RouterArgs {
     /// Links: connection strings with options, e.g. 'udpin:0.0.0.0:14550?version=1&name=legacy'.
     links: Vec<String>,
     /// A mavlink-router configuration file (main.conf), read as it is; its links come
-    /// before the ones on the command line.
+    /// before the ones on the command line. As with mavlink-router, a TCP server listens on
+    /// 5760 unless the file's TcpServerPort says otherwise (0: none) or --tcp-server is given.
     #[arg(long, value_name = "FILE")]
     conf: Option<PathBuf>,
     /// A TCP server port for dynamic clients (each client a link of its own).
@@ -99,7 +100,8 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
             );
         }
         if tcp_server.is_none() {
-            tcp_server = conf.general.tcp_server_port.filter(|&p| p != 0);
+            // As mavlink-router: a TCP server on 5760 unless the file says otherwise (0: none).
+            tcp_server = Some(conf.general.tcp_server_port.unwrap_or(5760)).filter(|&p| p != 0);
         }
         if config.dedup.is_none() {
             config.dedup = conf
