@@ -195,11 +195,11 @@ def via_router(binary, workdir, gcs_links, vehicle_opts="", name="router"):
     (3 tries)."""
     for attempt in range(3):
         vport = free_udp_port()
-        ports = {name: free_udp_port() for name, _ in gcs_links}
+        ports = {link: free_udp_port() for link, _ in gcs_links}
         opts = "name=vehicle" + (f"&{vehicle_opts}" if vehicle_opts else "")
         links = [f"udpin:127.0.0.1:{vport}?{opts}"]
-        links += [f"udpout:127.0.0.1:{ports[name]}?name={name}" + (f"&{o}" if o else "")
-                  for name, o in gcs_links]
+        links += [f"udpout:127.0.0.1:{ports[link]}?name={link}" + (f"&{o}" if o else "")
+                  for link, o in gcs_links]
         try:
             return Router(binary, links, workdir, name=name), vport, ports
         except Failure as e:

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """MAVSDK (the real SDK, from PyPI) against `mavstack vehicle --autopilot px4` on loopback UDP.
 
-    gcs_mavsdk.py --api native|grpc|both [--mavstack BIN] [--keep DIR] [--no-netns]
+    gcs_mavsdk.py --api native|grpc|both [--mavstack BIN] [--keep DIR] [--no-netns] [--via-router]
 
 Two distinct Python packages, both driven through the same checks:
 
@@ -24,6 +24,12 @@ vehicle's home -35.363261, 149.165230, 584 m AMSL; battery; armed false; a fligh
 get/set of an INT32 and a REAL32 read back); mission upload + download (same items); arm (armed
 in telemetry); takeoff (relative altitude rises above 2 m, in air); land (back on the ground and
 disarmed). Prints one JSON line with timings, exits 1 with the reason on any failure.
+
+--via-router: the same checks with `mavstack router` in the middle, started by this script in
+the same namespace (so on the same private loopback): the vehicle sends to the router's
+`udpin:127.0.0.1:R?name=vehicle` link, the router's `udpout:127.0.0.1:G?name=gcs` link sends to
+MAVSDK's `udpin://127.0.0.1:G`. At the end the router gets SIGTERM and must exit 0; both links
+must have carried frames with nothing dropped for lack of a route; its stats are in the JSON.
 """
 
 import argparse
@@ -41,11 +47,14 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from gcs_common import (  # noqa: E402
     HOME,
+    Failure,
     Vehicle,
+    check_router_carried,
     fail,
     free_udp_port,
     mavstack_bin,
     run_main,
+    via_router,
 )
 
 # defaults of the PX4 flavour that get_all_params must show
@@ -183,14 +192,24 @@ def describe(it):
             f"fly_through={it.is_fly_through})")
 
 
-async def scenario(api, binary, work):
+async def scenario(api, binary, work, via=False):
     summary = {"api": api.name}
     t_all = time.monotonic()
-    port = free_udp_port()
-    vehicle = Vehicle(binary, f"udpout:127.0.0.1:{port}", ["--autopilot", "px4"], work)
+    router = None
+    if via:
+        router, port, gcs_ports = via_router(binary, work, [("gcs", "")])
+        gcs_port = gcs_ports["gcs"]
+    else:
+        port = gcs_port = free_udp_port()
+    try:
+        vehicle = Vehicle(binary, f"udpout:127.0.0.1:{port}", ["--autopilot", "px4"], work)
+    except Failure:
+        if router is not None:
+            router.kill()
+        raise
     try:
         t = time.monotonic()
-        summary["system"] = await step("connect", api.connect(f"udpin://127.0.0.1:{port}"), 25)
+        summary["system"] = await step("connect", api.connect(f"udpin://127.0.0.1:{gcs_port}"), 25)
         summary["connect_s"] = round(time.monotonic() - t, 3)
 
         # telemetry
@@ -282,9 +301,18 @@ async def scenario(api, binary, work):
             fail(f"land: disarmed at {pos.relative_altitude_m} m above home")
         summary["land_s"] = round(time.monotonic() - t, 3)
         vehicle.check_alive()
+        if router is not None:
+            stats = router.stop()
+            check_router_carried(stats, ["vehicle", "gcs"], "through the router")
+            summary["router"] = {e["name"]: {k: e.get(k) for k in
+                                             ("version", "rx_frames", "tx_frames", "converted",
+                                              "dropped")}
+                                 for e in stats.get("links", [])}
     except BaseException as e:
         if not isinstance(e, (KeyboardInterrupt, SystemExit)):
             sys.stderr.write(f"--- vehicle log (tail) ---\n{vehicle.log(2000)}\n")
+            if router is not None:
+                sys.stderr.write(router.describe() + "\n")
         raise
     finally:
         try:
@@ -292,6 +320,8 @@ async def scenario(api, binary, work):
         except Exception:
             pass
         vehicle.stop()
+        if router is not None:
+            router.kill()
     summary["total_s"] = round(time.monotonic() - t_all, 3)
     return summary
 
@@ -343,6 +373,8 @@ def main():
     ap.add_argument("--keep", help="work directory to keep")
     ap.add_argument("--no-netns", action="store_true",
                     help="stay in the current network namespace")
+    ap.add_argument("--via-router", action="store_true",
+                    help="through `mavstack router` (in the same namespace)")
     args = ap.parse_args()
     if not args.no_netns and not in_netns():
         reexec_in_netns()
@@ -364,14 +396,14 @@ def main():
             sub = os.path.join(work, cls.name)
             os.makedirs(sub, exist_ok=True)
             try:
-                runs.append(asyncio.run(scenario(api, binary, sub)))
+                runs.append(asyncio.run(scenario(api, binary, sub, args.via_router)))
             except ImportError as e:
                 fail(f"{cls.name}: not installed ({e}); run scripts/setup-peers.sh")
             except Exception as e:
                 if type(e).__name__ == "Failure":
                     raise type(e)(f"{cls.name}: {e}") from None
                 raise
-        return {"netns": in_netns(), "runs": runs}
+        return {"netns": in_netns(), "via_router": args.via_router, "runs": runs}
 
     run_main("gcs_mavsdk", body)
 

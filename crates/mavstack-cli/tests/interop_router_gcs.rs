@@ -1,0 +1,113 @@
+//! Real ground-station software from PyPI against `mavstack vehicle` THROUGH `mavstack router`
+//! (DESIGN.md "Router", "Link options"): the scenarios of `interop_gcs.rs`, each script run
+//! with `--via-router`, which starts the router between the two (the vehicle on the router's
+//! `udpin:...?name=vehicle` link, the ground station on its `udpout:...?name=gcs` link),
+//! SIGTERMs it at the end (exit 0 required) and checks its stats (both links carried frames,
+//! nothing dropped for lack of a route or conversion):
+//!
+//! - `gcs_mavproxy.py --via-router`: MAVProxy 1.8.75: parameter fetch, set and read back,
+//!   mission download, upload of a QGC WPL 110 file and download again (compared), arm and
+//!   disarm; then a second MAVProxy on the router's signed link (`key=`, the vehicle link
+//!   `trusted=true`): its unsigned frames dropped before it has the key, then a full fetch
+//!   with `allow_unsigned 0` and every vehicle frame in its log signed by the router with the
+//!   key; then a MAVLink 1 hop: a `--mavlink1-only` vehicle on a `version=1` router link,
+//!   MAVProxy on a plain one: fetch, set, mission and arm/disarm through the conversion;
+//! - `gcs_mavsdk.py --api native --via-router` and `--api grpc --via-router`: MAVSDK's native
+//!   binding `mavsdk` 4.1.0 and `mavsdk-grpc` 4.0.5 with `mavsdk_server`, `--autopilot px4`:
+//!   connect, telemetry, parameters, mission upload and download, arm, takeoff and land, with
+//!   the router inside the script's own network namespace (`unshare -n`) next to the vehicle
+//!   and mavsdk_server.
+//!
+//! Never skipped: a client that is not installed fails the test. The scenarios run one at a
+//! time (they time a flying vehicle against the wall clock).
+
+mod support;
+
+use std::ffi::OsStr;
+use std::process::Command;
+use std::sync::{Mutex, OnceLock};
+
+use support::{python, require_pymavlink, run_script, text};
+
+/// The ground stations and their pinned releases (scripts/setup-peers.sh installs them).
+const CLIENTS: [(&str, &str); 3] = [
+    ("MAVProxy", "1.8.75"),
+    ("mavsdk", "4.1.0"),
+    ("mavsdk-grpc", "4.0.5"),
+];
+
+/// Fails (never skips) unless every client is installed at its pinned version; checked once.
+fn require_clients() {
+    static CHECKED: OnceLock<Result<(), String>> = OnceLock::new();
+    let checked = CHECKED.get_or_init(|| {
+        let probe = "import sys; from importlib.metadata import version; \
+                     import pexpect, mavsdk, mavsdk_grpc; \
+                     print(' '.join(n + '==' + version(n) for n in sys.argv[1:]))";
+        let names: Vec<&str> = CLIENTS.iter().map(|(n, _)| *n).collect();
+        let py = python();
+        let out = Command::new(&py)
+            .args(["-c", probe])
+            .args(&names)
+            .output()
+            .map_err(|e| format!("cannot run python {}: {e}", py.display()))?;
+        if !out.status.success() {
+            return Err(format!(
+                "python {} lacks a ground station: {}",
+                py.display(),
+                text(&out.stderr).trim()
+            ));
+        }
+        let want: Vec<String> = CLIENTS.iter().map(|(n, v)| format!("{n}=={v}")).collect();
+        let have = text(&out.stdout).trim().to_owned();
+        if have != want.join(" ") {
+            return Err(format!(
+                "python {} has {have}, want {}",
+                py.display(),
+                want.join(" ")
+            ));
+        }
+        Ok(())
+    });
+    if let Err(e) = checked {
+        panic!("ground-station interop needs the clients (run scripts/setup-peers.sh): {e}");
+    }
+}
+
+fn run(name: &str, args: &[&str]) -> String {
+    static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+    let _turn = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    require_pymavlink();
+    require_clients();
+    let bin = env!("CARGO_BIN_EXE_mavstack");
+    let mut all: Vec<&OsStr> = args.iter().map(OsStr::new).collect();
+    all.extend([
+        OsStr::new("--via-router"),
+        OsStr::new("--mavstack"),
+        OsStr::new(bin),
+    ]);
+    let out = run_script(name, &all);
+    let last = out.lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with('{') && last.contains("\"ok\": true") && last.contains("\"router\""),
+        "{name} --via-router: no success summary with the router's stats:\n{out}"
+    );
+    println!("{last}");
+    out
+}
+
+#[test]
+fn mavproxy_params_mission_arm_signed_link_and_mavlink1_hop_through_the_router() {
+    run("gcs_mavproxy.py", &[]);
+}
+
+#[test]
+fn mavsdk_native_binding_flies_a_session_through_the_router() {
+    run("gcs_mavsdk.py", &["--api", "native"]);
+}
+
+#[test]
+fn mavsdk_grpc_with_mavsdk_server_flies_a_session_through_the_router() {
+    run("gcs_mavsdk.py", &["--api", "grpc"]);
+}
