@@ -1,3 +1,4 @@
+#![allow(missing_docs)] // criterion_group! generates undocumented functions
 //! The router core's cost per frame, without sockets: one MAVLink 2 ATTITUDE from a vehicle
 //! link forwarded to two links (byte for byte; one of them converting to MAVLink 1; one of
 //! them signing), the frame parsed, checked, routed, queued and taken out again.
