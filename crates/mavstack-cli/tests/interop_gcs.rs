@@ -22,6 +22,28 @@
 //!
 //! Never skipped: a client that is not installed fails the test. The scenarios run one at a
 //! time (they time a flying vehicle against the wall clock).
+//!
+//! The same ground stations against `mavstack vehicle` THROUGH `mavstack router`
+//! (DESIGN.md "Router", "Link options"): the scenarios above, each script run
+//! with `--via-router`, which starts the router between the two (the vehicle on the router's
+//! `udpin:...?name=vehicle` link, the ground station on its `udpout:...?name=gcs` link),
+//! SIGTERMs it at the end (exit 0 required) and checks its stats (both links carried frames,
+//! nothing dropped for lack of a route or conversion):
+//!
+//! - `gcs_mavproxy.py --via-router`: MAVProxy 1.8.75: parameter fetch, set and read back,
+//!   mission download, upload of a QGC WPL 110 file and download again (compared), arm and
+//!   disarm; then a second MAVProxy on the router's signed link (`key=`, the vehicle link
+//!   `trusted=true`): its unsigned frames dropped before it has the key, then a full fetch
+//!   with `allow_unsigned 0` and every vehicle frame in its log signed by the router with the
+//!   key; then a MAVLink 1 hop: a `--mavlink1-only` vehicle on a `version=1` router link,
+//!   MAVProxy on a plain one: fetch, set, mission and arm/disarm through the conversion;
+//! - `gcs_mavsdk.py --api native --via-router` and `--api grpc --via-router`: MAVSDK's native
+//!   binding `mavsdk` 4.1.0 and `mavsdk-grpc` 4.0.5 with `mavsdk_server`, `--autopilot px4`:
+//!   connect, telemetry, parameters, mission upload and download, arm, takeoff and land, with
+//!   the router inside the script's own network namespace (`unshare -n`) next to the vehicle
+//!   and mavsdk_server.
+//!
+//! time (they time a flying vehicle against the wall clock).
 
 mod support;
 
@@ -76,6 +98,12 @@ fn require_clients() {
 }
 
 fn run(name: &str, args: &[&str]) -> String {
+    run_with(name, args, false)
+}
+
+/// Runs a scenario with `--via-router` when `via_router`: the summary must then carry the
+/// router's stats too.
+fn run_with(name: &str, args: &[&str], via_router: bool) -> String {
     static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
     let _turn = ONE_AT_A_TIME
         .lock()
@@ -84,12 +112,17 @@ fn run(name: &str, args: &[&str]) -> String {
     require_clients();
     let bin = env!("CARGO_BIN_EXE_mavstack");
     let mut all: Vec<&OsStr> = args.iter().map(OsStr::new).collect();
+    if via_router {
+        all.push(OsStr::new("--via-router"));
+    }
     all.extend([OsStr::new("--mavstack"), OsStr::new(bin)]);
     let out = run_script(name, &all);
     let last = out.lines().last().unwrap_or_default();
     assert!(
-        last.starts_with('{') && last.contains("\"ok\": true"),
-        "{name}: no success summary:\n{out}"
+        last.starts_with('{')
+            && last.contains("\"ok\": true")
+            && (!via_router || last.contains("\"router\"")),
+        "{name} {args:?} (via router: {via_router}): no success summary:\n{out}"
     );
     println!("{last}");
     out
@@ -116,4 +149,19 @@ fn mavsdk_native_binding_flies_a_session() {
 #[test]
 fn mavsdk_grpc_with_mavsdk_server_flies_a_session() {
     run("gcs_mavsdk.py", &["--api", "grpc"]);
+}
+
+#[test]
+fn mavproxy_params_mission_arm_signed_link_and_mavlink1_hop_through_the_router() {
+    run_with("gcs_mavproxy.py", &[], true);
+}
+
+#[test]
+fn mavsdk_native_binding_flies_a_session_through_the_router() {
+    run_with("gcs_mavsdk.py", &["--api", "native"], true);
+}
+
+#[test]
+fn mavsdk_grpc_with_mavsdk_server_flies_a_session_through_the_router() {
+    run_with("gcs_mavsdk.py", &["--api", "grpc"], true);
 }

@@ -25,45 +25,17 @@
 //!
 //! Never skipped: without pymavlink 2.4.50 they fail.
 
+#[path = "support/pymavlink_dialect.rs"]
+mod pymavlink_dialect;
 mod support;
 
 use std::ffi::OsStr;
-use std::process::Command;
-use std::sync::OnceLock;
 
-use support::{python, require_pymavlink, run_script, script, text};
-
-/// Generates the pymavlink dialect once, before scenarios run in parallel (its cache is
-/// written by whichever process comes first).
-fn dialect_ready() {
-    static READY: OnceLock<Result<(), String>> = OnceLock::new();
-    let ready = READY.get_or_init(|| {
-        let dir = script("");
-        let code = "import sys; sys.path.insert(0, sys.argv[1]); import mavstack_dialect; \
-                    print(mavstack_dialect.load().MAVLINK_MSG_ID_PROTOCOL_VERSION)";
-        let out = Command::new(python())
-            .args([OsStr::new("-c"), OsStr::new(code), dir.as_os_str()])
-            .output()
-            .map_err(|e| format!("cannot run python: {e}"))?;
-        if out.status.success() && text(&out.stdout).trim() == "300" {
-            Ok(())
-        } else {
-            Err(format!(
-                "mavstack_dialect.load() failed ({}): {}{}",
-                out.status,
-                text(&out.stdout),
-                text(&out.stderr)
-            ))
-        }
-    });
-    if let Err(e) = ready {
-        panic!("pymavlink dialect with PROTOCOL_VERSION: {e}");
-    }
-}
+use support::{require_pymavlink, run_script};
 
 fn scenario(name: &str) {
     require_pymavlink();
-    dialect_ready();
+    pymavlink_dialect::dialect_ready();
     let bin = env!("CARGO_BIN_EXE_mavstack");
     let out = run_script(
         "router_interop.py",
