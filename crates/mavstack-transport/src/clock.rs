@@ -50,7 +50,7 @@ pub(crate) fn to_std(t: Instant) -> std::time::Instant {
         .unwrap_or(*mono)
 }
 
-/// The tokio instant of `t` (see [`to_std`]).
+/// The tokio instant of `t` (the same instant on tokio's clock).
 #[must_use]
 pub fn to_tokio(t: Instant) -> tokio::time::Instant {
     tokio::time::Instant::from_std(to_std(t))
