@@ -1013,6 +1013,10 @@ impl<'a> Endpoint<'a> {
             let message = format!("{context}: SigningKey needs MAVLink 2 but MavlinkVersion is 1");
             return Err(failure(file, line, message));
         }
+        if self.link_id.is_some() && self.key.is_none() {
+            let message = format!("{context}: SigningLinkId without a SigningKey");
+            return Err(failure(section.file, section.line, message));
+        }
         Ok(())
     }
 
@@ -2188,5 +2192,18 @@ mod tests {
         );
         let conf = parse(&list).expect("parses");
         assert_well_formed(&conf);
+    }
+
+    /// Found by the `router_conf` fuzz target: a link id without a key made a link string the
+    /// link parser refuses.
+    #[test]
+    fn a_link_id_without_a_key_is_an_error() {
+        let text = "[UartEndpoint fc]\nDevice = /dev/ttyS1\nSigningLinkId = 2\n";
+        let err = parse(text).err().map(|e| e.to_string());
+        assert_eq!(
+            err.as_deref(),
+            Some("line 1: UartEndpoint \"fc\": SigningLinkId without a SigningKey")
+        );
+        fuzz_router_conf(text.as_bytes());
     }
 }
