@@ -169,8 +169,8 @@ pub struct RouterConfig {
     /// The router's own system id, used for the frames its links send themselves (default
     /// 1; a router sends none unless a node's services do).
     pub system_id: u8,
-    /// The router's own component id (default 191, MAV_COMP_ID_ONBOARD_COMPUTER... an
-    /// onboard router).
+    /// The router's own component id (default 191, MAV_COMP_ID_ONBOARD_COMPUTER: a router
+    /// usually runs on a companion computer).
     pub component_id: u8,
     /// A route not refreshed for this long is forgotten (default 30 s).
     pub route_ttl: Duration,
