@@ -398,10 +398,17 @@ impl Driver {
         let sleep = tokio::time::sleep(Duration::from_secs(3600));
         tokio::pin!(sleep);
         let mut result = Ok(());
+        let mut armed: Option<Instant> = None;
+        let mut timer_fired = false;
         loop {
             let deadline = self.next_deadline();
-            if let Some(d) = deadline {
+            // Re-arming the timer costs a trip through the runtime's timer wheel: only when the
+            // deadline moved (or after it fired).
+            if let Some(d) = deadline
+                && (armed != Some(d) || timer_fired)
+            {
                 sleep.as_mut().reset(clock::to_tokio(d));
+                armed = Some(d);
             }
             let mut command = None;
             let mut timer = false;
@@ -437,6 +444,7 @@ impl Driver {
                 }
             }
             let now = clock::now();
+            timer_fired = timer;
             if timer {
                 self.router.handle_timeout(now);
                 for i in 0..self.slots.len() {
