@@ -82,36 +82,11 @@ from pymavlink.dialects.v10 import ardupilotmega as V1  # noqa: E402  (wire prot
 V1_MAGIC, V2_MAGIC = 0xFE, 0xFD
 KEY = hashlib.sha256(b"mavstack router interop").digest()
 OTHER_KEY = hashlib.sha256(b"somebody else's key").digest()
-EPOCH_2015 = 1420070400
 REQUEST_MESSAGE = M.MAV_CMD_REQUEST_MESSAGE  # 512
 PROTOCOL_VERSION_ID = M.MAVLINK_MSG_ID_PROTOCOL_VERSION  # 300
 SETTLE = 0.4  # s for frames in flight through the router to arrive
 
-failures = []
-
-
-def fail(msg):
-    failures.append(msg)
-    print("FAIL: " + msg, file=sys.stderr)
-
-
-def check(cond, msg):
-    if not cond:
-        fail(msg)
-    return bool(cond)
-
-
-def free_port():
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
-
-
-def signing_now():
-    """The signing timestamp of now: 10 us units since 2015-01-01 (as mavutil.setup_signing)."""
-    return int((time.time() - EPOCH_2015) * 100 * 1000)
+from scenario import EPOCH_2015, check, fail, failures, free_port, signing_now  # noqa: E402,F401
 
 
 # --------------------------------------------------------------------------------------------

@@ -78,33 +78,8 @@ IN_PROGRESS = M.MAV_RESULT_IN_PROGRESS
 UNSUPPORTED = M.MAV_RESULT_UNSUPPORTED
 KEY = hashlib.sha256(b"mavstack version interop").digest()
 OTHER_KEY = hashlib.sha256(b"not the vehicle's key").digest()
-EPOCH_2015 = 1420070400
 
-failures = []
-
-
-def fail(msg):
-    failures.append(msg)
-    print("FAIL: " + msg, file=sys.stderr)
-
-
-def check(cond, msg):
-    if not cond:
-        fail(msg)
-    return bool(cond)
-
-
-def free_port():
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
-
-
-def signing_now():
-    """The signing timestamp of now: 10 us units since 2015-01-01 (as mavutil.setup_signing)."""
-    return int((time.time() - EPOCH_2015) * 100 * 1000)
+from scenario import EPOCH_2015, check, fail, failures, free_port, signing_now  # noqa: E402,F401
 
 
 class Rx:
