@@ -19,12 +19,31 @@ pub(crate) const SEND_BATCH: usize = 64;
 pub(crate) const PACK_LIMIT: usize = 1472;
 
 /// Receive buffers for one socket.
+///
+/// Two modes: while datagrams come one at a time (a wake-up each), one is taken per plain
+/// `recvfrom`, which costs less than a `recvmmsg` set up for a whole batch and lets the
+/// caller forward it before looking for the next; once two reads in a row find a datagram
+/// waiting, batches are taken, until a batch finds at most one.
 #[derive(Debug)]
 pub(crate) struct RecvBatch {
     buf: Vec<u8>,
     got: Vec<(usize, SocketAddr)>,
     /// Datagrams cut because they were longer than a slot.
     pub(crate) truncated: u64,
+    /// Batch mode (see above).
+    busy: bool,
+    /// The last single read found a datagram.
+    last_found: bool,
+}
+
+/// What one [`RecvBatch::recv`] found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Received {
+    /// Datagrams taken.
+    pub(crate) count: usize,
+    /// More may be waiting (the socket is still marked readable): read again, after
+    /// forwarding these.
+    pub(crate) more: bool,
 }
 
 impl RecvBatch {
@@ -33,16 +52,55 @@ impl RecvBatch {
             buf: vec![0; RECV_BATCH * RECV_SLOT],
             got: Vec::with_capacity(RECV_BATCH),
             truncated: 0,
+            busy: false,
+            last_found: false,
         }
     }
 
-    /// Receives what is waiting (up to [`RECV_BATCH`] datagrams) without blocking; returns
-    /// how many, 0 when none is waiting.
+    /// Receives what is waiting without blocking: one datagram, or up to [`RECV_BATCH`] in
+    /// batch mode.
     ///
     /// # Errors
     /// A receive error other than "would block".
-    pub(crate) fn recv(&mut self, socket: &UdpSocket) -> io::Result<usize> {
+    pub(crate) fn recv(&mut self, socket: &UdpSocket) -> io::Result<Received> {
         self.got.clear();
+        if !self.busy {
+            return match socket.try_recv_from(&mut self.buf[..RECV_SLOT]) {
+                Ok((len, from)) => {
+                    if len >= RECV_SLOT {
+                        // Cut (or exactly a slot long, which no MAVLink datagram is).
+                        self.truncated += 1;
+                    }
+                    self.got.push((len.min(RECV_SLOT), from));
+                    self.busy = core::mem::replace(&mut self.last_found, true);
+                    Ok(Received {
+                        count: 1,
+                        more: true,
+                    })
+                }
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                    self.last_found = false;
+                    Ok(Received {
+                        count: 0,
+                        more: false,
+                    })
+                }
+                Err(e) => Err(e),
+            };
+        }
+        self.batch(socket).map(|count| {
+            if count <= 1 {
+                self.busy = false;
+                self.last_found = false;
+            }
+            Received {
+                count,
+                more: count == RECV_BATCH,
+            }
+        })
+    }
+
+    fn batch(&mut self, socket: &UdpSocket) -> io::Result<usize> {
         match socket.try_io(Interest::READABLE, || self.recv_now(socket)) {
             Ok(n) => {
                 if n < RECV_BATCH {
@@ -164,7 +222,16 @@ impl SendBatch {
         let mut sent = Sent::default();
         let mut from = 0;
         while from < self.items.len() {
-            match socket.try_io(Interest::WRITABLE, || self.send_now(socket, from)) {
+            let result = if self.items.len() - from == 1 {
+                // One datagram: a plain sendto costs less than setting up a sendmmsg.
+                let (start, len, to) = self.items[from];
+                socket
+                    .try_send_to(&self.bytes[start..start + len], to)
+                    .map(|_| 1)
+            } else {
+                socket.try_io(Interest::WRITABLE, || self.send_now(socket, from))
+            };
+            match result {
                 Ok(n) => {
                     for &(_, len, _) in &self.items[from..from + n] {
                         sent.datagrams += 1;

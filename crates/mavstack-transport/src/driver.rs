@@ -76,7 +76,9 @@ pub(crate) async fn run<P: Protocol>(
             () = sleep_until(housekeeping), if housekeeping.is_some() => Step::Housekeeping,
         };
         match step {
-            Step::Input => link.dispatch(&mut proto),
+            Step::Input => {
+                link.dispatch(&mut proto);
+            }
             Step::Command(cmd) => {
                 proto.handle_command(clock::now(), cmd);
                 for _ in 1..COMMAND_BATCH {

@@ -349,14 +349,16 @@ impl Link {
         }
     }
 
-    /// Hands whatever input is ready (a bounded batch) to `input`.
-    pub fn dispatch<I: Input>(&mut self, input: &mut I) {
+    /// Hands whatever input is ready (a bounded batch) to `input`. Returns false when
+    /// nothing was ready after all (a UDP socket that had been drained already).
+    pub fn dispatch<I: Input>(&mut self, input: &mut I) -> bool {
         match &mut self.kind {
-            Kind::Udp(udp) => udp.dispatch(input, &mut self.stats, &self.peers),
+            Kind::Udp(udp) => udp.dispatch(input, &mut self.stats, &self.peers) > 0,
             Kind::Tasks(tasks) => {
                 if let Some(end) = tasks.dispatch(input, &mut self.stats, &self.peers) {
                     self.finished = Some(end);
                 }
+                true
             }
         }
     }
@@ -591,27 +593,37 @@ impl Udp {
         self.socket.poll_recv_ready(cx).map(|_| ())
     }
 
-    fn dispatch<I: Input>(&mut self, input: &mut I, stats: &mut LinkStats, table: &PeerTable) {
-        // Drain what is waiting, a batch per system call, before going back to the loop.
+    fn dispatch<I: Input>(
+        &mut self,
+        input: &mut I,
+        stats: &mut LinkStats,
+        table: &PeerTable,
+    ) -> usize {
+        // Drain what is waiting, a batch per system call, before going back to the loop; a
+        // datagram that came alone is handed on at once, and the next read waits for the
+        // next call (after the caller has forwarded this one).
+        let mut delivered = 0;
         for _ in 0..BATCH.div_ceil(RECV_BATCH) {
-            let n = match self.rx.recv(&self.socket) {
-                Ok(n) => n,
+            let got = match self.rx.recv(&self.socket) {
+                Ok(got) => got,
                 Err(e) => {
                     stats.rx_errors += 1;
                     tracing::debug!("udp receive error: {e}");
-                    return;
+                    return delivered;
                 }
             };
-            for i in 0..n {
+            for i in 0..got.count {
                 if let Some((bytes, from)) = self.rx.get(i) {
                     self.peers.deliver(input, bytes, from, stats, table);
                 }
             }
+            delivered += got.count;
             stats.rx_errors += core::mem::take(&mut self.rx.truncated);
-            if n < RECV_BATCH {
-                return;
+            if !got.more || got.count == 1 {
+                return delivered;
             }
         }
+        delivered
     }
 
     /// Queues a datagram for the next [`Udp::flush`] (flushing at once when the batch is

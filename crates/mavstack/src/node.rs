@@ -437,10 +437,11 @@ impl Driver {
                 }
             })
             .await;
+            let mut worked = command.is_some() || timer;
             for (i, r) in ready.iter_mut().enumerate() {
                 if core::mem::take(r) {
                     let (io, mut feed) = self.feed(i);
-                    io.dispatch(&mut feed);
+                    worked |= io.dispatch(&mut feed);
                 }
             }
             let now = clock::now();
@@ -467,10 +468,11 @@ impl Driver {
                 Some(Some(Command::Shutdown) | None) => break,
                 None => {}
             }
-            if !waited {
+            if !waited && worked {
                 // Busy (a link always has input): let the runtime poll its I/O driver, so
                 // the other sockets' readiness is seen, and run its other tasks (signals,
-                // statistics). One flooding link cannot starve the rest.
+                // statistics). One flooding link cannot starve the rest. (A turn that found
+                // nothing, a drained socket's last look, goes straight back to waiting.)
                 tokio::task::yield_now().await;
             }
             if let Some((i, Err(e))) = self
