@@ -16,7 +16,7 @@ is checked, plus its telemetry log (every frame it received, signature bytes inc
  3. param set + read back: a REAL32 and an INT32 parameter set, then fetched one by one
     (PARAM_REQUEST_READ) and printed with the new value; `param set` of the same names shows
     them in a second full fetch too;
- 4. wp list (download of what the vehicle holds);
+ 4. wp list and wp save on the empty vehicle: one item, home (ArduPilot keeps home as item 0);
  5. wp load of a generated QGC WPL 110 file (MISSION_COUNT, MISSION_REQUEST(_INT), MISSION_ITEM_INT,
     MISSION_ACK ACCEPTED), then wp save (a second download) compared item by item;
  6. arm throttle: COMMAND_ACK ACCEPTED, "ARMED", and an armed HEARTBEAT in the log; disarm;
@@ -379,14 +379,26 @@ def full(binary, keep, via=False):
             param_read_back(mp, name, new, f"param set {name} {new}")
         summary["param_set_readback_s"] = timer.mark("param_set", t)
 
-        # 4. wp list (download whatever the vehicle holds)
+        # 4. wp list + wp save on the empty vehicle: ArduPilot keeps home as item 0, so
+        #    there is one item to list and to save, at the vehicle's home
         t = time.monotonic()
         mp.cmd("wp list")
         _, m = mp.expect(r"Requesting (\d+) waypoints", 15, "wp list")
         before = int(m.group(1))
-        if before:
-            mp.expect(r"Saved \d+ waypoints to", 20, "wp list: items")
+        if before != 1:
+            fail(f"wp list on an empty ArduPilot-style vehicle: {before} items, expected 1 "
+                 "(home as item 0)")
+        mp.expect(r"Saved 1 waypoints to", 20, "wp list: the home item")
         summary.update(wp_list_before=before, wp_list_s=timer.mark("wp_list", t))
+        empty = os.path.join(work, "empty.txt")
+        download(mp, empty, 1, 20)
+        rows = read_qgc_wpl(empty)
+        if len(rows) != 1 or rows[0]["seq"] != 0 or rows[0]["command"] != 16:
+            fail(f"wp save on an empty vehicle: {rows}, expected item 0 = home (NAV_WAYPOINT)")
+        home = (-35.363261, 149.16523)
+        if abs(rows[0]["x"] - home[0]) > 1e-6 or abs(rows[0]["y"] - home[1]) > 1e-6:
+            fail(f"wp save on an empty vehicle: item 0 at {rows[0]['x']}, {rows[0]['y']}, "
+                 f"expected home {home}")
 
         # 5. wp load + compare
         items = survey_mission(12)

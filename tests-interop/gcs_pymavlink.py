@@ -288,10 +288,18 @@ def scenario_waypoints(binary):
         check(a is not None and a.type == M.MAV_MISSION_ACCEPTED, f"clear ack {a}")
         s.gcs.mav.mission_request_list_send(*s.target, 0)
         c = s.recv("MISSION_COUNT", 3.0)
-        check(c is not None and c.count == 0, f"count after clear {c}")
+        # ArduPilot keeps home as item 0: a cleared mission still has that one item.
+        check(c is not None and c.count == 1, f"count after clear {c}, expected 1 (home)")
+        s.gcs.mav.mission_request_int_send(*s.target, 0, 0)
+        home = s.recv("MISSION_ITEM_INT", 3.0)
+        check(home is not None and home.seq == 0 and home.command == M.MAV_CMD_NAV_WAYPOINT
+              and home.x == -353632610 and home.y == 1491652300,
+              f"item 0 after clear {home}, expected home")
+        s.gcs.mav.mission_ack_send(*s.target, M.MAV_MISSION_ACCEPTED, 0)
     finally:
         s.close()
-    return "12-item mission and 4-item fence uploaded/downloaded, set current, cleared"
+    return ("12-item mission and 4-item fence uploaded/downloaded, set current, cleared "
+            "(home stays as item 0)")
 
 
 def scenario_commands(binary):

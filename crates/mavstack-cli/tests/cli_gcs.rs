@@ -154,7 +154,14 @@ fn missions_upload_download_clear_in_both_formats() {
         "{mission}"
     );
     ok(&gcs(port, &["mission", "clear"]));
-    assert_eq!(ok(&gcs(port, &["mission", "download"])), "QGC WPL 110\n");
+    // ArduPilot keeps home as item 0: the cleared mission is that one item.
+    let cleared = ok(&gcs(port, &["mission", "download"]));
+    assert_eq!(cleared.lines().count(), 2, "{cleared}");
+    assert!(
+        cleared.starts_with("QGC WPL 110\n0\t")
+            && cleared.contains("\t-35.36326100\t149.16523000\t"),
+        "{cleared}"
+    );
     let bad = dir.path().join("bad.waypoints");
     std::fs::write(&bad, "QGC WPL 110\n0\t1\t0\n").expect("write");
     let out = gcs(port, &["mission", "upload", bad.to_str().expect("utf-8")]);

@@ -947,6 +947,22 @@ impl MissionServer {
         slot(mission_type).map_or(&[], |i| &self.plans[i])
     }
 
+    /// Replaces the stored plan of `mission_type` from the vehicle's side (a plan loaded at
+    /// start, ArduPilot's home as item 0 after a clear); ground stations see it on their
+    /// next download. No [`MissionServerEvent`] is raised: the caller made the change. The
+    /// current item goes back to 0 when it is past the new mission's end. Returns false for
+    /// a type with no plan (only mission, fence and rally have one).
+    pub fn set_plan(&mut self, mission_type: MavMissionType, items: Vec<MissionItemInt>) -> bool {
+        let Some(i) = slot(mission_type) else {
+            return false;
+        };
+        self.plans[i] = items;
+        if i == 0 && usize::from(self.current) >= self.plans[0].len() {
+            self.current = 0;
+        }
+        true
+    }
+
     /// The current mission item.
     #[must_use]
     pub fn current(&self) -> u16 {

@@ -19,10 +19,10 @@ use mavstack_core::time::Instant;
 use mavstack_dialects::common::{
     Attitude, AutopilotVersion, BatteryStatus, ExtendedSysState, GlobalPositionInt, GpsFixType,
     GpsRawInt, Heartbeat, HomePosition, MavAutopilot, MavBatteryChargeState, MavBatteryFunction,
-    MavBatteryType, MavCmd, MavDataStream, MavMessage, MavMissionType, MavModeFlag,
+    MavBatteryType, MavCmd, MavDataStream, MavFrame, MavMessage, MavMissionType, MavModeFlag,
     MavProtocolCapability, MavResult, MavSeverity, MavState, MavSysStatusSensor, MavType,
-    MavVtolState, MissionCurrent, MissionItemReached, MissionState, RequestDataStream, Statustext,
-    SysStatus, VfrHud,
+    MavVtolState, MissionCurrent, MissionItemInt, MissionItemReached, MissionState,
+    RequestDataStream, Statustext, SysStatus, VfrHud,
 };
 use mavstack_services::command::{Command, CommandHandler, CommandServer, Request, Response};
 use mavstack_services::mission::{MissionServer, MissionServerEvent};
@@ -538,7 +538,34 @@ impl Vehicle {
             started: now,
         };
         vehicle.retune();
+        vehicle.restore_home_item();
         vehicle
+    }
+
+    /// ArduPilot keeps home as mission item 0: a new or cleared mission has that one item,
+    /// so a ground station's download always finds at least it (MAVProxy's `wp list` and
+    /// `wp save` rely on it).
+    fn restore_home_item(&mut self) {
+        if self.commands.handler().autopilot != Autopilot::Ardupilot
+            || !self.missions.plan(MavMissionType::MISSION).is_empty()
+        {
+            return;
+        }
+        let home = self.commands.handler().flight.home();
+        let item = MissionItemInt {
+            seq: 0,
+            command: MavCmd::NAV_WAYPOINT,
+            frame: MavFrame::GLOBAL,
+            x: (home.lat * 1e7) as i32,
+            y: (home.lon * 1e7) as i32,
+            z: HOME_AMSL + home.alt,
+            autocontinue: 1,
+            mission_type: MavMissionType::MISSION,
+            ..MissionItemInt::default()
+        };
+        self.missions.set_plan(MavMissionType::MISSION, vec![item]);
+        let plan = self.missions.plan(MavMissionType::MISSION).to_vec();
+        self.craft().flight.set_mission(&plan);
     }
 
     fn craft(&mut self) -> &mut Craft {
@@ -637,6 +664,7 @@ impl Vehicle {
                     if mission_type == MavMissionType::MISSION {
                         let plan = self.missions.plan(MavMissionType::MISSION).to_vec();
                         self.craft().flight.set_mission(&plan);
+                        self.restore_home_item();
                     }
                 }
                 MissionServerEvent::CurrentChanged { seq } => {
