@@ -68,6 +68,19 @@ pub enum SwitchCause {
     SigningDisabled,
 }
 
+impl core::fmt::Display for SwitchCause {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Self::Mavlink2Received => "a MAVLink 2 frame arrived",
+            Self::CapabilityFlag => "AUTOPILOT_VERSION has the MAVLINK2 capability",
+            Self::Handshake => "the handshake was answered in MAVLink 2",
+            Self::HandshakeFallback => "the handshake was refused or went unanswered",
+            Self::SigningEnabled => "signing turned on",
+            Self::SigningDisabled => "signing turned off",
+        })
+    }
+}
+
 /// Why an incoming frame was not accepted. Rejections are events and counters, never errors
 /// that end the stream.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, thiserror::Error)]
@@ -146,6 +159,16 @@ pub enum ProtocolVersionAnswer {
     /// Nothing sent: the vehicle is configured without protocol-version support, and the
     /// frame is delivered unanswered for the caller's own command handling.
     Ignored,
+}
+
+impl core::fmt::Display for ProtocolVersionAnswer {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Accepted => f.write_str("accepted, PROTOCOL_VERSION sent in MAVLink 2"),
+            Self::Nacked(result) => write!(f, "refused with COMMAND_ACK {result:?} in MAVLink 1"),
+            Self::Ignored => f.write_str("left to the vehicle's own command handling"),
+        }
+    }
 }
 
 /// What a SETUP_SIGNING did.

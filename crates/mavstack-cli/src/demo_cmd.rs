@@ -186,14 +186,13 @@ impl Ground {
                 }
             }
             Event::VersionChanged { from, to, cause } => {
-                timeline.say(format!(
-                    "ground station: link {from:?} → {to:?} ({cause:?})"
-                ));
+                timeline.say(format!("ground station: link {from} → {to} ({cause})"));
             }
             Event::Rejected(r) => {
                 timeline.say(format!(
-                    "ground station ✗ rejected message {}: {:?}",
-                    r.msg_id, r.reason
+                    "ground station ✗ rejected {}: {}",
+                    crate::version_cmd::message_name(r.msg_id),
+                    r.reason
                 ));
             }
             _ => {}

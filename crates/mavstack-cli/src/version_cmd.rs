@@ -43,6 +43,11 @@ use crate::link_cmd::{interrupted, parse_spec, runtime, seconds};
 use crate::sim::{SimConfig, Vehicle, params};
 use crate::{Failure, other};
 
+/// A message's name in the common dialect, or its number when the dialect has none.
+pub(crate) fn message_name(id: u32) -> String {
+    MavMessage::info(id).map_or_else(|| format!("message {id}"), |m| m.name.to_owned())
+}
+
 /// The autopilot a simulated vehicle claims to be.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub(crate) enum Autopilot {
@@ -50,6 +55,15 @@ pub(crate) enum Autopilot {
     Ardupilot,
     /// PX4 (MAV_AUTOPILOT_PX4, 12).
     Px4,
+}
+
+impl core::fmt::Display for Autopilot {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Self::Ardupilot => "ArduPilot",
+            Self::Px4 => "PX4",
+        })
+    }
 }
 
 #[derive(Debug, Args)]
@@ -274,7 +288,7 @@ pub(crate) async fn run_vehicle(
     let mut routes = Routes::default();
     say(&log, || {
         format!(
-            "vehicle: {:?} flavour, {} parameters",
+            "vehicle: {} flavour, {} parameters",
             setup.autopilot,
             sim.param_count()
         )
@@ -360,16 +374,18 @@ pub(crate) async fn run_vehicle(
                 sim.handle_message(service_time(start), from, &message);
             }
             Event::VersionChanged { from, to, cause } => {
-                say(&log, || {
-                    format!("vehicle: link {from:?} → {to:?} ({cause:?})")
-                });
+                say(&log, || format!("vehicle: link {from} → {to} ({cause})"));
             }
             Event::ProtocolVersionRequested { answer, .. } => {
-                say(&log, || format!("vehicle ← handshake request: {answer:?}"));
+                say(&log, || format!("vehicle ← handshake request: {answer}"));
             }
             Event::Rejected(r) => {
                 say(&log, || {
-                    format!("vehicle ✗ rejected {}: {:?}", r.msg_id, r.reason)
+                    format!(
+                        "vehicle ✗ rejected {}: {}",
+                        message_name(r.msg_id),
+                        r.reason
+                    )
                 });
             }
             Event::SigningSetup { setup: s, .. } => {

@@ -69,6 +69,15 @@ const STREAMS: &[(u32, Option<Duration>)] = &[
     (ExtendedSysState::ID, Some(Duration::from_secs(1))),
 ];
 
+/// A plan's name in the log: "mission", "fence" or "rally".
+fn plan_name(mission_type: MavMissionType) -> &'static str {
+    match mission_type {
+        MavMissionType::FENCE => "fence",
+        MavMissionType::RALLY => "rally",
+        _ => "mission",
+    }
+}
+
 /// The messages of each REQUEST_DATA_STREAM group the vehicle has (ArduPilot's grouping).
 fn data_stream(group: MavDataStream) -> &'static [u32] {
     match group {
@@ -659,8 +668,10 @@ impl Vehicle {
                     mission_type,
                     count,
                 } => {
-                    self.log
-                        .push_back(format!("{mission_type:?} plan stored: {count} items"));
+                    self.log.push_back(format!(
+                        "{} plan stored: {count} items",
+                        plan_name(mission_type)
+                    ));
                     if mission_type == MavMissionType::MISSION {
                         let plan = self.missions.plan(MavMissionType::MISSION).to_vec();
                         self.craft().flight.set_mission(&plan);
@@ -672,7 +683,7 @@ impl Vehicle {
                 }
                 MissionServerEvent::UploadAbandoned { mission_type } => {
                     self.log
-                        .push_back(format!("{mission_type:?} upload abandoned"));
+                        .push_back(format!("{} upload abandoned", plan_name(mission_type)));
                 }
                 _ => {}
             }
