@@ -46,11 +46,9 @@ use tokio::time::Instant;
 
 use crate::gcs_cmd::{Remote, fetch_params, mission_op, set_param, value_text};
 use crate::link_cmd::runtime;
+use crate::radio_cmd::{open_radio_side, run_radio};
 use crate::sim::flight;
-use crate::version_cmd::{
-    Autopilot, Log, VehicleSetup, open_radio_side, open_vehicle, run_radio, run_vehicle,
-    version_name,
-};
+use crate::vehicle_cmd::{Autopilot, Log, VehicleSetup, open_vehicle, run_vehicle, version_name};
 use crate::{Failure, other};
 
 #[derive(Debug, Args)]
@@ -191,7 +189,7 @@ impl Ground {
             Event::Rejected(r) => {
                 timeline.say(format!(
                     "ground station ✗ rejected {}: {}",
-                    crate::version_cmd::message_name(r.msg_id),
+                    crate::vehicle_cmd::message_name(r.msg_id),
                     r.reason
                 ));
             }

@@ -35,7 +35,7 @@ use tokio::time::Instant;
 use crate::link_cmd::{parse_spec, runtime};
 use crate::mission_file;
 use crate::sim::modes;
-use crate::version_cmd::{Autopilot, secret_key, service_time};
+use crate::vehicle_cmd::{Autopilot, secret_key, service_time};
 use crate::{Failure, other};
 
 /// How to reach the remote system (shared by `param`, `mission` and `command`).

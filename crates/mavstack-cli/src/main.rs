@@ -11,9 +11,11 @@ mod gcs_cmd;
 mod json_frames;
 mod link_cmd;
 mod mission_file;
+mod probe_cmd;
+mod radio_cmd;
 mod router_cmd;
 mod sim;
-mod version_cmd;
+mod vehicle_cmd;
 
 use std::process::ExitCode;
 
@@ -51,11 +53,11 @@ enum Command {
     /// Send a tlog (original timing) or a raw capture onto a link.
     Replay(link_cmd::ReplayArgs),
     /// A simulated vehicle that follows the MAVLink version rules (runs until interrupted).
-    Vehicle(version_cmd::VehicleArgs),
+    Vehicle(vehicle_cmd::VehicleArgs),
     /// Find the systems on a link, run the MAVLink 2 handshake, report each as JSON.
-    Probe(version_cmd::ProbeArgs),
+    Probe(probe_cmd::ProbeArgs),
     /// A semi-transparent radio between a ground station (A) and a vehicle (B).
-    Radio(version_cmd::RadioArgs),
+    Radio(radio_cmd::RadioArgs),
     /// Parameters of a remote system: list (and save), get, set.
     Param {
         #[command(subcommand)]
@@ -114,9 +116,9 @@ fn main() -> ExitCode {
         Command::Listen(args) => link_cmd::listen(&args),
         Command::Record(args) => link_cmd::record(&args),
         Command::Replay(args) => link_cmd::replay(&args),
-        Command::Vehicle(args) => version_cmd::vehicle(&args),
-        Command::Probe(args) => version_cmd::probe(&args),
-        Command::Radio(args) => version_cmd::radio(&args),
+        Command::Vehicle(args) => vehicle_cmd::vehicle(&args),
+        Command::Probe(args) => probe_cmd::probe(&args),
+        Command::Radio(args) => radio_cmd::radio(&args),
         Command::Param { action } => gcs_cmd::param(action),
         Command::Mission { action } => gcs_cmd::mission(action),
         Command::Cmd(args) => gcs_cmd::command(&args),

@@ -11,7 +11,7 @@ use std::collections::VecDeque;
 use mavstack_dialects::common::{MavCmd, MavFrame, MavLandedState, MissionItemInt};
 
 use super::modes::{self, Behaviour, Mode};
-use crate::version_cmd::Autopilot;
+use crate::vehicle_cmd::Autopilot;
 
 /// Metres per degree of latitude (spherical Earth, as every GCS map does at this scale).
 const METRES_PER_DEGREE: f64 = 111_319.49;

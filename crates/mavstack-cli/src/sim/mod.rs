@@ -5,7 +5,7 @@
 //! [`ParamServer`] with the flavour's table (or a file's), a [`MissionServer`] whose plan the
 //! craft flies in mission mode, a [`StreamScheduler`] for telemetry rates, and TIMESYNC. Like
 //! every service it takes decoded messages and the time, and hands out messages to send:
-//! the caller (`version_cmd::run_vehicle`) moves them over a `mavstack-channel` link.
+//! the caller (`vehicle_cmd::run`) moves them over a `mavstack-channel` link.
 
 pub(crate) mod flight;
 pub(crate) mod modes;
@@ -33,7 +33,7 @@ use mavstack_services::{Address, Outgoing, Service};
 
 use self::flight::{Flight, FlightEvent, HOME_AMSL, Position, Tuning};
 use self::modes::{Behaviour, Mode};
-use crate::version_cmd::Autopilot;
+use crate::vehicle_cmd::Autopilot;
 
 /// Peers that appear later than this after the start get a HEARTBEAT of their own.
 const GREETING_AFTER: Duration = Duration::from_millis(100);

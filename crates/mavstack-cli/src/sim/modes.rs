@@ -5,7 +5,7 @@
 //! bits 16–23 and a sub mode (of AUTO) in bits 24–31. MAV_CMD_DO_SET_MODE carries the
 //! ArduPilot number or the PX4 main mode in param2 and the PX4 sub mode in param3.
 
-use crate::version_cmd::Autopilot;
+use crate::vehicle_cmd::Autopilot;
 
 /// What the simulated vehicle does in a mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -10,7 +10,7 @@ use anyhow::{Context, anyhow, bail};
 use mavstack_dialects::common::MavParamType;
 use mavstack_services::param::{Name, Value};
 
-use crate::version_cmd::Autopilot;
+use crate::vehicle_cmd::Autopilot;
 
 /// ArduPilot Copter's names, types and defaults (a representative subset).
 const ARDUPILOT: &[(&str, Value)] = &[

@@ -1,0 +1,311 @@
+//! `mavstack probe`: the ground station's side of the version rules: find the systems on a
+//! link, ask for AUTOPILOT_VERSION, run the MAVLink 2 handshake, print one JSON report per
+//! system.
+
+use core::time::Duration;
+use std::collections::BTreeMap;
+
+use anyhow::anyhow;
+use clap::{Args, ValueEnum};
+use mavstack_channel::{
+    Authentication, CommandEncoding, Config, Event, HandshakeMethod, HandshakeResult,
+    SigningConfig, Target,
+};
+use mavstack_core::wire::Version;
+use mavstack_core::Message;
+use mavstack_dialects::common::{
+    AutopilotVersion, CommandLong, Heartbeat, MavAutopilot, MavCmd, MavProtocolCapability, MavType,
+};
+use mavstack_transport::channel_protocol::{
+    ChannelCommand, ChannelEvent, ChannelEventKind, ChannelProtocol, RawMessage,
+};
+use mavstack_transport::{Connection, Dest, PeerId};
+use tokio::time::Instant;
+
+use crate::link_cmd::{parse_spec, runtime, seconds};
+use crate::vehicle_cmd::secret_key;
+use crate::{Failure, other};
+
+/// How the probe runs the handshake.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub(crate) enum Method {
+    /// MAV_CMD_REQUEST_MESSAGE with param1 = 300 (PROTOCOL_VERSION).
+    #[value(name = "request-message-300")]
+    RequestMessage300,
+    /// MAV_CMD_REQUEST_PROTOCOL_VERSION.
+    RequestProtocolVersion,
+    /// MAV_CMD_REQUEST_MESSAGE for another message the target sends (`--other-id`, ≥ 256).
+    RequestMessageOther,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct ProbeArgs {
+    /// The ground station's side of the link (udpin:HOST:PORT waits for vehicles,
+    /// udpout:HOST:PORT reaches one listening there, tcp:HOST:PORT, serial:...).
+    conn: String,
+    /// Seconds to wait for the first system.
+    #[arg(long, default_value_t = 5.0)]
+    timeout: f64,
+    /// Handshake request.
+    #[arg(long, value_enum, default_value = "request-message-300")]
+    method: Method,
+    /// With `--method request-message-other`: the message to ask for (id ≥ 256).
+    #[arg(long, default_value_t = 397)]
+    other_id: u32,
+    /// Send the requests as COMMAND_INT instead of COMMAND_LONG.
+    #[arg(long)]
+    command_int: bool,
+    /// Sign with this key (64 hex digits): talk to vehicles that accept only signed frames.
+    #[arg(long)]
+    key: Option<String>,
+    /// Signing link id (with `--key`).
+    #[arg(long, default_value_t = 0)]
+    link_id: u8,
+    /// Our system id.
+    #[arg(long, default_value_t = 255)]
+    sysid: u8,
+    /// Our component id.
+    #[arg(long, default_value_t = 190)]
+    compid: u8,
+}
+
+/// What the probe learnt about one system.
+#[derive(Debug)]
+struct System {
+    peer: PeerId,
+    autopilot: u8,
+    kind: u8,
+    version_before: Version,
+    version_after: Option<Version>,
+    capability: Option<bool>,
+    signed: bool,
+    handshake: Option<&'static str>,
+}
+
+struct Probe {
+    conn: Connection<ChannelProtocol>,
+    systems: BTreeMap<(u8, u8), System>,
+    outcomes: BTreeMap<PeerId, HandshakeResult>,
+    /// Heartbeats seen after each system's handshake ended.
+    after: BTreeMap<(u8, u8), Version>,
+    handshake_done: BTreeMap<(u8, u8), bool>,
+}
+
+impl Probe {
+    async fn send(&self, command: ChannelCommand) -> Result<(), Failure> {
+        self.conn.send(command).await.map_err(other)
+    }
+
+    /// Takes events until `until`, recording what they say.
+    async fn pump(&mut self, until: Instant) -> Result<(), Failure> {
+        loop {
+            let event = tokio::select! {
+                () = tokio::time::sleep_until(until) => return Ok(()),
+                e = self.conn.recv() => match e {
+                    Some(e) => e,
+                    None => return Err(Failure::Other(anyhow!("the link closed"))),
+                },
+            };
+            self.note(event);
+        }
+    }
+
+    fn note(&mut self, event: ChannelEvent) {
+        let peer = event.peer;
+        let ChannelEventKind::Channel(event) = event.event else {
+            return;
+        };
+        match event {
+            Event::Frame(rf) => {
+                let f = &rf.frame;
+                let key = (f.sysid(), f.compid());
+                let signed = !matches!(
+                    rf.auth,
+                    Authentication::Unsigned | Authentication::AllowedUnsigned
+                );
+                if f.msg_id() == Heartbeat::ID {
+                    let hb = Heartbeat::decode(f.payload());
+                    if hb.r#type == MavType::GCS {
+                        return;
+                    }
+                    let system = self.systems.entry(key).or_insert(System {
+                        peer,
+                        autopilot: hb.autopilot.0,
+                        kind: hb.r#type.0,
+                        version_before: f.version(),
+                        version_after: None,
+                        capability: None,
+                        signed: false,
+                        handshake: None,
+                    });
+                    system.signed |= signed && f.is_signed();
+                    if self.handshake_done.get(&key).copied().unwrap_or(false) {
+                        self.after.entry(key).or_insert(f.version());
+                    }
+                } else if let Some(system) = self.systems.get_mut(&key) {
+                    system.signed |= f.is_signed();
+                    if f.msg_id() == AutopilotVersion::ID {
+                        let av = AutopilotVersion::decode(f.payload());
+                        system.capability =
+                            Some(av.capabilities.0 & MavProtocolCapability::MAVLINK2.0 != 0);
+                    }
+                }
+            }
+            Event::Handshake(outcome) => {
+                self.outcomes.insert(peer, outcome.result);
+            }
+            _ => {}
+        }
+    }
+}
+
+fn report(key: (u8, u8), s: &System, method: &str) -> String {
+    let v = |v: Version| v.number();
+    let capability = s
+        .capability
+        .map_or_else(|| "null".to_owned(), |c| c.to_string());
+    format!(
+        "{{\"sysid\":{},\"compid\":{},\"autopilot\":{},\"type\":{},\"version_before\":{},\"version_after\":{},\"handshake\":{{\"method\":\"{method}\",\"result\":\"{}\"}},\"mavlink2_capability\":{capability},\"signed\":{}}}",
+        key.0,
+        key.1,
+        s.autopilot,
+        s.kind,
+        v(s.version_before),
+        v(s.version_after.unwrap_or(s.version_before)),
+        s.handshake.unwrap_or("timeout"),
+        s.signed
+    )
+}
+
+pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
+    let spec = parse_spec(&args.conn)?;
+    let wait = seconds(args.timeout, "--timeout")?;
+    if args.method == Method::RequestMessageOther && args.other_id < 256 {
+        return Err(Failure::Input(anyhow!(
+            "--other-id: {} is below 256",
+            args.other_id
+        )));
+    }
+    let method = match args.method {
+        Method::RequestMessage300 => HandshakeMethod::RequestMessage300,
+        Method::RequestProtocolVersion => HandshakeMethod::RequestProtocolVersion,
+        Method::RequestMessageOther => HandshakeMethod::RequestMessageOther {
+            msg_id: args.other_id,
+        },
+    };
+    let encoding = if args.command_int {
+        CommandEncoding::Int
+    } else {
+        CommandEncoding::Long
+    };
+    let mut config = Config::ground_station(args.sysid, args.compid);
+    config.signing = args
+        .key
+        .as_deref()
+        .map(|k| secret_key(k, "--key").map(|key| SigningConfig::new(key, args.link_id)))
+        .transpose()?;
+    let protocol =
+        ChannelProtocol::new(config).map_err(|e| Failure::Input(anyhow!("probe: {e}")))?;
+    runtime()?.block_on(async {
+        let conn = Connection::open(&spec, protocol).await.map_err(other)?;
+        let mut probe = Probe {
+            conn,
+            systems: BTreeMap::new(),
+            outcomes: BTreeMap::new(),
+            after: BTreeMap::new(),
+            handshake_done: BTreeMap::new(),
+        };
+        let gcs_heartbeat = RawMessage::new(&Heartbeat {
+            r#type: MavType::GCS,
+            autopilot: MavAutopilot::INVALID,
+            mavlink_version: 3,
+            ..Heartbeat::default()
+        });
+        // 1. Find the systems: heartbeats until the first, then a little longer for others.
+        let give_up = Instant::now() + wait;
+        while probe.systems.is_empty() && Instant::now() < give_up {
+            probe.send(ChannelCommand::to_all(gcs_heartbeat)).await?;
+            let next = (Instant::now() + Duration::from_millis(500)).min(give_up);
+            probe.pump(next).await?;
+        }
+        if probe.systems.is_empty() {
+            probe.conn.close().await.map_err(other)?;
+            return Err(Failure::Other(anyhow!(
+                "no system found on {} within {} s",
+                args.conn,
+                args.timeout
+            )));
+        }
+        probe
+            .pump(Instant::now() + Duration::from_millis(1200))
+            .await?;
+        let keys: Vec<(u8, u8)> = probe.systems.keys().copied().collect();
+        let method_name = method.name();
+        for key in keys {
+            let Some(peer) = probe.systems.get(&key).map(|s| s.peer) else {
+                continue;
+            };
+            // 2. AUTOPILOT_VERSION, in the link's current framing.
+            let request = RawMessage::new(&CommandLong {
+                target_system: key.0,
+                target_component: key.1,
+                command: MavCmd::REQUEST_MESSAGE,
+                param1: AutopilotVersion::ID as f32,
+                ..CommandLong::default()
+            });
+            for _ in 0..3 {
+                probe
+                    .send(ChannelCommand::Send {
+                        dest: Dest::Peer(peer),
+                        message: request,
+                    })
+                    .await?;
+                probe
+                    .pump(Instant::now() + Duration::from_millis(400))
+                    .await?;
+                if probe
+                    .systems
+                    .get(&key)
+                    .is_some_and(|s| s.capability.is_some())
+                {
+                    break;
+                }
+            }
+            // 3. The handshake; the channel retries and times out by itself.
+            probe.outcomes.remove(&peer);
+            probe
+                .send(ChannelCommand::StartHandshake {
+                    peer,
+                    target: Target::new(key.0, key.1),
+                    method,
+                    encoding,
+                })
+                .await?;
+            let deadline = Instant::now() + Duration::from_secs(5);
+            while !probe.outcomes.contains_key(&peer) && Instant::now() < deadline {
+                probe
+                    .pump(Instant::now() + Duration::from_millis(100))
+                    .await?;
+            }
+            let result = probe.outcomes.get(&peer).map(HandshakeResult::name);
+            probe.handshake_done.insert(key, true);
+            // 4. The version the system uses now: its next heartbeat.
+            let deadline = Instant::now() + Duration::from_millis(2500);
+            while !probe.after.contains_key(&key) && Instant::now() < deadline {
+                probe.send(ChannelCommand::to_all(gcs_heartbeat)).await?;
+                probe
+                    .pump(Instant::now() + Duration::from_millis(250))
+                    .await?;
+            }
+            if let Some(system) = probe.systems.get_mut(&key) {
+                system.handshake = result;
+                system.version_after = probe.after.get(&key).copied();
+            }
+        }
+        for (key, system) in &probe.systems {
+            println!("{}", report(*key, system, method_name));
+        }
+        probe.conn.close().await.map_err(other)?;
+        Ok(())
+    })
+}
