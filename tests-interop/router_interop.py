@@ -52,6 +52,11 @@ Scenarios:
                   every frame it gets MAVLink 2; the same from a version=1 link: only MAVLink 1
                   frames, no PROTOCOL_VERSION (cannot_convert); `mavstack probe` through a plain
                   link: handshake.result protocol_version, through a version=1 link: not
+  own_heartbeat   --heartbeat --sysid 42: the router's own HEARTBEAT (an onboard controller's)
+                  on a version=1 link only as MAVLink 1, on an auto link as MAVLink 1 until its
+                  peer sends MAVLink 2 and as MAVLink 2 after, on a key= link signed with the
+                  link's id so that pymavlink verifies it; each link its own consecutive
+                  sequence numbers
   stats_and_exit  --stats 1: a JSON object about every second, an entry per link with its name
                   and version (1, 2, signed, auto; auto -> 2 when its peer sends MAVLink 2),
                   rx_frames/tx_frames equal to what the peers sent/received; SIGTERM -> exit 0
@@ -1231,6 +1236,71 @@ def tlog(bin_):
     return "%d frames, links 0 and 1, bytes as sent" % len(got)
 
 
+def own_heartbeat(bin_):
+    """--heartbeat --sysid 42: the router's own HEARTBEAT on three links, each framing it its
+    own way, read by pymavlink."""
+    ports = []
+
+    def links():
+        ports[:] = [free_port() for _ in range(3)]
+        return ["udpin:127.0.0.1:%d?version=1&name=legacy" % ports[0],
+                "udpin:127.0.0.1:%d?name=auto" % ports[1],
+                "udpin:127.0.0.1:%d?key=%s&link_id=3&name=secure" % (ports[2], KEY.hex())]
+
+    router, _ = start_router(bin_, links, extra=("--heartbeat", "--sysid", "42", "--compid", "191"))
+    if router is None:
+        return None
+    leg = Peer("legacy", V1, 255, 190, dest=ports[0])
+    auto = Peer("auto", M, 254, 190, dest=ports[1])
+    sec = Peer("secure", M, 253, 190, dest=ports[2], key=KEY)
+    peers = (leg, auto, sec)
+    try:
+        # Each peer makes itself known (a udpin link has no peer before it hears one).
+        leg.send(heartbeat(mod=V1))
+        auto.send(heartbeat(), v1=True)
+        sec.send(heartbeat())
+        time.sleep(2.6)
+
+        def own(peer, since=0.0):
+            with peer.lock:
+                return [f for f in peer.got if f.src == (42, 191) and f.t >= since]
+
+        for peer in peers:
+            got = own(peer)
+            check(len(got) >= 2, "%s: %d of the router's HEARTBEATs in 2.6 s, expected 2 or more" % (peer.name, len(got)))
+            for f in got:
+                check(f.msg is not None and f.type == "HEARTBEAT", "%s: the router's frame %r is not a HEARTBEAT pymavlink reads" % (peer.name, f))
+                if f.msg is not None and f.type == "HEARTBEAT":
+                    check((f.msg.type, f.msg.autopilot, f.msg.system_status) == (M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, M.MAV_STATE_ACTIVE),
+                          "%s: the router's HEARTBEAT %s, expected an onboard controller's" % (peer.name, f.msg))
+            seqs = [f.seq for f in got]
+            check(all((b - a) % 256 == 1 for a, b in zip(seqs, seqs[1:])),
+                  "%s: the router's sequence numbers on this link %s, expected consecutive" % (peer.name, seqs))
+        check(all(f.version == 1 for f in own(leg)), "legacy (version=1): the router's frames %s, expected MAVLink 1 only" % own(leg))
+        check(all(f.version == 1 for f in own(auto)),
+              "auto link whose peer spoke only MAVLink 1: the router's frames %s, expected MAVLink 1" % own(auto))
+        check(all(f.version == 2 and f.signed and f.link_id == 3 for f in own(sec)),
+              "secure (key=): the router's frames %s, expected signed MAVLink 2 with link id 3" % own(sec))
+        check(not sec.rejected and not sec.bad, "secure: pymavlink refused the router's frames (%s %s)" % (sec.rejected, sec.bad))
+        # The auto link's peer speaks MAVLink 2: from then on, so does the router there.
+        auto.send(heartbeat())
+        switched = time.monotonic() + SETTLE
+        time.sleep(2.6)
+        after = own(auto, switched)
+        check(after and all(f.version == 2 and not f.signed for f in after),
+              "auto link after its peer's MAVLink 2 frame: the router's frames %s, expected unsigned MAVLink 2" % after)
+        check(all(f.version == 1 for f in own(leg)), "legacy: MAVLink 2 from the router after the auto link switched: %s" % own(leg))
+        stats = router.stop()
+        check_versions(stats, "auto", "2", "own_heartbeat")
+        check_versions(stats, "legacy", "1", "own_heartbeat")
+        check_no_key(router, "own_heartbeat")
+    finally:
+        router.kill()
+        for p in peers:
+            p.close()
+    return "the router's HEARTBEAT as 42/191: MAVLink 1 on version=1, MAVLink 1 then 2 on auto, signed (link id 3) on key=, consecutive sequence per link"
+
+
 SCENARIOS = {
     "v1_peer": v1_peer,
     "v2_link": v2_link,
@@ -1239,6 +1309,7 @@ SCENARIOS = {
     "handshake": handshake,
     "stats_and_exit": stats_and_exit,
     "tlog": tlog,
+    "own_heartbeat": own_heartbeat,
 }
 
 

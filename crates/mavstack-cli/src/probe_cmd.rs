@@ -11,8 +11,8 @@ use mavstack_channel::{
     Authentication, CommandEncoding, Config, Event, HandshakeMethod, HandshakeResult,
     SigningConfig, Target,
 };
-use mavstack_core::wire::Version;
 use mavstack_core::Message;
+use mavstack_core::wire::Version;
 use mavstack_dialects::common::{
     AutopilotVersion, CommandLong, Heartbeat, MavAutopilot, MavCmd, MavProtocolCapability, MavType,
 };

@@ -44,6 +44,18 @@ pub(crate) struct RouterArgs {
     /// Dialect for CRC_EXTRA, lengths and target offsets.
     #[arg(long, default_value = "ardupilotmega")]
     dialect: String,
+    /// Announce the router as a component of its own: a HEARTBEAT (an onboard computer's,
+    /// MAV_TYPE_ONBOARD_CONTROLLER) once a second on every link, each in the link's version
+    /// and signing.
+    #[arg(long)]
+    heartbeat: bool,
+    /// The router's own system id (its HEARTBEAT's; frames addressed to it are not
+    /// forwarded to a link).
+    #[arg(long, default_value_t = 1)]
+    sysid: u8,
+    /// The router's own component id.
+    #[arg(long, default_value_t = 191)]
+    compid: u8,
 }
 
 /// The built-in dialects a router can use, by name.
@@ -80,6 +92,9 @@ fn seconds(value: f64, what: &str) -> Result<Duration, Failure> {
 pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
     let mut specs = Vec::new();
     let mut config = RouterConfig::default();
+    config.system_id = args.sysid;
+    config.component_id = args.compid;
+    let heartbeat = args.heartbeat;
     config.route_ttl = seconds(args.route_ttl, "--route-ttl")?;
     config.dedup = args
         .dedup
@@ -145,6 +160,16 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         .map_err(crate::other)?;
     runtime.block_on(async move {
         let mut builder = Node::builder().router(config).dialect(dialect);
+        if heartbeat {
+            let hb = mavstack::dialects::common::Heartbeat {
+                r#type: mavstack::dialects::common::MavType::ONBOARD_CONTROLLER,
+                autopilot: mavstack::dialects::common::MavAutopilot::INVALID,
+                system_status: mavstack::dialects::common::MavState::ACTIVE,
+                mavlink_version: 3,
+                ..Default::default()
+            };
+            builder = builder.heartbeat(&hb, Duration::from_secs(1));
+        }
         for spec in specs {
             builder = builder.link(spec);
         }

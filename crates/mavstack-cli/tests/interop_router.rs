@@ -21,7 +21,10 @@
 //!   plain link (pymavlink and `mavstack probe`) and cannot through a `version=1` link;
 //! - `stats_and_exit`: `--stats 1` JSON lines (names, versions, counts), exit 0 on SIGTERM;
 //! - `tlog`: `--log DIR` writes every accepted frame, bytes as sent, read back by pymavlink's
-//!   own tlog reader with the link number in `msg._link` (MAVProxy's timestamp bits).
+//!   own tlog reader with the link number in `msg._link` (MAVProxy's timestamp bits);
+//! - `own_heartbeat`: `--heartbeat`: the router's own HEARTBEAT in each link's version and
+//!   signing (MAVLink 1 on `version=1`, 1 then 2 on `auto`, signed on `key=`), as pymavlink
+//!   reads and verifies it.
 //!
 //! Never skipped: without pymavlink 2.4.50 they fail.
 
@@ -80,4 +83,9 @@ fn router_prints_stats_and_exits_on_sigterm() {
 #[test]
 fn router_logs_all_traffic_in_a_tlog_pymavlink_reads() {
     scenario("tlog");
+}
+
+#[test]
+fn router_sends_its_own_heartbeat_in_each_links_version_and_signing() {
+    scenario("own_heartbeat");
 }

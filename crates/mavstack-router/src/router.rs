@@ -523,6 +523,107 @@ impl<D: Dialect> Router<D> {
         }
     }
 
+    // ----- the router's own messages ------------------------------------------------------
+
+    /// Sends a message of the router's own component ([`RouterConfig::system_id`] and
+    /// [`RouterConfig::component_id`]), given as its id and encoded payload: each link frames
+    /// it in its own version (MAVLink 1 on a `version=1` link or an `auto` link that has not
+    /// heard MAVLink 2, MAVLink 2 otherwise), with its own sequence numbers, signed when the
+    /// link signs. The message goes where its target fields (read through the dialect) lead:
+    /// a broadcast, or a system not heard yet, to every link; a known system to the links it
+    /// was heard on. `to` names one link instead. The out-filters, rate limits and queues of
+    /// the links apply as to forwarded frames. Returns how many links it was queued on.
+    ///
+    /// ```
+    /// use mavstack_core::time::Instant;
+    /// use mavstack_core::Message as _;
+    /// use mavstack_router::{DialectInfo, LinkConfig, Router, RouterConfig, VersionMode};
+    /// use mavstack_dialects::common::{Heartbeat, MavMessage};
+    ///
+    /// let mut router = Router::new(RouterConfig::default(), DialectInfo::<MavMessage>::new());
+    /// let mut legacy = LinkConfig::new("legacy");
+    /// legacy.version = VersionMode::Mavlink1;
+    /// router.add_link(legacy).unwrap();
+    /// let mut v2 = LinkConfig::new("v2");
+    /// v2.version = VersionMode::Mavlink2;
+    /// router.add_link(v2).unwrap();
+    ///
+    /// let mut payload = [0u8; 255];
+    /// let len = Heartbeat::default().encode(&mut payload);
+    /// assert_eq!(router.send(Instant::ZERO, None, Heartbeat::ID, &payload[..len]), 2);
+    /// let mut buf = [0u8; 280];
+    /// let magics: Vec<u8> = core::iter::from_fn(|| router.poll_transmit(&mut buf).map(|_| buf[0])).collect();
+    /// assert_eq!(magics, [0xfe, 0xfd]);
+    /// ```
+    pub fn send(&mut self, now: Instant, to: Option<LinkId>, msg_id: u32, payload: &[u8]) -> usize {
+        let Some(info) = self.dialect.info(msg_id) else {
+            return 0;
+        };
+        let mut dests = core::mem::take(&mut self.scratch);
+        dests.clear();
+        if let Some(link) = to {
+            dests.push(link);
+        } else {
+            let (tsys, tcomp) = target_of(Some(&info), payload);
+            let known = tsys != 0
+                && self
+                    .routes
+                    .links_to(now, self.config.route_ttl, tsys, tcomp, &mut dests);
+            if !known {
+                dests.clear();
+                dests.extend(self.links());
+            }
+        }
+        let control = is_control(msg_id);
+        let own = (self.config.system_id, self.config.component_id);
+        let mut queued = 0;
+        for &d in &dests {
+            let Some(out) = self.link_mut(d) else {
+                continue;
+            };
+            if !out.config.filters_out.passes(msg_id, own.0, own.1) {
+                out.counters.dropped.count(DropReason::Filtered);
+                continue;
+            }
+            if !control && !out.limiter.allow_message(now, own.0, own.1, msg_id) {
+                out.counters.dropped.count(DropReason::RateLimited);
+                continue;
+            }
+            let mut buf = [0u8; MAX_FRAME_LEN];
+            let len = match out
+                .channel
+                .send_raw(now, msg_id, info.crc_extra, payload, &mut buf)
+            {
+                Ok(t) => t.len,
+                Err(_) => {
+                    // An id above 255 on a MAVLink 1 link, or a payload over 255 bytes.
+                    out.counters.dropped.count(DropReason::CannotConvert);
+                    continue;
+                }
+            };
+            if !out.limiter.spend(now, len, control) {
+                out.counters.dropped.count(DropReason::RateLimited);
+                continue;
+            }
+            if !out
+                .queue
+                .push(control, &buf[..len], out.config.queue_frames)
+            {
+                out.counters.dropped.count(DropReason::QueueFull);
+                continue;
+            }
+            out.counters.tx_frames += 1;
+            out.counters.tx_bytes += len as u64;
+            queued += 1;
+            if !out.ready {
+                out.ready = true;
+                self.ready.push_back(d);
+            }
+        }
+        self.scratch = dests;
+        queued
+    }
+
     // ----- output ----------------------------------------------------------------------
 
     /// Moves the next frame to send into `buf`: links take turns, each link's control

@@ -487,3 +487,70 @@ fn a_truncated_datagram_costs_only_itself() {
     );
     assert_eq!(r.link_status(a).unwrap().channel.parser.bad_crc, 1);
 }
+
+/// The router's own messages ([`Router::send`]): each link frames them its own way.
+#[test]
+fn own_messages_take_each_links_version_and_signing() {
+    let mut r = router();
+    let k = key(9);
+    let v1 = link(&mut r, "v1", |c| c.version = VersionMode::Mavlink1);
+    let auto = link(&mut r, "auto", |_| {});
+    let signed = link(&mut r, "signed", |c| {
+        c.signing = Some(SigningConfig::new(k.clone(), 4))
+    });
+    let mut payload = [0u8; 255];
+    let len = hb().encode(&mut payload);
+    let own = (r.config().system_id, r.config().component_id);
+
+    assert_eq!(r.send(T0, None, Heartbeat::ID, &payload[..len]), 3);
+    let out = drain(&mut r);
+    let on = |l: LinkId| -> Vec<Vec<u8>> {
+        out.iter()
+            .filter(|(d, _)| *d == l)
+            .map(|(_, b)| b.clone())
+            .collect()
+    };
+    // MAVLink 1 on the version=1 link and on the auto link that has heard nothing yet.
+    for l in [v1, auto] {
+        let frames = on(l);
+        assert_eq!(frames.len(), 1);
+        let f = Frame::new_checked(&frames[0][..]).unwrap();
+        assert_eq!(f.version(), Version::V1);
+        assert_eq!((f.sysid(), f.compid()), own);
+        assert!(f.check_crc(Heartbeat::CRC_EXTRA));
+        assert_eq!(f.msg_id(), Heartbeat::ID);
+    }
+    let s = on(signed);
+    let f = Frame::new_checked(&s[0][..]).unwrap();
+    assert_eq!(f.version(), Version::V2);
+    assert!(verify(&f, &k).is_ok());
+
+    // The auto link's peer speaks MAVLink 2: from then on, so does the router there; and a
+    // message to that peer goes only there.
+    r.handle_datagram(T0, auto, &frame(&hb(), Version::V2, (7, 1), 0, None));
+    drain(&mut r);
+    let mut payload = [0u8; 255];
+    let len = command((7, 1)).encode(&mut payload);
+    assert_eq!(r.send(T0, None, CommandLong::ID, &payload[..len]), 1);
+    let out = drain(&mut r);
+    assert_eq!(out.len(), 1);
+    assert_eq!(out[0].0, auto);
+    let f = Frame::new_checked(&out[0].1[..]).unwrap();
+    assert_eq!(f.version(), Version::V2);
+    assert_eq!(f.seq(), 1, "the auto link's second frame of ours");
+
+    // An id above 255 cannot go on the MAVLink 1 link: counted there, sent on the others.
+    let mut payload = [0u8; 255];
+    let len = ProtocolVersion::default().encode(&mut payload);
+    assert_eq!(r.send(T0, None, ProtocolVersion::ID, &payload[..len]), 2);
+    assert_eq!(
+        r.link_status(v1).unwrap().counters.dropped.cannot_convert,
+        1
+    );
+    let out = drain(&mut r);
+    assert!(out.iter().all(|(l, _)| *l != v1));
+    // One link named: only there.
+    let len = hb().encode(&mut payload);
+    assert_eq!(r.send(T0, Some(signed), Heartbeat::ID, &payload[..len]), 1);
+    assert_eq!(drain(&mut r).len(), 1);
+}

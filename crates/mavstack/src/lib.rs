@@ -32,7 +32,7 @@ pub mod node;
 pub mod router_conf;
 
 pub use link_spec::{LinkSpec, LinkSpecError, redacted};
-pub use node::{LinkReport, Node, NodeBuilder, NodeError, NodeReport};
+pub use node::{Incoming, LinkReport, Node, NodeBuilder, NodeError, NodeReport, Subscription};
 
 pub use mavstack_channel as channel;
 pub use mavstack_core as core;

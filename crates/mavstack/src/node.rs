@@ -18,8 +18,10 @@ use core::time::Duration;
 use std::collections::HashMap;
 use std::path::PathBuf;
 
+use mavstack_channel::ReceivedFrame;
 use mavstack_core::time::Instant;
 use mavstack_core::wire::MAX_FRAME_LEN;
+use mavstack_core::{MAX_PAYLOAD_LEN, Message};
 use mavstack_router::{
     Event, InfoFn, LinkConfig, LinkId, LinkMode, LocalDelivery, Router, RouterConfig,
 };
@@ -109,10 +111,36 @@ pub struct NodeReport {
     pub routes: Vec<(u8, u8, String, Option<String>, f64)>,
     /// The transport counters of each configured link: (name, counters).
     pub transport: Vec<(String, LinkStats)>,
+    /// Frames a subscriber missed because it fell behind.
+    pub subscriber_drops: u64,
 }
+
+/// A frame that reached the node's own component (see [`Node::subscribe`]).
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub struct Incoming {
+    /// The name of the link it came in on.
+    pub link: String,
+    /// The frame, as the link's channel accepted it (version, signature, sequence, bytes).
+    pub frame: ReceivedFrame,
+}
+
+/// Frames for the node, from [`Node::subscribe`]: a bounded queue; a subscriber that falls
+/// more than 1,024 frames behind loses the newest ones (counted in
+/// [`NodeReport::subscriber_drops`]).
+pub type Subscription = mpsc::Receiver<Incoming>;
+
+/// How many frames a subscriber may fall behind.
+const SUBSCRIPTION_DEPTH: usize = 1024;
 
 enum Command {
     Report(oneshot::Sender<NodeReport>),
+    Send {
+        msg_id: u32,
+        payload: Vec<u8>,
+        done: oneshot::Sender<usize>,
+    },
+    Subscribe(mpsc::Sender<Incoming>, oneshot::Sender<()>),
     Shutdown,
 }
 
@@ -138,6 +166,7 @@ pub struct NodeBuilder {
     links: Vec<LinkSpec>,
     log_dir: Option<PathBuf>,
     options: Options,
+    heartbeat: Option<(Vec<u8>, Duration)>,
 }
 
 impl NodeBuilder {
@@ -152,6 +181,36 @@ impl NodeBuilder {
     #[must_use]
     pub fn router(mut self, config: RouterConfig) -> Self {
         self.router = config;
+        self
+    }
+
+    /// The node's own system and component id (default 1/191, an onboard computer's), and
+    /// frames addressed to it (or broadcast) delivered to [`Node::subscribe`]. Router
+    /// settings given with [`router`](Self::router) afterwards replace these.
+    #[must_use]
+    pub fn identity(mut self, system_id: u8, component_id: u8) -> Self {
+        self.router.system_id = system_id;
+        self.router.component_id = component_id;
+        if self.router.local == LocalDelivery::None {
+            self.router.local = LocalDelivery::Addressed;
+        }
+        self
+    }
+
+    /// Sends `heartbeat` as the node's own component every `period` (MAVLink components
+    /// send one a second), on every link, each in its own version and signing.
+    #[must_use]
+    pub fn heartbeat(
+        mut self,
+        heartbeat: &mavstack_dialects::common::Heartbeat,
+        period: Duration,
+    ) -> Self {
+        let mut payload = [0u8; MAX_PAYLOAD_LEN];
+        let len = heartbeat.encode(&mut payload);
+        self.heartbeat = Some((
+            payload[..len].to_vec(),
+            period.max(Duration::from_millis(10)),
+        ));
         self
     }
 
@@ -233,6 +292,13 @@ impl NodeBuilder {
             log_local_only,
             started: clock::now(),
             buf: [0; MAX_FRAME_LEN],
+            subscribers: Vec::new(),
+            subscriber_drops: 0,
+            heartbeat: self.heartbeat.map(|(payload, period)| Heartbeat {
+                payload,
+                period,
+                next: clock::now(),
+            }),
         };
         let task = tokio::spawn(driver.run());
         Ok(Node {
@@ -274,6 +340,7 @@ impl Node {
             links: Vec::new(),
             log_dir: None,
             options: Options::default(),
+            heartbeat: None,
         }
     }
 
@@ -289,6 +356,43 @@ impl Node {
         let (tx, rx) = oneshot::channel();
         self.commands.send(Command::Report(tx)).await.ok()?;
         rx.await.ok()
+    }
+
+    /// Sends `message` as the node's own component: on the links its target fields lead to
+    /// (every link for a broadcast or a system not heard yet), each link framing it in its
+    /// own version and signing it when it signs (see `mavstack_router::Router::send`).
+    /// Returns on how many links it was queued; 0 once the node has stopped.
+    pub async fn send<M: Message>(&self, message: &M) -> usize {
+        let mut payload = [0u8; MAX_PAYLOAD_LEN];
+        let len = message.encode(&mut payload);
+        let (done, rx) = oneshot::channel();
+        let command = Command::Send {
+            msg_id: M::ID,
+            payload: payload[..len].to_vec(),
+            done,
+        };
+        if self.commands.send(command).await.is_err() {
+            return 0;
+        }
+        rx.await.unwrap_or(0)
+    }
+
+    /// Every frame that reaches the node's component from now on: addressed to it or
+    /// broadcast (with [`NodeBuilder::identity`]; everything the router delivers locally
+    /// otherwise). Dropping the receiver unsubscribes.
+    pub async fn subscribe(&self) -> Subscription {
+        let (tx, rx) = mpsc::channel(SUBSCRIPTION_DEPTH);
+        let (done, registered) = oneshot::channel();
+        if self
+            .commands
+            .send(Command::Subscribe(tx, done))
+            .await
+            .is_ok()
+        {
+            // Registered before this returns: nothing that arrives later is missed.
+            let _ = registered.await;
+        }
+        rx
     }
 
     /// Whether the node's task has ended (a link failed).
@@ -327,6 +431,16 @@ struct Driver {
     log_local_only: bool,
     started: Instant,
     buf: [u8; MAX_FRAME_LEN],
+    subscribers: Vec<mpsc::Sender<Incoming>>,
+    subscriber_drops: u64,
+    heartbeat: Option<Heartbeat>,
+}
+
+/// The node's own HEARTBEAT: its encoded payload, period and next time.
+struct Heartbeat {
+    payload: Vec<u8>,
+    period: Duration,
+    next: Instant,
 }
 
 /// The [`Input`] a slot's link feeds: peers become router links.
@@ -446,6 +560,21 @@ impl Driver {
             }
             let now = clock::now();
             timer_fired = timer;
+            if let Some(hb) = &mut self.heartbeat
+                && now >= hb.next
+            {
+                hb.next = now + hb.period;
+                let payload = core::mem::take(&mut hb.payload);
+                self.router.send(
+                    now,
+                    None,
+                    mavstack_dialects::common::Heartbeat::ID,
+                    &payload,
+                );
+                if let Some(hb) = &mut self.heartbeat {
+                    hb.payload = payload;
+                }
+            }
             if timer {
                 self.router.handle_timeout(now);
                 for i in 0..self.slots.len() {
@@ -464,6 +593,19 @@ impl Driver {
             match command {
                 Some(Some(Command::Report(tx))) => {
                     let _ = tx.send(self.report(clock::now()));
+                }
+                Some(Some(Command::Send {
+                    msg_id,
+                    payload,
+                    done,
+                })) => {
+                    let queued = self.router.send(clock::now(), None, msg_id, &payload);
+                    self.flush();
+                    let _ = done.send(queued);
+                }
+                Some(Some(Command::Subscribe(tx, done))) => {
+                    self.subscribers.push(tx);
+                    let _ = done.send(());
                 }
                 Some(Some(Command::Shutdown) | None) => break,
                 None => {}
@@ -514,7 +656,8 @@ impl Driver {
             .as_ref()
             .and_then(|(_, w)| w.flush_deadline())
             .map(|_| clock::now() + Duration::from_secs(1));
-        [self.router.poll_timeout(), housekeeping, log]
+        let heartbeat = self.heartbeat.as_ref().map(|h| h.next);
+        [self.router.poll_timeout(), housekeeping, log, heartbeat]
             .into_iter()
             .flatten()
             .min()
@@ -539,8 +682,16 @@ impl Driver {
                                 source,
                             })?;
                     }
-                    if self.log_local_only {
+                    if self.log_local_only || self.subscribers.is_empty() {
                         continue;
+                    }
+                    let name = self.link_label(link);
+                    let incoming = Incoming { link: name, frame };
+                    self.subscribers.retain(|s| !s.is_closed());
+                    for s in &self.subscribers {
+                        if s.try_send(incoming.clone()).is_err() {
+                            self.subscriber_drops += 1;
+                        }
                     }
                 }
                 Event::VersionChanged { link, from, to } => {
@@ -649,6 +800,7 @@ impl Driver {
                 .iter()
                 .map(|s| (s.template.name.clone(), s.io.stats()))
                 .collect(),
+            subscriber_drops: self.subscriber_drops,
         }
     }
 }

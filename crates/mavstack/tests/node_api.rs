@@ -1,0 +1,141 @@
+//! `Node` as a component of its own: frames addressed to it come out of `subscribe`, what it
+//! sends goes out on each link in that link's version, and shutting it down frees every
+//! socket. The peers are plain UDP sockets writing frames by hand (the same behaviour is
+//! checked against pymavlink by `tests-interop/router_interop.py own_heartbeat`).
+
+use core::time::Duration;
+use std::net::UdpSocket;
+
+use mavstack::core::Message as _;
+use mavstack::core::wire::{self, Frame, FrameHeader, MAX_FRAME_LEN, Version};
+use mavstack::dialects::common::{CommandAck, CommandLong, Heartbeat, MavCmd, MavResult};
+use mavstack::{LinkSpec, Node};
+
+fn frame<M: mavstack::core::Message>(msg: &M, version: Version, src: (u8, u8)) -> Vec<u8> {
+    let mut buf = [0u8; MAX_FRAME_LEN];
+    let header = FrameHeader {
+        version,
+        seq: 0,
+        sysid: src.0,
+        compid: src.1,
+        signed: false,
+    };
+    let len = wire::emit_message(&header, msg, &mut buf).expect("fits");
+    buf[..len].to_vec()
+}
+
+/// The next frame from `sock` (one per datagram here), as (version, sysid, compid, msg id).
+fn next(sock: &UdpSocket) -> Option<(Version, u8, u8, u32)> {
+    let mut buf = [0u8; 2048];
+    let n = sock.recv(&mut buf).ok()?;
+    let f = Frame::new_checked(&buf[..n]).ok()?;
+    Some((f.version(), f.sysid(), f.compid(), f.msg_id()))
+}
+
+fn peer(port: u16) -> UdpSocket {
+    let s = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    s.connect(("127.0.0.1", port)).expect("connect");
+    s.set_read_timeout(Some(Duration::from_secs(3)))
+        .expect("timeout");
+    s
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_node_receives_what_is_addressed_to_it_and_sends_in_each_links_version() {
+    let none = |_: &str| None;
+    let node = Node::builder()
+        .identity(1, 191)
+        .link(LinkSpec::parse("udpin:127.0.0.1:0?version=1&name=legacy", &none).expect("spec"))
+        .link(LinkSpec::parse("udpin:127.0.0.1:0?name=gcs", &none).expect("spec"))
+        .start()
+        .await
+        .expect("starts");
+    let ports: Vec<u16> = node
+        .local_addrs()
+        .iter()
+        .map(|a| a.expect("bound").port())
+        .collect();
+    let mut frames = node.subscribe().await;
+    let legacy = peer(ports[0]);
+    let gcs = peer(ports[1]);
+
+    let command = CommandLong {
+        command: MavCmd::REQUEST_MESSAGE,
+        target_system: 1,
+        target_component: 191,
+        ..CommandLong::default()
+    };
+    gcs.send(&frame(&command, Version::V2, (255, 190)))
+        .expect("send");
+    let mut got = Vec::new();
+    let mut recv = async || {
+        let incoming = tokio::time::timeout(Duration::from_secs(3), frames.recv())
+            .await
+            .expect("a frame for the node")
+            .expect("subscribed");
+        let f = incoming.frame.frame.view();
+        (incoming.link.clone(), f.msg_id(), f.version())
+    };
+    got.push(recv().await);
+    // Now that the ground station is a link, a broadcast HEARTBEAT from the legacy side
+    // reaches the node and is forwarded to the ground station.
+    legacy
+        .send(&frame(&Heartbeat::default(), Version::V1, (1, 50)))
+        .expect("send");
+    got.push(recv().await);
+    assert_eq!(
+        got,
+        [
+            ("gcs".to_owned(), CommandLong::ID, Version::V2),
+            ("legacy".to_owned(), Heartbeat::ID, Version::V1),
+        ]
+    );
+    assert_eq!(
+        next(&gcs),
+        Some((Version::V2, 1, 50, Heartbeat::ID)),
+        "forwarded, converted"
+    );
+
+    // The answer goes only to the ground station (its route), in MAVLink 2.
+    let ack = CommandAck {
+        command: MavCmd::REQUEST_MESSAGE,
+        result: MavResult::ACCEPTED,
+        target_system: 255,
+        target_component: 190,
+        ..CommandAck::default()
+    };
+    assert_eq!(node.send(&ack).await, 1);
+    assert_eq!(next(&gcs), Some((Version::V2, 1, 191, CommandAck::ID)));
+    // A broadcast goes to both, as MAVLink 1 on the version=1 link.
+    assert_eq!(node.send(&Heartbeat::default()).await, 2);
+    assert_eq!(next(&legacy), Some((Version::V1, 1, 191, Heartbeat::ID)));
+    assert_eq!(next(&gcs), Some((Version::V2, 1, 191, Heartbeat::ID)));
+
+    let report = node.shutdown().await.expect("clean shutdown");
+    assert_eq!(report.subscriber_drops, 0);
+    // Every socket is closed: the ports can be bound again.
+    for port in ports {
+        UdpSocket::bind(("127.0.0.1", port)).expect("the node's port is free after shutdown");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_node_with_a_heartbeat_announces_itself_on_every_link() {
+    let none = |_: &str| None;
+    let listener = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    listener
+        .set_read_timeout(Some(Duration::from_secs(3)))
+        .expect("timeout");
+    let port = listener.local_addr().expect("addr").port();
+    let node = Node::builder()
+        .identity(7, 191)
+        .heartbeat(&Heartbeat::default(), Duration::from_millis(100))
+        .link(LinkSpec::parse(&format!("udpout:127.0.0.1:{port}?version=2"), &none).expect("spec"))
+        .start()
+        .await
+        .expect("starts");
+    for _ in 0..3 {
+        assert_eq!(next(&listener), Some((Version::V2, 7, 191, Heartbeat::ID)));
+    }
+    node.shutdown().await.expect("clean shutdown");
+}
