@@ -20,7 +20,17 @@ cargo clippy --workspace --all-targets --all-features --locked -- -D warnings
 step "cargo test (workspace, all features)"
 cargo test --workspace --all-features --locked
 
+step "examples, against the in-process simulated vehicle"
+gs="$(cargo run -q --locked -p mavstack --features sim --example ground_station -- 4)"
+for want in "ATTITUDE roll" "GLOBAL_POSITION_INT -35.36" "HEARTBEAT MAV_TYPE_QUADROTOR MAV_AUTOPILOT_ARDUPILOTMEGA" "link vehicle (2)"; do
+    if ! grep -qF "$want" <<<"$gs"; then
+        printf 'ground_station example: no "%s" in its output:\n%s\n' "$want" "$gs" >&2
+        exit 1
+    fi
+done
+
 step "feature matrix"
+cargo build -p mavstack --locked
 cargo build -p mavstack-core --no-default-features --locked
 cargo build -p mavstack-dialects --no-default-features --features minimal --locked
 cargo build -p mavstack-dialects --locked

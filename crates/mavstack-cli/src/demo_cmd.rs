@@ -47,9 +47,10 @@ use tokio::time::Instant;
 use crate::gcs_cmd::{Remote, fetch_params, mission_op, set_param, value_text};
 use crate::link_cmd::runtime;
 use crate::radio_cmd::{open_radio_side, run_radio};
-use crate::sim::flight;
-use crate::vehicle_cmd::{Autopilot, Log, VehicleSetup, open_vehicle, run_vehicle, version_name};
+use crate::vehicle_cmd::{Log, VehicleSetup, open_vehicle, run_vehicle, version_name};
 use crate::{Failure, other};
+use mavstack_sim::Autopilot;
+use mavstack_sim::flight;
 
 #[derive(Debug, Args)]
 pub(crate) struct DemoArgs {}
@@ -268,7 +269,7 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
         signing: None,
         protocol_version: true,
         secure: true,
-        params: crate::sim::params::defaults(Autopilot::Ardupilot),
+        params: mavstack_sim::params::defaults(Autopilot::Ardupilot),
     };
     let any_port = |scheme: &str| -> Result<ConnSpec, Failure> {
         format!("{scheme}:127.0.0.1:0").parse().map_err(other)

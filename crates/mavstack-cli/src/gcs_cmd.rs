@@ -34,9 +34,10 @@ use tokio::time::Instant;
 
 use crate::link_cmd::{parse_spec, runtime};
 use crate::mission_file;
-use crate::sim::modes;
-use crate::vehicle_cmd::{Autopilot, secret_key, service_time};
+use crate::vehicle_cmd::{secret_key, service_time};
 use crate::{Failure, other};
+use mavstack_sim::Autopilot;
+use mavstack_sim::modes;
 
 /// How to reach the remote system (shared by `param`, `mission` and `command`).
 #[derive(Debug, Args)]

@@ -14,7 +14,6 @@ mod mission_file;
 mod probe_cmd;
 mod radio_cmd;
 mod router_cmd;
-mod sim;
 mod vehicle_cmd;
 
 use std::process::ExitCode;

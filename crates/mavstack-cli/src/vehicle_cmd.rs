@@ -9,7 +9,7 @@ use core::time::Duration;
 use std::collections::BTreeMap;
 
 use anyhow::anyhow;
-use clap::{Args, ValueEnum};
+use clap::Args;
 use mavstack_channel::{Config, Event, LinkStats, SigningConfig, VehicleVersion};
 use mavstack_core::signing::SecretKey;
 use mavstack_core::wire::Version;
@@ -25,30 +25,18 @@ use tokio::sync::mpsc;
 use tokio::time::Instant;
 
 use crate::link_cmd::{interrupted, parse_spec, runtime};
-use crate::sim::{SimConfig, Vehicle, params};
 use crate::{Failure, other};
+use mavstack_sim::Autopilot;
+use mavstack_sim::{SimConfig, Vehicle, params};
 
 /// A message's name in the common dialect, or its number when the dialect has none.
 pub(crate) fn message_name(id: u32) -> String {
     MavMessage::info(id).map_or_else(|| format!("message {id}"), |m| m.name.to_owned())
 }
 
-/// The autopilot a simulated vehicle claims to be.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub(crate) enum Autopilot {
-    /// ArduPilot (MAV_AUTOPILOT_ARDUPILOTMEGA, 3).
-    Ardupilot,
-    /// PX4 (MAV_AUTOPILOT_PX4, 12).
-    Px4,
-}
-
-impl core::fmt::Display for Autopilot {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.write_str(match self {
-            Self::Ardupilot => "ArduPilot",
-            Self::Px4 => "PX4",
-        })
-    }
+/// `--autopilot NAME` (the names [`Autopilot`]'s `FromStr` takes).
+fn autopilot_arg(name: &str) -> Result<Autopilot, String> {
+    name.parse()
 }
 
 #[derive(Debug, Args)]
@@ -62,8 +50,8 @@ pub(crate) struct VehicleArgs {
     /// Component id.
     #[arg(long, default_value_t = 1)]
     compid: u8,
-    /// Which autopilot to claim.
-    #[arg(long, value_enum, default_value = "ardupilot")]
+    /// Which autopilot to claim: ardupilot or px4.
+    #[arg(long, default_value = "ardupilot", value_parser = autopilot_arg)]
     autopilot: Autopilot,
     /// MAVLink 1 only: refuse the handshake (failure COMMAND_ACK), never switch.
     #[arg(long, conflicts_with_all = ["start_mavlink2", "sign_key"])]
@@ -373,7 +361,7 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
         VehicleVersion::StartMavlink1
     };
     let params = match &args.params {
-        Some(path) => params::load(path).map_err(Failure::Input)?,
+        Some(path) => params::load(path).map_err(|e| Failure::Input(e.into()))?,
         None => params::defaults(args.autopilot),
     };
     let setup = VehicleSetup {

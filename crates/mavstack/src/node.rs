@@ -21,7 +21,7 @@ use std::path::PathBuf;
 use mavstack_channel::ReceivedFrame;
 use mavstack_core::time::Instant;
 use mavstack_core::wire::MAX_FRAME_LEN;
-use mavstack_core::{MAX_PAYLOAD_LEN, Message};
+use mavstack_core::{MAX_PAYLOAD_LEN, Message, MessageSet};
 use mavstack_router::{
     Event, InfoFn, LinkConfig, LinkId, LinkMode, LocalDelivery, Router, RouterConfig,
 };
@@ -334,8 +334,7 @@ impl Node {
         NodeBuilder {
             router: RouterConfig::default(),
             dialect: InfoFn(|id| {
-                <mavstack_dialects::common::MavMessage as mavstack_core::MessageSet>::info(id)
-                    .copied()
+                <mavstack_dialects::common::MavMessage as MessageSet>::info(id).copied()
             }),
             links: Vec::new(),
             log_dir: None,
@@ -358,6 +357,51 @@ impl Node {
         rx.await.ok()
     }
 
+    /// A handle for other tasks: it sends, subscribes and reports like the node, and can be
+    /// cloned; the node stops only through [`shutdown`](Self::shutdown).
+    #[must_use]
+    pub fn handle(&self) -> NodeHandle {
+        NodeHandle {
+            commands: self.commands.clone(),
+        }
+    }
+
+    /// See [`NodeHandle::send`].
+    pub async fn send<M: Message>(&self, message: &M) -> usize {
+        self.handle().send(message).await
+    }
+
+    /// See [`NodeHandle::subscribe`].
+    pub async fn subscribe(&self) -> Subscription {
+        self.handle().subscribe().await
+    }
+
+    /// Whether the node's task has ended (a link failed).
+    #[must_use]
+    pub fn is_finished(&self) -> bool {
+        self.task.is_finished()
+    }
+
+    /// Stops the node: queued frames go out, links close, the log is written out.
+    /// Returns the final report.
+    ///
+    /// # Errors
+    /// [`NodeError`] if a link failed or the log could not be written.
+    pub async fn shutdown(self) -> Result<NodeReport, NodeError> {
+        let _ = self.commands.send(Command::Shutdown).await;
+        self.task
+            .await
+            .map_err(|e| NodeError::Stopped(e.to_string()))?
+    }
+}
+
+/// A cloneable handle on a running [`Node`] (from [`Node::handle`]).
+#[derive(Clone, Debug)]
+pub struct NodeHandle {
+    commands: mpsc::Sender<Command>,
+}
+
+impl NodeHandle {
     /// Sends `message` as the node's own component: on the links its target fields lead to
     /// (every link for a broadcast or a system not heard yet), each link framing it in its
     /// own version and signing it when it signs (see `mavstack_router::Router::send`).
@@ -365,10 +409,22 @@ impl Node {
     pub async fn send<M: Message>(&self, message: &M) -> usize {
         let mut payload = [0u8; MAX_PAYLOAD_LEN];
         let len = message.encode(&mut payload);
+        self.send_payload(M::ID, payload[..len].to_vec()).await
+    }
+
+    /// Like [`send`](Self::send), for a message of a dialect's enum (`MavMessage`).
+    pub async fn send_message<S: MessageSet>(&self, message: &S) -> usize {
+        let mut payload = [0u8; MAX_PAYLOAD_LEN];
+        let len = message.encode(&mut payload);
+        self.send_payload(message.id(), payload[..len].to_vec())
+            .await
+    }
+
+    async fn send_payload(&self, msg_id: u32, payload: Vec<u8>) -> usize {
         let (done, rx) = oneshot::channel();
         let command = Command::Send {
-            msg_id: M::ID,
-            payload: payload[..len].to_vec(),
+            msg_id,
+            payload,
             done,
         };
         if self.commands.send(command).await.is_err() {
@@ -395,22 +451,11 @@ impl Node {
         rx
     }
 
-    /// Whether the node's task has ended (a link failed).
-    #[must_use]
-    pub fn is_finished(&self) -> bool {
-        self.task.is_finished()
-    }
-
-    /// Stops the node: queued frames go out, links close, the log is written out.
-    /// Returns the final report.
-    ///
-    /// # Errors
-    /// [`NodeError`] if a link failed or the log could not be written.
-    pub async fn shutdown(self) -> Result<NodeReport, NodeError> {
-        let _ = self.commands.send(Command::Shutdown).await;
-        self.task
-            .await
-            .map_err(|e| NodeError::Stopped(e.to_string()))?
+    /// A snapshot of every link and route; `None` once the node has stopped.
+    pub async fn report(&self) -> Option<NodeReport> {
+        let (tx, rx) = oneshot::channel();
+        self.commands.send(Command::Report(tx)).await.ok()?;
+        rx.await.ok()
     }
 }
 

@@ -5,11 +5,11 @@
 //! bits 16–23 and a sub mode (of AUTO) in bits 24–31. MAV_CMD_DO_SET_MODE carries the
 //! ArduPilot number or the PX4 main mode in param2 and the PX4 sub mode in param3.
 
-use crate::vehicle_cmd::Autopilot;
+use crate::Autopilot;
 
 /// What the simulated vehicle does in a mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Behaviour {
+pub enum Behaviour {
     /// Pilot-controlled modes: with no sticks, hold altitude and position.
     Manual,
     /// Hold position (LOITER, POSHOLD, PX4 HOLD).
@@ -28,13 +28,13 @@ pub(crate) enum Behaviour {
 
 /// One mode of a flavour.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct Mode {
+pub struct Mode {
     /// Its name as ground stations print it.
-    pub(crate) name: &'static str,
+    pub name: &'static str,
     /// Its HEARTBEAT `custom_mode`.
-    pub(crate) custom_mode: u32,
+    pub custom_mode: u32,
     /// What the simulation does in it.
-    pub(crate) behaviour: Behaviour,
+    pub behaviour: Behaviour,
 }
 
 const fn ardu(name: &'static str, number: u32, behaviour: Behaviour) -> Mode {
@@ -85,7 +85,7 @@ const PX4: &[Mode] = &[
 ];
 
 /// The modes of a flavour, the mode it boots in first.
-pub(crate) fn modes(autopilot: Autopilot) -> &'static [Mode] {
+pub fn modes(autopilot: Autopilot) -> &'static [Mode] {
     match autopilot {
         Autopilot::Ardupilot => ARDUPILOT,
         Autopilot::Px4 => PX4,
@@ -93,7 +93,7 @@ pub(crate) fn modes(autopilot: Autopilot) -> &'static [Mode] {
 }
 
 /// The mode with this `custom_mode`.
-pub(crate) fn by_custom_mode(autopilot: Autopilot, custom_mode: u32) -> Option<Mode> {
+pub fn by_custom_mode(autopilot: Autopilot, custom_mode: u32) -> Option<Mode> {
     modes(autopilot)
         .iter()
         .copied()
@@ -101,7 +101,7 @@ pub(crate) fn by_custom_mode(autopilot: Autopilot, custom_mode: u32) -> Option<M
 }
 
 /// The mode with this name (case-insensitive; PX4 names also without the `AUTO.` prefix).
-pub(crate) fn by_name(autopilot: Autopilot, name: &str) -> Option<Mode> {
+pub fn by_name(autopilot: Autopilot, name: &str) -> Option<Mode> {
     modes(autopilot).iter().copied().find(|m| {
         m.name.eq_ignore_ascii_case(name)
             || m.name
@@ -111,7 +111,7 @@ pub(crate) fn by_name(autopilot: Autopilot, name: &str) -> Option<Mode> {
 }
 
 /// The first mode of a flavour with `behaviour`.
-pub(crate) fn with_behaviour(autopilot: Autopilot, behaviour: Behaviour) -> Mode {
+pub fn with_behaviour(autopilot: Autopilot, behaviour: Behaviour) -> Mode {
     modes(autopilot)
         .iter()
         .copied()
@@ -120,7 +120,7 @@ pub(crate) fn with_behaviour(autopilot: Autopilot, behaviour: Behaviour) -> Mode
 }
 
 /// The `custom_mode` MAV_CMD_DO_SET_MODE's param2 (and PX4's param3) stand for.
-pub(crate) fn custom_mode_of_command(autopilot: Autopilot, param2: f32, param3: f32) -> u32 {
+pub fn custom_mode_of_command(autopilot: Autopilot, param2: f32, param3: f32) -> u32 {
     let whole = |p: f32| {
         if p.is_finite() && p >= 0.0 {
             p as u32
@@ -136,7 +136,7 @@ pub(crate) fn custom_mode_of_command(autopilot: Autopilot, param2: f32, param3: 
 
 /// MAV_CMD_DO_SET_MODE's param2 and param3 for a mode (the inverse of
 /// [`custom_mode_of_command`]).
-pub(crate) fn command_params(autopilot: Autopilot, mode: Mode) -> (f32, f32) {
+pub fn command_params(autopilot: Autopilot, mode: Mode) -> (f32, f32) {
     match autopilot {
         Autopilot::Ardupilot => (mode.custom_mode as f32, 0.0),
         Autopilot::Px4 => (

@@ -11,27 +11,30 @@ use std::collections::VecDeque;
 use mavstack_dialects::common::{MavCmd, MavFrame, MavLandedState, MissionItemInt};
 
 use super::modes::{self, Behaviour, Mode};
-use crate::vehicle_cmd::Autopilot;
+use crate::Autopilot;
 
 /// Metres per degree of latitude (spherical Earth, as every GCS map does at this scale).
 const METRES_PER_DEGREE: f64 = 111_319.49;
 
 /// Where the craft starts, and returns to: ArduPilot SITL's default home (CMAC, Canberra).
-pub(crate) const HOME: Position = Position {
+pub const HOME: Position = Position {
     lat: -35.363_261,
     lon: 149.165_230,
     alt: 0.0,
 };
 
 /// The home altitude above mean sea level, metres.
-pub(crate) const HOME_AMSL: f32 = 584.0;
+pub const HOME_AMSL: f32 = 584.0;
 
 /// A point: degrees and metres above home.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct Position {
-    pub(crate) lat: f64,
-    pub(crate) lon: f64,
-    pub(crate) alt: f32,
+pub struct Position {
+    /// Latitude, degrees.
+    pub lat: f64,
+    /// Longitude, degrees.
+    pub lon: f64,
+    /// Altitude above home, metres.
+    pub alt: f32,
 }
 
 impl Position {
@@ -54,21 +57,21 @@ impl Position {
 
 /// Speeds, altitudes and the battery, from the parameter table.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct Tuning {
+pub struct Tuning {
     /// Horizontal cruise speed, m/s.
-    pub(crate) cruise: f32,
+    pub cruise: f32,
     /// Climb rate, m/s.
-    pub(crate) climb: f32,
+    pub climb: f32,
     /// Descent rate above 10 m, m/s.
-    pub(crate) descent: f32,
+    pub descent: f32,
     /// Final landing speed, m/s.
-    pub(crate) land: f32,
+    pub land: f32,
     /// Take-off altitude when a command gives none, m.
-    pub(crate) takeoff_alt: f32,
+    pub takeoff_alt: f32,
     /// Return altitude, m.
-    pub(crate) rtl_alt: f32,
+    pub rtl_alt: f32,
     /// Battery capacity, mAh.
-    pub(crate) capacity_mah: f32,
+    pub capacity_mah: f32,
 }
 
 impl Default for Tuning {
@@ -87,7 +90,7 @@ impl Default for Tuning {
 
 /// Something the vehicle should tell its ground stations.
 #[derive(Clone, Debug, PartialEq)]
-pub(crate) enum FlightEvent {
+pub enum FlightEvent {
     /// Mission item `seq` was reached (MISSION_ITEM_REACHED).
     ItemReached(u16),
     /// The current mission item is now `seq`.
@@ -98,14 +101,14 @@ pub(crate) enum FlightEvent {
 
 /// Why a command was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Refusal {
+pub enum Refusal {
     /// Not now (e.g. take-off while disarmed): MAV_RESULT_DENIED or FAILED.
     NotNow,
 }
 
 /// The craft.
 #[derive(Debug)]
-pub(crate) struct Flight {
+pub struct Flight {
     autopilot: Autopilot,
     mode: Mode,
     armed: bool,
@@ -133,7 +136,7 @@ pub(crate) struct Flight {
 
 impl Flight {
     /// A disarmed craft on the ground at home, in the flavour's first mode.
-    pub(crate) fn new(autopilot: Autopilot, tuning: Tuning) -> Self {
+    pub fn new(autopilot: Autopilot, tuning: Tuning) -> Self {
         let mode = match autopilot {
             Autopilot::Ardupilot => modes::with_behaviour(autopilot, Behaviour::Manual),
             Autopilot::Px4 => modes::with_behaviour(autopilot, Behaviour::Hold),
@@ -161,40 +164,48 @@ impl Flight {
         }
     }
 
-    pub(crate) fn set_tuning(&mut self, tuning: Tuning) {
+    /// Takes new speeds, altitudes and battery size.
+    pub fn set_tuning(&mut self, tuning: Tuning) {
         self.tuning = tuning;
     }
 
-    pub(crate) fn mode(&self) -> Mode {
+    /// The flight mode.
+    pub fn mode(&self) -> Mode {
         self.mode
     }
 
-    pub(crate) fn is_armed(&self) -> bool {
+    /// Whether the motors are armed.
+    pub fn is_armed(&self) -> bool {
         self.armed
     }
 
-    pub(crate) fn is_airborne(&self) -> bool {
+    /// Whether the craft is off the ground.
+    pub fn is_airborne(&self) -> bool {
         self.airborne
     }
 
-    pub(crate) fn position(&self) -> Position {
+    /// Where the craft is.
+    pub fn position(&self) -> Position {
         self.position
     }
 
-    pub(crate) fn home(&self) -> Position {
+    /// Where it started, and returns to.
+    pub fn home(&self) -> Position {
         self.home
     }
 
-    pub(crate) fn velocity(&self) -> [f32; 3] {
+    /// Velocity north, east, down, m/s.
+    pub fn velocity(&self) -> [f32; 3] {
         self.velocity
     }
 
-    pub(crate) fn heading(&self) -> f32 {
+    /// Heading, degrees from north.
+    pub fn heading(&self) -> f32 {
         self.heading
     }
 
     /// Battery: fraction left (0–1), voltage (4 cells), current (A), consumed (mAh).
-    pub(crate) fn battery(&self) -> (f32, f32, f32, f32) {
+    pub fn battery(&self) -> (f32, f32, f32, f32) {
         let left = (1.0 - self.consumed_mah / f64::from(self.tuning.capacity_mah.max(1.0)))
             .clamp(0.0, 1.0) as f32;
         (
@@ -205,7 +216,8 @@ impl Flight {
         )
     }
 
-    pub(crate) fn landed_state(&self) -> MavLandedState {
+    /// On the ground, taking off, in the air or landing.
+    pub fn landed_state(&self) -> MavLandedState {
         if !self.airborne {
             MavLandedState::ON_GROUND
         } else if self.velocity[2] > 0.2 && self.is_landing() {
@@ -229,14 +241,15 @@ impl Flight {
     }
 
     /// The mission the craft flies in mission mode (replaces the old one).
-    pub(crate) fn set_mission(&mut self, items: &[MissionItemInt]) {
+    pub fn set_mission(&mut self, items: &[MissionItemInt]) {
         self.mission = items.to_vec();
         self.current = self.first_item();
         self.mission_done = false;
         self.hold_until = None;
     }
 
-    pub(crate) fn mission_len(&self) -> usize {
+    /// Items in the mission it flies.
+    pub fn mission_len(&self) -> usize {
         self.mission.len()
     }
 
@@ -248,22 +261,25 @@ impl Flight {
         }
     }
 
-    pub(crate) fn current_item(&self) -> u16 {
+    /// The mission item it flies to.
+    pub fn current_item(&self) -> u16 {
         self.current
     }
 
-    pub(crate) fn mission_done(&self) -> bool {
+    /// Whether the mission has been flown to its end.
+    pub fn mission_done(&self) -> bool {
         self.mission_done
     }
 
     /// Makes item `seq` current (MISSION_SET_CURRENT, DO_SET_MISSION_CURRENT).
-    pub(crate) fn set_current(&mut self, seq: u16) {
+    pub fn set_current(&mut self, seq: u16) {
         self.current = seq;
         self.mission_done = false;
         self.hold_until = None;
     }
 
-    pub(crate) fn poll_event(&mut self) -> Option<FlightEvent> {
+    /// The next event (an item reached, the current item changed, a message to say).
+    pub fn poll_event(&mut self) -> Option<FlightEvent> {
         self.events.pop_front()
     }
 
@@ -272,7 +288,7 @@ impl Flight {
     }
 
     /// Changes the mode.
-    pub(crate) fn set_mode(&mut self, mode: Mode) {
+    pub fn set_mode(&mut self, mode: Mode) {
         if mode == self.mode {
             return;
         }
@@ -301,7 +317,7 @@ impl Flight {
     }
 
     /// Arms or disarms. Disarming in the air needs `force`.
-    pub(crate) fn arm(&mut self, arm: bool, force: bool) -> Result<(), Refusal> {
+    pub fn arm(&mut self, arm: bool, force: bool) -> Result<(), Refusal> {
         if arm == self.armed {
             return Ok(());
         }
@@ -325,7 +341,7 @@ impl Flight {
     }
 
     /// MAV_CMD_NAV_TAKEOFF to `alt` metres above home (`None`: the configured height).
-    pub(crate) fn takeoff(&mut self, alt: Option<f32>) -> Result<(), Refusal> {
+    pub fn takeoff(&mut self, alt: Option<f32>) -> Result<(), Refusal> {
         if !self.armed {
             return Err(Refusal::NotNow);
         }
@@ -351,7 +367,7 @@ impl Flight {
     }
 
     /// Sets the guided target (DO_REPOSITION, guided waypoints); `None` parts keep ours.
-    pub(crate) fn go_to(&mut self, lat: Option<f64>, lon: Option<f64>, alt: Option<f32>) {
+    pub fn go_to(&mut self, lat: Option<f64>, lon: Option<f64>, alt: Option<f32>) {
         let here = self.position;
         self.target = Some(Position {
             lat: lat.unwrap_or(here.lat),
@@ -368,19 +384,20 @@ impl Flight {
         }
     }
 
-    pub(crate) fn set_speed(&mut self, speed: f32) {
+    /// Sets the ground speed, m/s (DO_CHANGE_SPEED).
+    pub fn set_speed(&mut self, speed: f32) {
         if speed.is_finite() && speed > 0.0 {
             self.speed_override = Some(speed);
         }
     }
 
     /// Moves home to `at` (altitude above the old home).
-    pub(crate) fn set_home(&mut self, at: Position) {
+    pub fn set_home(&mut self, at: Position) {
         self.home = at;
     }
 
     /// Advances the craft by `dt` seconds.
-    pub(crate) fn step(&mut self, dt: f64) {
+    pub fn step(&mut self, dt: f64) {
         self.flight_time += dt;
         self.consumed_mah += f64::from(self.current_draw()) * dt / 3.6;
         if !self.armed {
@@ -508,7 +525,7 @@ impl Flight {
     /// Where an item's coordinates point (its own where given, else here).
     fn item_position(&self, item: &MissionItemInt) -> Position {
         let here = self.position;
-        let global = crate::mission_file::is_global(item.frame);
+        let global = crate::is_global(item.frame);
         let (lat, lon) = if global && (item.x != 0 || item.y != 0) {
             (f64::from(item.x) / 1e7, f64::from(item.y) / 1e7)
         } else {

@@ -1,15 +1,48 @@
-//! The simulated vehicle behind `mavstack vehicle` and `mavstack demo`, sans-IO.
+//! A simulated MAVLink vehicle, sans-IO: the vehicle behind `mavstack vehicle` and
+//! `mavstack demo`, and the one a ground station's tests can run in-process.
 //!
 //! [`Vehicle`] puts the server roles of `mavstack-services` together around a kinematic
 //! craft ([`flight::Flight`]): a [`CommandServer`] whose handler flies the craft, a
 //! [`ParamServer`] with the flavour's table (or a file's), a [`MissionServer`] whose plan the
 //! craft flies in mission mode, a [`StreamScheduler`] for telemetry rates, and TIMESYNC. Like
 //! every service it takes decoded messages and the time, and hands out messages to send:
-//! the caller (`vehicle_cmd::run`) moves them over a `mavstack-channel` link.
+//! the caller moves them over its links (`mavstack vehicle` over a `mavstack-channel` link).
 
-pub(crate) mod flight;
-pub(crate) mod modes;
-pub(crate) mod params;
+pub mod flight;
+pub mod modes;
+pub mod params;
+
+/// The autopilot a simulated vehicle claims to be: its HEARTBEAT, parameter table and
+/// encoding, flight modes and mission conventions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Autopilot {
+    /// ArduPilot (MAV_AUTOPILOT_ARDUPILOTMEGA, 3).
+    Ardupilot,
+    /// PX4 (MAV_AUTOPILOT_PX4, 12).
+    Px4,
+}
+
+impl core::fmt::Display for Autopilot {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Self::Ardupilot => "ArduPilot",
+            Self::Px4 => "PX4",
+        })
+    }
+}
+
+impl core::str::FromStr for Autopilot {
+    type Err = String;
+
+    /// `ardupilot` or `px4` (any case).
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.to_ascii_lowercase().as_str() {
+            "ardupilot" => Ok(Self::Ardupilot),
+            "px4" => Ok(Self::Px4),
+            _ => Err(format!("unknown autopilot {s:?}: ardupilot or px4")),
+        }
+    }
+}
 
 use core::time::Duration;
 use std::collections::VecDeque;
@@ -33,7 +66,6 @@ use mavstack_services::{Address, Outgoing, Service};
 
 use self::flight::{Flight, FlightEvent, HOME_AMSL, Position, Tuning};
 use self::modes::{Behaviour, Mode};
-use crate::vehicle_cmd::Autopilot;
 
 /// Peers that appear later than this after the start get a HEARTBEAT of their own.
 const GREETING_AFTER: Duration = Duration::from_millis(100);
@@ -43,15 +75,15 @@ const STEP: Duration = Duration::from_millis(50);
 
 /// What the vehicle is.
 #[derive(Clone, Debug)]
-pub(crate) struct SimConfig {
+pub struct SimConfig {
     /// Its address.
-    pub(crate) own: Address,
+    pub own: Address,
     /// Which autopilot it behaves like.
-    pub(crate) autopilot: Autopilot,
+    pub autopilot: Autopilot,
     /// Whether it advertises MAVLink 2 in AUTOPILOT_VERSION.
-    pub(crate) mavlink2: bool,
+    pub mavlink2: bool,
     /// Its parameter table.
-    pub(crate) params: Vec<(Name, Value)>,
+    pub params: Vec<(Name, Value)>,
 }
 
 /// The messages the vehicle streams and their default intervals (`None`: on request only).
@@ -496,7 +528,7 @@ impl CommandHandler for Craft {
 
 /// The simulated vehicle; see the [module docs](self).
 #[derive(Debug)]
-pub(crate) struct Vehicle {
+pub struct Vehicle {
     own: Address,
     commands: CommandServer<Craft>,
     params: ParamServer,
@@ -511,7 +543,7 @@ pub(crate) struct Vehicle {
 
 impl Vehicle {
     /// A vehicle on the ground at home, disarmed, at time `now`.
-    pub(crate) fn new(config: SimConfig, now: Instant) -> Self {
+    pub fn new(config: SimConfig, now: Instant) -> Self {
         let encoding = match config.autopilot {
             Autopilot::Ardupilot => Encoding::CCast,
             Autopilot::Px4 => Encoding::Bytewise,
@@ -617,7 +649,7 @@ impl Vehicle {
     }
 
     /// Feeds one decoded message from `from`.
-    pub(crate) fn handle_message(&mut self, now: Instant, from: Address, message: &MavMessage) {
+    pub fn handle_message(&mut self, now: Instant, from: Address, message: &MavMessage) {
         let own = self.own;
         match message {
             MavMessage::SetMode(m) if m.target_system == own.system => {
@@ -641,7 +673,7 @@ impl Vehicle {
     }
 
     /// Advances the model and every timer to `now`.
-    pub(crate) fn handle_timeout(&mut self, now: Instant) {
+    pub fn handle_timeout(&mut self, now: Instant) {
         while self.next_step <= now {
             self.craft().flight.step(STEP.as_secs_f64());
             self.next_step += STEP;
@@ -734,7 +766,7 @@ impl Vehicle {
     }
 
     /// The next message to send.
-    pub(crate) fn poll_transmit(&mut self) -> Option<Outgoing> {
+    pub fn poll_transmit(&mut self) -> Option<Outgoing> {
         if let Some(o) = self.commands.poll_transmit() {
             return Some(o);
         }
@@ -749,7 +781,7 @@ impl Vehicle {
     }
 
     /// When [`Vehicle::handle_timeout`] is next due.
-    pub(crate) fn poll_timeout(&self) -> Instant {
+    pub fn poll_timeout(&self) -> Instant {
         [
             self.commands.handler().streams.poll_timeout(),
             self.commands.poll_timeout(),
@@ -763,20 +795,33 @@ impl Vehicle {
     }
 
     /// The next line of what happened (mode changes, parameter sets, plans stored).
-    pub(crate) fn poll_log(&mut self) -> Option<String> {
+    pub fn poll_log(&mut self) -> Option<String> {
         self.log.pop_front()
     }
 
     /// What to send a peer that just appeared: our HEARTBEAT at once, so that it need not
     /// wait up to a second to find us — except in the first moments, when the stream's own
     /// first HEARTBEAT reaches the peers a link starts with (a `udpout` destination).
-    pub(crate) fn greeting(&self, now: Instant) -> Option<MavMessage> {
+    pub fn greeting(&self, now: Instant) -> Option<MavMessage> {
         (now.saturating_duration_since(self.started) >= GREETING_AFTER)
             .then(|| MavMessage::Heartbeat(self.commands.handler().heartbeat()))
     }
 
     /// The parameter table's size.
-    pub(crate) fn param_count(&self) -> usize {
+    pub fn param_count(&self) -> usize {
         self.params.len()
     }
+}
+
+/// Whether `frame` gives latitude and longitude (the global frames).
+fn is_global(frame: MavFrame) -> bool {
+    matches!(
+        frame,
+        MavFrame::GLOBAL
+            | MavFrame::GLOBAL_INT
+            | MavFrame::GLOBAL_RELATIVE_ALT
+            | MavFrame::GLOBAL_RELATIVE_ALT_INT
+            | MavFrame::GLOBAL_TERRAIN_ALT
+            | MavFrame::GLOBAL_TERRAIN_ALT_INT
+    )
 }

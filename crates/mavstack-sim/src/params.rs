@@ -6,11 +6,10 @@
 //! value written as an integer (`12`, `-3`) is an INT32 and any other (`12.0`, `1e3`) a
 //! REAL32.
 
-use anyhow::{Context, anyhow, bail};
 use mavstack_dialects::common::MavParamType;
 use mavstack_services::param::{Name, Value};
 
-use crate::vehicle_cmd::Autopilot;
+use crate::Autopilot;
 
 /// ArduPilot Copter's names, types and defaults (a representative subset).
 const ARDUPILOT: &[(&str, Value)] = &[
@@ -88,7 +87,7 @@ const PX4: &[(&str, Value)] = &[
 ];
 
 /// A flavour's default table.
-pub(crate) fn defaults(autopilot: Autopilot) -> Vec<(Name, Value)> {
+pub fn defaults(autopilot: Autopilot) -> Vec<(Name, Value)> {
     let table = match autopilot {
         Autopilot::Ardupilot => ARDUPILOT,
         Autopilot::Px4 => PX4,
@@ -100,45 +99,90 @@ pub(crate) fn defaults(autopilot: Autopilot) -> Vec<(Name, Value)> {
         .collect()
 }
 
+/// Why a parameter file could not be read.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ParamFileError {
+    /// The file could not be read.
+    #[error("cannot read {path}: {source}")]
+    Read {
+        /// The file.
+        path: String,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A line is not a parameter (`LINE: what`, prefixed with the file by [`load`]).
+    #[error("{}{line}: {message}", path.as_ref().map(|p| format!("{p}:")).unwrap_or_default())]
+    Line {
+        /// The file, when read by [`load`].
+        path: Option<String>,
+        /// The line, from 1.
+        line: usize,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// More parameters than the protocol can index.
+    #[error("{count} parameters: at most 65,534 fit the protocol")]
+    TooMany {
+        /// How many the file has.
+        count: usize,
+    },
+}
+
 /// A parameter file's table, in file order (a name given twice keeps its last value).
 ///
 /// # Errors
-/// A line that is not a parameter, naming the file and line.
-pub(crate) fn load(path: &str) -> anyhow::Result<Vec<(Name, Value)>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {path}"))?;
-    parse(&text).map_err(|e| anyhow!("{path}:{e}"))
+/// [`ParamFileError`]: the file cannot be read, or a line is not a parameter (naming the
+/// file and line).
+pub fn load(path: &str) -> Result<Vec<(Name, Value)>, ParamFileError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ParamFileError::Read {
+        path: path.to_owned(),
+        source,
+    })?;
+    parse(&text).map_err(|e| match e {
+        ParamFileError::Line { line, message, .. } => ParamFileError::Line {
+            path: Some(path.to_owned()),
+            line,
+            message,
+        },
+        other => other,
+    })
 }
 
-/// Parses a parameter file's text; errors are `LINE: what`.
-pub(crate) fn parse(text: &str) -> anyhow::Result<Vec<(Name, Value)>> {
+/// Parses a parameter file's text.
+///
+/// # Errors
+/// [`ParamFileError::Line`] for a line that is not a parameter, [`ParamFileError::TooMany`].
+pub fn parse(text: &str) -> Result<Vec<(Name, Value)>, ParamFileError> {
     let mut table: Vec<(Name, Value)> = Vec::new();
     for (i, raw) in text.lines().enumerate() {
         let line = raw.split('#').next().unwrap_or("").trim();
         if line.is_empty() {
             continue;
         }
-        let (name, value) = parse_line(line).map_err(|e| anyhow!("{}: {e}", i + 1))?;
+        let (name, value) = parse_line(line).map_err(|message| ParamFileError::Line {
+            path: None,
+            line: i + 1,
+            message,
+        })?;
         match table.iter_mut().find(|(n, _)| *n == name) {
             Some(slot) => slot.1 = value,
             None => table.push((name, value)),
         }
     }
     if table.len() >= usize::from(u16::MAX) {
-        bail!(
-            "{} parameters: at most 65,534 fit the protocol",
-            table.len()
-        );
+        return Err(ParamFileError::TooMany { count: table.len() });
     }
     Ok(table)
 }
 
-fn parse_line(line: &str) -> anyhow::Result<(Name, Value)> {
+fn parse_line(line: &str) -> Result<(Name, Value), String> {
     let tabbed: Vec<&str> = line.split('\t').map(str::trim).collect();
     let (name, value, ty) = if tabbed.len() == 5 {
         // QGroundControl: SYSID COMPID NAME VALUE TYPE.
         let ty: u8 = tabbed[4]
             .parse()
-            .map_err(|_| anyhow!("type {:?} is not a MAV_PARAM_TYPE number", tabbed[4]))?;
+            .map_err(|_| format!("type {:?} is not a MAV_PARAM_TYPE number", tabbed[4]))?;
         (tabbed[2], tabbed[3], Some(MavParamType(ty)))
     } else {
         let fields: Vec<&str> = line
@@ -147,15 +191,19 @@ fn parse_line(line: &str) -> anyhow::Result<(Name, Value)> {
             .collect();
         match fields.as_slice() {
             [name, value] => (*name, *value, None),
-            _ => bail!("expected NAME VALUE, NAME,VALUE or a QGroundControl line, got {line:?}"),
+            _ => {
+                return Err(format!(
+                    "expected NAME VALUE, NAME,VALUE or a QGroundControl line, got {line:?}"
+                ));
+            }
         }
     };
-    let name = Name::new(name).map_err(|e| anyhow!("parameter name {name:?}: {e}"))?;
+    let name = Name::new(name).map_err(|e| format!("parameter name {name:?}: {e}"))?;
     let number: f64 = value
         .parse()
-        .map_err(|_| anyhow!("value {value:?} of {name} is not a number"))?;
+        .map_err(|_| format!("value {value:?} of {name} is not a number"))?;
     if !number.is_finite() {
-        bail!("value {value:?} of {name} is not finite");
+        return Err(format!("value {value:?} of {name} is not finite"));
     }
     let written_as_integer = value
         .bytes()
@@ -166,7 +214,7 @@ fn parse_line(line: &str) -> anyhow::Result<(Name, Value)> {
         MavParamType::REAL32
     });
     let value = typed(number, ty)
-        .ok_or_else(|| anyhow!("value {value} of {name} does not fit type {ty:?}"))?;
+        .ok_or_else(|| format!("value {value} of {name} does not fit type {ty:?}"))?;
     Ok((name, value))
 }
 
