@@ -609,16 +609,12 @@ impl Driver {
                 && now >= hb.next
             {
                 hb.next = now + hb.period;
-                let payload = core::mem::take(&mut hb.payload);
                 self.router.send(
                     now,
                     None,
                     mavstack_dialects::common::Heartbeat::ID,
-                    &payload,
+                    &hb.payload,
                 );
-                if let Some(hb) = &mut self.heartbeat {
-                    hb.payload = payload;
-                }
             }
             if timer {
                 self.router.handle_timeout(now);
