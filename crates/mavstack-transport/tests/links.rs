@@ -53,6 +53,12 @@ async fn udpin_answers_three_peers_each_at_its_own_address() {
     for client in &mut clients {
         assert_eq!(frame(client).await.frame.sysid(), 7);
     }
+    // The driver publishes its counters after the step that sent the datagrams, which can
+    // come just after the clients have them.
+    until("six datagrams counted", || {
+        server.stats().link.tx_chunks >= 6
+    })
+    .await;
     let stats = server.stats();
     assert_eq!(stats.protocol.frames, 3);
     assert_eq!((stats.link.peers_added, stats.link.tx_chunks), (3, 6));
