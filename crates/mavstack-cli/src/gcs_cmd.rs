@@ -528,6 +528,12 @@ pub(crate) async fn set_param(
     current: Value,
     value: f64,
 ) -> Result<Param, Failure> {
+    // A REAL32 holds what f32 holds: no infinity, no NaN (an integer type clamps instead).
+    if current.param_type() == MavParamType::REAL32 && !(value as f32).is_finite() {
+        return Err(Failure::Input(anyhow!(
+            "{name}: {value} is not a REAL32 value (beyond ±3.4e38, or not a number)"
+        )));
+    }
     let typed = Value::F32(value as f32)
         .converted_to(current.param_type())
         .map(|v| match (v, current) {

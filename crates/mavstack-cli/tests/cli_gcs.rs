@@ -96,6 +96,18 @@ fn params_list_get_set_and_save_round_trip() {
     );
     let missing = gcs(port, &["param", "get", "NO_SUCH"]);
     assert_eq!(missing.status.code(), Some(1));
+    // Beyond f32's range: refused before anything is sent, the value unchanged.
+    for huge in ["1e300", "nan"] {
+        let out = gcs(port, &["param", "set", "P_009", huge]);
+        assert_eq!(out.status.code(), Some(2), "param set P_009 {huge}");
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains("is not a REAL32 value"),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let got = ok(&gcs(port, &["param", "get", "P_009"]));
+    assert_eq!(got, "P_009 = -2.25 (REAL32)\n");
 }
 
 #[test]
