@@ -10,20 +10,8 @@
 
 use anyhow::{Context, anyhow, bail};
 use mavstack_dialects::common::{MavCmd, MavFrame, MavMissionType, MissionItemInt};
+use mavstack_services::mission::is_global;
 use serde_json::{Map, Value as Json, json};
-
-/// Whether `frame` carries latitude/longitude (degE7 in MISSION_ITEM_INT).
-pub(crate) fn is_global(frame: MavFrame) -> bool {
-    matches!(
-        frame,
-        MavFrame::GLOBAL
-            | MavFrame::GLOBAL_INT
-            | MavFrame::GLOBAL_RELATIVE_ALT
-            | MavFrame::GLOBAL_RELATIVE_ALT_INT
-            | MavFrame::GLOBAL_TERRAIN_ALT
-            | MavFrame::GLOBAL_TERRAIN_ALT_INT
-    )
-}
 
 /// The scale between file units and MISSION_ITEM_INT's integers.
 fn scale(frame: MavFrame) -> f64 {

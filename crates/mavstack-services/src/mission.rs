@@ -1138,19 +1138,33 @@ impl MissionServer {
     }
 }
 
-/// The MISSION_ITEM_INT equivalent of a float MISSION_ITEM: latitude and longitude of
-/// global frames scaled to degE7, local coordinates to metres × 10⁴ (as the protocol's INT
-/// frames carry them).
-fn item_int_of(item: &MissionItem) -> MissionItemInt {
-    let global = matches!(
-        item.frame,
+/// Whether `frame` gives latitude and longitude (the global frames, float or INT): their
+/// x and y are degrees (degE7 in MISSION_ITEM_INT), other frames' are metres.
+///
+/// ```
+/// use mavstack_dialects::common::MavFrame;
+/// use mavstack_services::mission::is_global;
+/// assert!(is_global(MavFrame::GLOBAL_RELATIVE_ALT_INT));
+/// assert!(!is_global(MavFrame::LOCAL_NED));
+/// ```
+#[must_use]
+pub fn is_global(frame: MavFrame) -> bool {
+    matches!(
+        frame,
         MavFrame::GLOBAL
             | MavFrame::GLOBAL_RELATIVE_ALT
             | MavFrame::GLOBAL_TERRAIN_ALT
             | MavFrame::GLOBAL_INT
             | MavFrame::GLOBAL_RELATIVE_ALT_INT
             | MavFrame::GLOBAL_TERRAIN_ALT_INT
-    );
+    )
+}
+
+/// The MISSION_ITEM_INT equivalent of a float MISSION_ITEM: latitude and longitude of
+/// global frames scaled to degE7, local coordinates to metres × 10⁴ (as the protocol's INT
+/// frames carry them).
+fn item_int_of(item: &MissionItem) -> MissionItemInt {
+    let global = is_global(item.frame);
     let scale = |v: f32| {
         let v = f64::from(v) * if global { 1e7 } else { 1e4 };
         // Saturating: NaN becomes 0, out-of-range values clamp.

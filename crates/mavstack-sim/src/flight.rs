@@ -525,7 +525,7 @@ impl Flight {
     /// Where an item's coordinates point (its own where given, else here).
     fn item_position(&self, item: &MissionItemInt) -> Position {
         let here = self.position;
-        let global = crate::is_global(item.frame);
+        let global = mavstack_services::mission::is_global(item.frame);
         let (lat, lon) = if global && (item.x != 0 || item.y != 0) {
             (f64::from(item.x) / 1e7, f64::from(item.y) / 1e7)
         } else {

@@ -812,16 +812,3 @@ impl Vehicle {
         self.params.len()
     }
 }
-
-/// Whether `frame` gives latitude and longitude (the global frames).
-fn is_global(frame: MavFrame) -> bool {
-    matches!(
-        frame,
-        MavFrame::GLOBAL
-            | MavFrame::GLOBAL_INT
-            | MavFrame::GLOBAL_RELATIVE_ALT
-            | MavFrame::GLOBAL_RELATIVE_ALT_INT
-            | MavFrame::GLOBAL_TERRAIN_ALT
-            | MavFrame::GLOBAL_TERRAIN_ALT_INT
-    )
-}
