@@ -30,6 +30,10 @@ Scenarios, `mavstack vehicle` against a pymavlink ground station (mavutil):
                           pymavlink; signed commands answered (signed); unsigned v2, v1, replayed
                           and wrongly signed (huge timestamp) commands ignored; genuine frames
                           after the forgery still answered
+  vehicle_multilink       one vehicle on three links (version=1, auto, key=): MAVLink 1 only and the
+                          handshake NACKed on the first, no capability bit there; the switch and
+                          the handshake on the auto link; every frame signed on the key link and an
+                          unsigned command ignored; a parameter set on one link read on another
 
 `mavstack probe` against a pymavlink vehicle written here (HEARTBEAT at 5 Hz, AUTOPILOT_VERSION
 on request, starts in MAVLink 1):
@@ -186,8 +190,8 @@ class Mavstack:
 class Gcs:
     """A pymavlink ground station on a mavutil UDP connection; keeps every message received."""
 
-    def __init__(self, spec, key=None, link_id=1):
-        self.conn = mavutil.mavlink_connection(spec, source_system=GCS[0], source_component=GCS[1])
+    def __init__(self, spec, key=None, link_id=1, sysid=GCS[0]):
+        self.conn = mavutil.mavlink_connection(spec, source_system=sysid, source_component=GCS[1])
         self.log = []
         self.rejected_unsigned = []
         if key is not None:
@@ -643,6 +647,109 @@ def vehicle_signed(bin_):
     return "%d frames, all signed and verified by pymavlink; 4 bad commands ignored, genuine ones answered" % n
 
 
+def param_read(gcs, name, v1=False, timeout=2.0):
+    """PARAM_REQUEST_READ name from gcs; the PARAM_VALUE for it, or None."""
+    gcs.send(M.MAVLink_param_request_read_message(1, 1, name.encode(), -1), v1)
+    return gcs.wait_for(lambda rx: rx.type == "PARAM_VALUE" and rx.msg.param_id == name, timeout)
+
+
+def vehicle_multilink(bin_):
+    """One vehicle, three links: version=1 (a legacy ground station), auto, and key=."""
+    legacy = Gcs("udpin:127.0.0.1:0", sysid=251)
+    auto = Gcs("udpin:127.0.0.1:0", sysid=252)
+    signed = Gcs("udpin:127.0.0.1:0", key=KEY, link_id=3, sysid=253)
+    links = [
+        "udpout:127.0.0.1:%d?version=1&name=legacy" % legacy.port,
+        "udpout:127.0.0.1:%d?name=auto" % auto.port,
+        "udpout:127.0.0.1:%d?key=%s&link_id=2&name=signed" % (signed.port, KEY.hex()),
+    ]
+    veh = Mavstack([bin_, "vehicle", *links])
+    target = (1, 1)
+    try:
+        for g, what in ((legacy, "legacy"), (auto, "auto"), (signed, "signed")):
+            hb = first_heartbeat(g, veh)
+            if hb is None:
+                return
+            check_heartbeat(hb, "%s link, first HEARTBEAT" % what, version=2 if g is signed else 1)
+        check(signed.log[0].signed, "signed link: the first frame is not signed")
+        # version=1: the handshake, in MAVLink 2, is refused in MAVLink 1; no capability bit.
+        for what, command, msg in handshake_requests(target):
+            ack, pv = legacy.request(msg, command, "PROTOCOL_VERSION", timeout=1.5)
+            check_ack(ack, "legacy link, %s" % what, command, version=1, accepted=False)
+            check(pv is None, "legacy link, %s: PROTOCOL_VERSION sent" % what)
+        ack, av = legacy.request(cmd_long(target, REQUEST_MESSAGE, AUTOPILOT_VERSION_ID), REQUEST_MESSAGE,
+                                 "AUTOPILOT_VERSION", v1=True)
+        check_ack(ack, "legacy link, REQUEST_MESSAGE(148)", REQUEST_MESSAGE, version=1)
+        check_autopilot_version(av, "legacy link", False, version=1)
+        # auto: the handshake switches it; the capability bit is set there.
+        t_sent = time.monotonic()
+        ack, pv = auto.request(cmd_long(target, REQUEST_MESSAGE, PROTOCOL_VERSION_ID), REQUEST_MESSAGE,
+                               "PROTOCOL_VERSION")
+        check_ack(ack, "auto link, the handshake", REQUEST_MESSAGE, version=2)
+        check_protocol_version(pv, "auto link, the handshake")
+        check_switched(auto, t_sent, "auto link after the handshake")
+        ack, av = auto.request(cmd_long(target, REQUEST_MESSAGE, AUTOPILOT_VERSION_ID), REQUEST_MESSAGE,
+                               "AUTOPILOT_VERSION")
+        check_autopilot_version(av, "auto link", True, version=2)
+        # Link versions are independent: the legacy link still speaks MAVLink 1 only, and
+        # hears the auto link's ground station, converted.
+        auto.send(gcs_heartbeat())
+        window = legacy.collect(1.5)
+        check(any(rx.type == "HEARTBEAT" and rx.msg.get_srcSystem() == 1 for rx in window),
+              "legacy link: no HEARTBEAT from the vehicle after the auto link switched")
+        check(any(rx.type == "HEARTBEAT" and rx.msg.get_srcSystem() == 252 for rx in legacy.log),
+              "legacy link: the auto link's ground station (252) was not forwarded")
+        check_all_version(legacy.log, 1, "legacy link")
+        # key=: signed commands answered, signed; unsigned ones ignored.
+        ack, av = signed.request(cmd_long(target, REQUEST_MESSAGE, AUTOPILOT_VERSION_ID), REQUEST_MESSAGE,
+                                 "AUTOPILOT_VERSION")
+        check_ack(ack, "signed link, signed REQUEST_MESSAGE(148)", REQUEST_MESSAGE, version=2, signed=True)
+        check_autopilot_version(av, "signed link", True, version=2, signed=True)
+        plain = M.MAVLink(None, srcSystem=253, srcComponent=GCS[1])
+        signed.write(bytes(cmd_long(target, REQUEST_AUTOPILOT_CAPABILITIES, 1).pack(plain)))
+        window = signed.collect(1.5)
+        check(not [rx for rx in window if rx.type == "COMMAND_ACK"], "signed link: an unsigned command was answered")
+        # A parameter set on the auto link reads back on the legacy link. The PARAM_VALUE that
+        # confirms a set is broadcast (the parameter protocol: every ground station learns
+        # the new value), so the legacy link gets it too, in MAVLink 1; the answer to a read
+        # goes back to the link it came from only.
+        before = param_read(auto, "WPNAV_SPEED")
+        if not check(before is not None, "auto link: no PARAM_VALUE for WPNAV_SPEED"):
+            return
+        new = before.msg.param_value + 125.0
+        legacy_seen = len(legacy.log)
+        auto.send(M.MAVLink_param_set_message(1, 1, b"WPNAV_SPEED", new, before.msg.param_type))
+        echo = auto.wait_for(lambda rx: rx.type == "PARAM_VALUE" and rx.msg.param_id == "WPNAV_SPEED", 2.0)
+        check(echo is not None and echo.msg.param_value == new, "auto link: PARAM_SET not confirmed with %s: %r" % (
+            new, echo and echo.msg.param_value))
+        legacy.collect(0.3)
+        told = [rx for rx in legacy.log[legacy_seen:] if rx.type == "PARAM_VALUE"]
+        check([(rx.version, rx.msg.param_value) for rx in told] == [(1, new)],
+              "legacy link: the set's PARAM_VALUE broadcast came as %s, expected one in MAVLink 1" % told)
+        auto_seen = len(auto.log)
+        back = param_read(legacy, "WPNAV_SPEED", v1=True)
+        auto.collect(0.3)
+        stray = [rx for rx in auto.log[auto_seen:] if rx.type == "PARAM_VALUE"]
+        check(not stray, "auto link got the answer to the legacy link's read: %s" % stray)
+        check(back is not None and back.version == 1 and back.msg.param_value == new,
+              "legacy link: WPNAV_SPEED read back as %r, expected %s in MAVLink 1" % (
+                  back and (back.msg.param_value, back.version), new))
+        # Everything on the signed link: signed MAVLink 2, verified; nothing forwarded from
+        # the unsigned links (they are not trusted).
+        s = signed.conn.mav.signing
+        check(not [rx for rx in signed.log if not rx.signed or rx.version != 2], "signed link: frames not signed MAVLink 2")
+        check(not signed.rejected_unsigned, "signed link: pymavlink got unsigned frames (ids %s)" % signed.rejected_unsigned[:10])
+        check(s.badsig_count == 0, "signed link: pymavlink counted %d bad signatures" % s.badsig_count)
+        check(not [rx for rx in signed.log if rx.msg.get_srcSystem() != 1], "signed link: frames of the unsigned links")
+        veh.stop(signal.SIGINT)
+        counts = (len(legacy.log), len(auto.log), len(signed.log))
+    finally:
+        veh.kill()
+        for g in (legacy, auto, signed):
+            g.close()
+    return "legacy/auto/signed links: %d/%d/%d frames, each in its own version; parameter shared" % counts
+
+
 # --------------------------------------------------------------------------------------------
 # The pymavlink vehicle, for `mavstack probe`
 
@@ -887,6 +994,7 @@ def probe_signed(bin_):
 
 SCENARIOS = {
     "vehicle_switch": vehicle_switch,
+    "vehicle_multilink": vehicle_multilink,
     "vehicle_udpin": vehicle_udpin,
     "vehicle_handshake": vehicle_handshake,
     "vehicle_mavlink1_only": vehicle_mavlink1_only,

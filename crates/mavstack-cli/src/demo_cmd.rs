@@ -25,7 +25,7 @@ use std::net::UdpSocket;
 use clap::Args;
 use mavstack_channel::{
     Authentication, CommandEncoding, Config, Event, HandshakeMethod, HandshakeResult,
-    SigningConfig, Target, VehicleVersion,
+    SigningConfig, Target,
 };
 use mavstack_core::Message;
 use mavstack_core::signing::{self, SecretKey};
@@ -47,8 +47,10 @@ use tokio::time::Instant;
 use crate::gcs_cmd::{Remote, fetch_params, mission_op, set_param, value_text};
 use crate::link_cmd::runtime;
 use crate::radio_cmd::{open_radio_side, run_radio};
-use crate::vehicle_cmd::{Log, VehicleSetup, open_vehicle, run_vehicle, version_name};
+use crate::vehicle_cmd::{Log, version_name};
 use crate::{Failure, other};
+use mavstack::sim_vehicle::SimVehicle;
+use mavstack::{LinkSpec, Node};
 use mavstack_sim::Autopilot;
 use mavstack_sim::flight;
 
@@ -261,22 +263,27 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
     };
     // The vehicle: MAVLink 1 until a MAVLink 2 frame, MAVLink 2 capable, a secure link
     // (think USB) so it accepts SETUP_SIGNING.
-    let setup = VehicleSetup {
-        sysid: 1,
-        compid: 1,
-        autopilot: Autopilot::Ardupilot,
-        version: VehicleVersion::StartMavlink1,
-        signing: None,
-        protocol_version: true,
-        secure: true,
-        params: mavstack_sim::params::defaults(Autopilot::Ardupilot),
-    };
     let any_port = |scheme: &str| -> Result<ConnSpec, Failure> {
         format!("{scheme}:127.0.0.1:0").parse().map_err(other)
     };
-    let vehicle_conn = open_vehicle(&setup, &any_port("udpin")?).await?;
-    let vehicle_addr = vehicle_conn
-        .local_addr()
+    let radio_link =
+        LinkSpec::parse("udpin:127.0.0.1:0?secure=true&name=radio", &|_| None).map_err(other)?;
+    let vehicle = SimVehicle::start_logged(
+        Node::builder().link(radio_link),
+        SimVehicle::config(
+            Autopilot::Ardupilot,
+            mavstack_sim::params::defaults(Autopilot::Ardupilot),
+        ),
+        timeline.log(),
+    )
+    .await
+    .map_err(other)?;
+    let vehicle_addr = vehicle
+        .node()
+        .local_addrs()
+        .first()
+        .copied()
+        .flatten()
         .ok_or_else(|| other("the vehicle's socket has no address"))?;
     let radio_a = open_radio_side(&any_port("udpin")?).await?;
     let radio_a_addr = radio_a
@@ -287,14 +294,17 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
     timeline.say(format!(
         "setup: vehicle 1/1 on udp {vehicle_addr} (starts in MAVLink 1), radio {radio_a_addr} ⇄ vehicle, ground station 255/190 → radio"
     ));
+    // A copy of every signed COMMAND_LONG the vehicle accepts: the attacker replays one.
     let (tap_tx, mut tap_rx) = mpsc::unbounded_channel();
-    let vehicle = tokio::spawn(run_vehicle(
-        setup,
-        vehicle_conn,
-        timeline.log(),
-        Some(tap_tx),
-        stopped(stop_rx.clone()),
-    ));
+    let mut for_vehicle = vehicle.node().subscribe().await;
+    let tap = tokio::spawn(async move {
+        while let Some(incoming) = for_vehicle.recv().await {
+            let rf = &incoming.frame;
+            if rf.frame.is_signed() && rf.frame.msg_id() == CommandLong::ID {
+                let _ = tap_tx.send(rf.frame.as_bytes().to_vec());
+            }
+        }
+    });
     let radio = tokio::spawn(run_radio(
         radio_a,
         radio_b,
@@ -325,12 +335,22 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
         }
     };
     let _ = stop_tx.send(true);
-    let links = vehicle.await.map_err(other)??;
+    let report = vehicle.shutdown().await.map_err(other)?;
+    tap.abort();
     radio.await.map_err(other)??;
     outcome?;
-    let replayed: u64 = links.iter().map(|l| l.rejected.replayed).sum();
-    let forged: u64 = links.iter().map(|l| l.rejected.bad_signature).sum();
-    let accepted: u64 = links.iter().map(|l| l.accepted).sum();
+    let dropped = |reason: &str| -> u64 {
+        report
+            .links
+            .iter()
+            .flat_map(|l| &l.dropped)
+            .filter(|(r, _)| *r == reason)
+            .map(|(_, n)| n)
+            .sum()
+    };
+    let replayed = dropped("replay");
+    let forged = dropped("bad_signature");
+    let accepted: u64 = report.links.iter().map(|l| l.rx_frames).sum();
     timeline.say(format!(
         "vehicle's link: {accepted} frames accepted, {replayed} replay and {forged} forgery rejected"
     ));

@@ -11,7 +11,8 @@
 //!   `--no-protocol-version`, `--start-mavlink2`, `--sign-key` (signed from the first frame,
 //!   verified by pymavlink's signing; unsigned, MAVLink 1, replayed and wrongly signed commands
 //!   ignored), AUTOPILOT_VERSION's MAVLink 2 capability, `--autopilot`, `--sysid`, exit 0 on
-//!   SIGINT/SIGTERM;
+//!   SIGINT/SIGTERM; and one vehicle on three links (`version=1`, `auto`, `key=`), each with
+//!   its own version, handshake answer, capability bit and signing, parameters shared;
 //! - `mavstack probe` against a pymavlink vehicle that answers the handshake, NACKs it, stays
 //!   silent, or signs everything: the JSON report and the frames the probe sent.
 //!
@@ -98,4 +99,9 @@ fn probe_request_protocol_version_as_command_int() {
 #[test]
 fn probe_sees_a_signing_vehicle() {
     scenario("probe_signed");
+}
+
+#[test]
+fn vehicle_with_three_links_keeps_each_links_version_and_signing_and_shares_its_parameters() {
+    scenario("vehicle_multilink");
 }

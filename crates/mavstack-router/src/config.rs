@@ -6,6 +6,26 @@ use core::time::Duration;
 
 use mavstack_channel::{Config as ChannelConfig, SigningConfig, VehicleVersion};
 
+/// Whose link it is: a router's, that forwards for others, or a vehicle's (any component
+/// that answers the MAVLink 2 handshake for itself).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum LinkRole {
+    /// Forwards what others send and speaks for nobody: never answers a handshake, and
+    /// SETUP_SIGNING is routed like any frame (from a `secure` link only).
+    #[default]
+    Relay,
+    /// The link of the router's own component when it is a vehicle: its channel answers a
+    /// request for PROTOCOL_VERSION addressed to it (PROTOCOL_VERSION in MAVLink 2, or a
+    /// COMMAND_ACK failure in MAVLink 1 on a `version=1` link), applies a SETUP_SIGNING
+    /// addressed to it on a `secure` link, and the MAV_PROTOCOL_CAPABILITY_MAVLINK2 bit of the
+    /// component's own AUTOPILOT_VERSION is set exactly on the links that accept MAVLink 2.
+    Vehicle {
+        /// Whether it answers the handshake at all (`false`: a vehicle without
+        /// PROTOCOL_VERSION support, which stays silent).
+        protocol_version: bool,
+    },
+}
+
 /// Which framing a link carries (the `version` link option).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum VersionMode {
@@ -109,6 +129,8 @@ pub struct RateLimits {
 pub struct LinkConfig {
     /// Its name in statistics and logs.
     pub name: String,
+    /// Whose link it is (default [`LinkRole::Relay`]).
+    pub role: LinkRole,
     /// The framing it carries.
     pub version: VersionMode,
     /// Signing: `Some` makes it a signed MAVLink 2 link (every frame out signed, every frame
@@ -140,6 +162,7 @@ impl LinkConfig {
     pub fn new(name: impl Into<String>) -> Self {
         Self {
             name: name.into(),
+            role: LinkRole::Relay,
             version: VersionMode::Auto,
             signing: None,
             secure: false,
@@ -155,7 +178,19 @@ impl LinkConfig {
     /// The channel setup of this link for a router with ids `(sysid, compid)`.
     #[must_use]
     pub fn channel_config(&self, sysid: u8, compid: u8) -> ChannelConfig {
-        let mut config = ChannelConfig::relay(sysid, compid, self.version.channel_policy());
+        let mut config = match self.role {
+            LinkRole::Relay => ChannelConfig::relay(sysid, compid, self.version.channel_policy()),
+            LinkRole::Vehicle { protocol_version } => {
+                let mut config = ChannelConfig::vehicle(sysid, compid);
+                if let Some(policy) = config.vehicle_policy_mut() {
+                    policy.version = self.version.channel_policy();
+                    if !protocol_version {
+                        policy.protocol_version = None;
+                    }
+                }
+                config
+            }
+        };
         config.signing.clone_from(&self.signing);
         config.secure = self.secure;
         config

@@ -48,12 +48,13 @@ pub mod router;
 pub mod stats;
 
 pub use config::{
-    DirectionFilters, IdFilter, LinkConfig, LocalDelivery, RateLimits, RouterConfig, VersionMode,
+    DirectionFilters, IdFilter, LinkConfig, LinkRole, LocalDelivery, RateLimits, RouterConfig,
+    VersionMode,
 };
 pub use dialect::{Dialect, DialectInfo, InfoFn, is_control, target_of};
 pub use options::OptionError;
 pub use route::Route;
-pub use router::{Event, LinkId, Router, Transmit};
+pub use router::{Event, LinkId, Router, SendTo, Transmit};
 pub use stats::{Conversions, Counters, DropReason, Drops, LinkMode, LinkStatus};
 
 /// Fuzzing entry point for link options: any text is parsed (message names resolve to

@@ -5,13 +5,14 @@ use alloc::vec::Vec;
 use core::time::Duration;
 
 use mavstack_channel::{
-    Channel, ConfigError, Event as ChannelEvent, LinkVersion, ReceivedFrame, Rejected,
+    Channel, ConfigError, Event as ChannelEvent, LinkVersion, ProtocolVersionAnswer, ReceivedFrame,
+    Rejected, SigningSetup, SwitchCause,
 };
 use mavstack_core::message::Message as _;
 use mavstack_core::signing;
 use mavstack_core::time::Instant;
 use mavstack_core::wire::MAX_FRAME_LEN;
-use mavstack_dialects::common::SetupSigning;
+use mavstack_dialects::common::{AutopilotVersion, MavProtocolCapability, SetupSigning};
 
 use crate::config::{LinkConfig, LocalDelivery, RouterConfig, VersionMode};
 use crate::convert::{self, Origin, Plan};
@@ -73,6 +74,28 @@ pub enum Event {
         from: LinkVersion,
         /// After.
         to: LinkVersion,
+        /// Why.
+        cause: SwitchCause,
+    },
+    /// A [`LinkRole::Vehicle`](crate::LinkRole::Vehicle) link was asked for
+    /// PROTOCOL_VERSION; its answer is queued on the link.
+    ProtocolVersionRequested {
+        /// The link.
+        link: LinkId,
+        /// The requester (sysid, compid).
+        from: (u8, u8),
+        /// What the link answered.
+        answer: ProtocolVersionAnswer,
+    },
+    /// A [`LinkRole::Vehicle`](crate::LinkRole::Vehicle) link applied a SETUP_SIGNING (it
+    /// came on a `secure` link, addressed to the router's component).
+    SigningSetup {
+        /// The link.
+        link: LinkId,
+        /// The sender (sysid, compid).
+        from: (u8, u8),
+        /// What changed.
+        setup: SigningSetup,
     },
     /// A signed link asks for its signing timestamp to be stored (see the channel's
     /// `Event::PersistTimestamp`).
@@ -89,6 +112,20 @@ pub enum Event {
         /// What and why.
         rejected: Rejected,
     },
+}
+
+/// Where [`Router::send`] sends a message of the router's own component.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum SendTo {
+    /// Where the message's target fields lead: the links a known target was heard on; every
+    /// link for a broadcast, a target not heard yet, or a message without target fields.
+    Target,
+    /// Onto this link only.
+    Link(LinkId),
+    /// Where component `(sysid, compid)` was heard, as if the message were addressed to it
+    /// (an answer without target fields, such as PARAM_VALUE for a read); every link if it
+    /// was not heard. Component 0 means any component of the system.
+    Component(u8, u8),
 }
 
 /// A frame to send: `buf[..len]` onto `link`.
@@ -316,6 +353,7 @@ impl<D: Dialect> Router<D> {
             };
             data = &data[n..];
             let drained = self.drain_channel(now, id);
+            self.drain_channel_transmits(now, id);
             if data.is_empty() || (n == 0 && !drained) {
                 return;
             }
@@ -335,9 +373,33 @@ impl<D: Dialect> Router<D> {
                 ChannelEvent::Rejected(rejected) => {
                     self.push_event(Event::Rejected { link: id, rejected });
                 }
-                ChannelEvent::VersionChanged { from, to, .. } => {
-                    self.push_event(Event::VersionChanged { link: id, from, to });
+                ChannelEvent::VersionChanged { from, to, cause } => {
+                    self.push_event(Event::VersionChanged {
+                        link: id,
+                        from,
+                        to,
+                        cause,
+                    });
                 }
+                ChannelEvent::ProtocolVersionRequested {
+                    sysid,
+                    compid,
+                    answer,
+                    ..
+                } => self.push_event(Event::ProtocolVersionRequested {
+                    link: id,
+                    from: (sysid, compid),
+                    answer,
+                }),
+                ChannelEvent::SigningSetup {
+                    sysid,
+                    compid,
+                    setup,
+                } => self.push_event(Event::SigningSetup {
+                    link: id,
+                    from: (sysid, compid),
+                    setup,
+                }),
                 ChannelEvent::PersistTimestamp { timestamp } => {
                     self.push_event(Event::PersistTimestamp {
                         link: id,
@@ -346,6 +408,27 @@ impl<D: Dialect> Router<D> {
                 }
                 _ => {}
             }
+        }
+    }
+
+    /// Queues what `id`'s channel sends on its own (a vehicle link's handshake answers) as
+    /// control traffic of that link.
+    fn drain_channel_transmits(&mut self, now: Instant, id: LinkId) {
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        let mut queued = false;
+        let Some(l) = self.link_mut(id) else { return };
+        while let Some(t) = l.channel.poll_transmit(now, &mut buf) {
+            if l.queue.push(true, &buf[..t.len], l.config.queue_frames) {
+                l.counters.tx_frames += 1;
+                l.counters.tx_bytes += t.len as u64;
+                queued = true;
+            } else {
+                l.counters.dropped.count(DropReason::QueueFull);
+            }
+        }
+        if queued && !l.ready {
+            l.ready = true;
+            self.ready.push_back(id);
         }
     }
 
@@ -531,13 +614,14 @@ impl<D: Dialect> Router<D> {
     /// heard MAVLink 2, MAVLink 2 otherwise), with its own sequence numbers, signed when the
     /// link signs. The message goes where its target fields (read through the dialect) lead:
     /// a broadcast, or a system not heard yet, to every link; a known system to the links it
-    /// was heard on. `to` names one link instead. The out-filters, rate limits and queues of
+    /// was heard on. `to` may name one link, or the component it answers, instead (see
+    /// [`SendTo`]). The out-filters, rate limits and queues of
     /// the links apply as to forwarded frames. Returns how many links it was queued on.
     ///
     /// ```
     /// use mavstack_core::time::Instant;
     /// use mavstack_core::Message as _;
-    /// use mavstack_router::{DialectInfo, LinkConfig, Router, RouterConfig, VersionMode};
+    /// use mavstack_router::{DialectInfo, LinkConfig, Router, RouterConfig, SendTo, VersionMode};
     /// use mavstack_dialects::common::{Heartbeat, MavMessage};
     ///
     /// let mut router = Router::new(RouterConfig::default(), DialectInfo::<MavMessage>::new());
@@ -550,21 +634,26 @@ impl<D: Dialect> Router<D> {
     ///
     /// let mut payload = [0u8; 255];
     /// let len = Heartbeat::default().encode(&mut payload);
-    /// assert_eq!(router.send(Instant::ZERO, None, Heartbeat::ID, &payload[..len]), 2);
+    /// assert_eq!(router.send(Instant::ZERO, SendTo::Target, Heartbeat::ID, &payload[..len]), 2);
     /// let mut buf = [0u8; 280];
     /// let magics: Vec<u8> = core::iter::from_fn(|| router.poll_transmit(&mut buf).map(|_| buf[0])).collect();
     /// assert_eq!(magics, [0xfe, 0xfd]);
     /// ```
-    pub fn send(&mut self, now: Instant, to: Option<LinkId>, msg_id: u32, payload: &[u8]) -> usize {
+    pub fn send(&mut self, now: Instant, to: SendTo, msg_id: u32, payload: &[u8]) -> usize {
         let Some(info) = self.dialect.info(msg_id) else {
             return 0;
         };
         let mut dests = core::mem::take(&mut self.scratch);
         dests.clear();
-        if let Some(link) = to {
-            dests.push(link);
-        } else {
-            let (tsys, tcomp) = target_of(Some(&info), payload);
+        let target = match to {
+            SendTo::Link(link) => {
+                dests.push(link);
+                None
+            }
+            SendTo::Target => Some(target_of(Some(&info), payload)),
+            SendTo::Component(sysid, compid) => Some((sysid, compid)),
+        };
+        if let Some((tsys, tcomp)) = target {
             let known = tsys != 0
                 && self
                     .routes
@@ -589,6 +678,14 @@ impl<D: Dialect> Router<D> {
                 out.counters.dropped.count(DropReason::RateLimited);
                 continue;
             }
+            let mut own_caps = [0u8; mavstack_core::MAX_PAYLOAD_LEN];
+            let payload = if msg_id == AutopilotVersion::ID
+                && matches!(out.config.role, crate::LinkRole::Vehicle { .. })
+            {
+                with_mavlink2_capability(payload, out.channel.accepts_mavlink2(), &mut own_caps)
+            } else {
+                payload
+            };
             let mut buf = [0u8; MAX_FRAME_LEN];
             let len = match out
                 .channel
@@ -705,8 +802,28 @@ impl<D: Dialect> Router<D> {
                 l.channel.handle_timeout(now);
             }
             self.drain_channel(now, id);
+            self.drain_channel_transmits(now, id);
         }
     }
+}
+
+/// AUTOPILOT_VERSION's payload with MAV_PROTOCOL_CAPABILITY_MAVLINK2 set or cleared in its
+/// `capabilities` (the first field, a little-endian u64), written into `buf`.
+fn with_mavlink2_capability<'a>(payload: &[u8], on: bool, buf: &'a mut [u8]) -> &'a [u8] {
+    let len = payload.len().clamp(8, buf.len());
+    buf[..len].fill(0);
+    let n = payload.len().min(len);
+    buf[..n].copy_from_slice(&payload[..n]);
+    let mut caps = [0u8; 8];
+    caps.copy_from_slice(&buf[..8]);
+    let mut caps = u64::from_le_bytes(caps);
+    if on {
+        caps |= MavProtocolCapability::MAVLINK2.0;
+    } else {
+        caps &= !MavProtocolCapability::MAVLINK2.0;
+    }
+    buf[..8].copy_from_slice(&caps.to_le_bytes());
+    &buf[..len]
 }
 
 impl<D> core::fmt::Debug for Router<D> {

@@ -12,7 +12,7 @@ use mavstack_dialects::common::{
     Attitude, CommandAck, CommandLong, Heartbeat, MavCmd, MavMessage, MavSysStatusSensorExtended,
     ProtocolVersion, SysStatus,
 };
-use mavstack_router::{DialectInfo, LinkConfig, LinkId, Router, RouterConfig, VersionMode};
+use mavstack_router::{DialectInfo, LinkConfig, LinkId, Router, RouterConfig, SendTo, VersionMode};
 
 type R = Router<DialectInfo<MavMessage>>;
 
@@ -502,7 +502,10 @@ fn own_messages_take_each_links_version_and_signing() {
     let len = hb().encode(&mut payload);
     let own = (r.config().system_id, r.config().component_id);
 
-    assert_eq!(r.send(T0, None, Heartbeat::ID, &payload[..len]), 3);
+    assert_eq!(
+        r.send(T0, SendTo::Target, Heartbeat::ID, &payload[..len]),
+        3
+    );
     let out = drain(&mut r);
     let on = |l: LinkId| -> Vec<Vec<u8>> {
         out.iter()
@@ -531,7 +534,10 @@ fn own_messages_take_each_links_version_and_signing() {
     drain(&mut r);
     let mut payload = [0u8; 255];
     let len = command((7, 1)).encode(&mut payload);
-    assert_eq!(r.send(T0, None, CommandLong::ID, &payload[..len]), 1);
+    assert_eq!(
+        r.send(T0, SendTo::Target, CommandLong::ID, &payload[..len]),
+        1
+    );
     let out = drain(&mut r);
     assert_eq!(out.len(), 1);
     assert_eq!(out[0].0, auto);
@@ -542,7 +548,10 @@ fn own_messages_take_each_links_version_and_signing() {
     // An id above 255 cannot go on the MAVLink 1 link: counted there, sent on the others.
     let mut payload = [0u8; 255];
     let len = ProtocolVersion::default().encode(&mut payload);
-    assert_eq!(r.send(T0, None, ProtocolVersion::ID, &payload[..len]), 2);
+    assert_eq!(
+        r.send(T0, SendTo::Target, ProtocolVersion::ID, &payload[..len]),
+        2
+    );
     assert_eq!(
         r.link_status(v1).unwrap().counters.dropped.cannot_convert,
         1
@@ -551,6 +560,115 @@ fn own_messages_take_each_links_version_and_signing() {
     assert!(out.iter().all(|(l, _)| *l != v1));
     // One link named: only there.
     let len = hb().encode(&mut payload);
-    assert_eq!(r.send(T0, Some(signed), Heartbeat::ID, &payload[..len]), 1);
+    assert_eq!(
+        r.send(T0, SendTo::Link(signed), Heartbeat::ID, &payload[..len]),
+        1
+    );
     assert_eq!(drain(&mut r).len(), 1);
+}
+
+#[test]
+fn vehicle_links_answer_the_handshake_in_their_own_version_and_set_the_capability_per_link() {
+    use mavstack_dialects::common::{AutopilotVersion, MavProtocolCapability, MavResult};
+    use mavstack_router::{Event, LinkRole};
+    let mut config = RouterConfig::default();
+    config.component_id = 1;
+    let mut r = Router::new(config, DialectInfo::<MavMessage>::new());
+    let vehicle = LinkRole::Vehicle {
+        protocol_version: true,
+    };
+    let v1 = link(&mut r, "v1", |c| {
+        c.version = VersionMode::Mavlink1;
+        c.role = vehicle;
+    });
+    let auto = link(&mut r, "auto", |c| c.role = vehicle);
+    let relay = link(&mut r, "relay", |_| {});
+
+    // The handshake request, in MAVLink 2 from a ground station, on each link.
+    let request = frame(&command((1, 1)), Version::V2, (255, 190), 0, None);
+    r.handle_datagram(T0, v1, &request);
+    r.handle_datagram(T0, auto, &request);
+    r.handle_datagram(T0, relay, &request);
+    let mut events = Vec::new();
+    let mut out = Vec::new();
+    let mut buf = [0u8; MAX_FRAME_LEN];
+    while let Some(t) = r.poll_transmit(&mut buf) {
+        out.push((t.link, buf[..t.len].to_vec()));
+    }
+    while let Some(e) = r.poll_event() {
+        events.push(e);
+    }
+    let decoded = |frames: Vec<Vec<u8>>| -> Vec<(Version, MavMessage)> {
+        frames
+            .iter()
+            .map(|b| {
+                let f = Frame::new_checked(&b[..]).unwrap();
+                let m = MavMessage::decode(f.msg_id(), f.payload()).unwrap();
+                (f.version(), m)
+            })
+            .collect()
+    };
+    // version=1: a failure COMMAND_ACK in MAVLink 1, nothing else of the vehicle's own.
+    let on_v1 = decoded(on(&out, v1));
+    let acks: Vec<_> = on_v1
+        .iter()
+        .filter_map(|(v, m)| match m {
+            MavMessage::CommandAck(a) => Some((*v, a.result)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(acks, [(Version::V1, MavResult::UNSUPPORTED)]);
+    assert!(on_v1.iter().all(|(v, _)| *v == Version::V1));
+    // auto: the ACK, then PROTOCOL_VERSION in MAVLink 2, and the link is MAVLink 2 now.
+    let on_auto = decoded(on(&out, auto));
+    assert!(
+        on_auto
+            .iter()
+            .any(|(v, m)| *v == Version::V2 && matches!(m, MavMessage::ProtocolVersion(_)))
+    );
+    // A relay link answers nothing of its own: it only forwards (the request went on to the
+    // other links, as a frame for system 1 heard on no link yet is not).
+    assert!(decoded(on(&out, relay)).iter().all(|(_, m)| !matches!(
+        m,
+        MavMessage::ProtocolVersion(_) | MavMessage::CommandAck(_)
+    )));
+    let answered: Vec<LinkId> = events
+        .iter()
+        .filter_map(|e| match e {
+            Event::ProtocolVersionRequested { link, from, .. } => {
+                assert_eq!(*from, (255, 190));
+                Some(*link)
+            }
+            _ => None,
+        })
+        .collect();
+    assert_eq!(answered, [v1, auto]);
+
+    // The component's own AUTOPILOT_VERSION: the MAVLINK2 bit only where MAVLink 2 goes.
+    let mut payload = [0u8; 255];
+    let own = AutopilotVersion {
+        capabilities: MavProtocolCapability::MISSION_INT | MavProtocolCapability::MAVLINK2,
+        ..AutopilotVersion::default()
+    };
+    let len = own.encode(&mut payload);
+    assert_eq!(
+        r.send(T0, SendTo::Target, AutopilotVersion::ID, &payload[..len]),
+        3
+    );
+    let caps: Vec<(LinkId, u64)> = core::iter::from_fn(|| {
+        r.poll_transmit(&mut buf).map(|t| {
+            let f = Frame::new_checked(&buf[..t.len]).unwrap();
+            match MavMessage::decode(f.msg_id(), f.payload()).unwrap() {
+                MavMessage::AutopilotVersion(a) => (t.link, a.capabilities.0),
+                m => panic!("{m:?}"),
+            }
+        })
+    })
+    .collect();
+    let mission_int = MavProtocolCapability::MISSION_INT.0;
+    let mavlink2 = MavProtocolCapability::MAVLINK2.0;
+    assert!(caps.contains(&(v1, mission_int)));
+    assert!(caps.contains(&(auto, mission_int | mavlink2)));
+    // A relay link's frames are not the router's business: sent as given.
+    assert!(caps.contains(&(relay, mission_int | mavlink2)));
 }

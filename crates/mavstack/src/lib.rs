@@ -66,7 +66,8 @@ pub mod sim_vehicle;
 
 pub use link_spec::{LinkSpec, LinkSpecError, redacted};
 pub use node::{
-    Incoming, LinkReport, Node, NodeBuilder, NodeError, NodeHandle, NodeReport, Subscription,
+    EventSubscription, Incoming, LinkEvent, LinkReport, Node, NodeBuilder, NodeError, NodeEvent,
+    NodeHandle, NodeReport, Subscription,
 };
 
 pub use mavstack_channel as channel;

@@ -18,12 +18,15 @@ use core::time::Duration;
 use std::collections::HashMap;
 use std::path::PathBuf;
 
-use mavstack_channel::ReceivedFrame;
+use mavstack_channel::{
+    LinkVersion, ProtocolVersionAnswer, ReceivedFrame, Rejected, SigningSetup, SwitchCause,
+};
 use mavstack_core::time::Instant;
 use mavstack_core::wire::MAX_FRAME_LEN;
 use mavstack_core::{MAX_PAYLOAD_LEN, Message, MessageSet};
 use mavstack_router::{
-    Event, InfoFn, LinkConfig, LinkId, LinkMode, LocalDelivery, Router, RouterConfig,
+    Event, InfoFn, LinkConfig, LinkId, LinkMode, LinkRole, LocalDelivery, Router, RouterConfig,
+    SendTo,
 };
 use mavstack_transport::protocol::Framing;
 use mavstack_transport::{
@@ -121,6 +124,9 @@ pub struct NodeReport {
 pub struct Incoming {
     /// The name of the link it came in on.
     pub link: String,
+    /// The router link (one peer of that link) it came from: answers sent with
+    /// [`NodeHandle::send_on`] go back exactly there.
+    pub link_id: LinkId,
     /// The frame, as the link's channel accepted it (version, signature, sequence, bytes).
     pub frame: ReceivedFrame,
 }
@@ -130,17 +136,77 @@ pub struct Incoming {
 /// [`NodeReport::subscriber_drops`]).
 pub type Subscription = mpsc::Receiver<Incoming>;
 
+/// Something that happened on one of the node's links (see [`NodeHandle::events`]).
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub struct NodeEvent {
+    /// The configured link's name.
+    pub link: String,
+    /// The router link (one peer of it).
+    pub link_id: LinkId,
+    /// What happened.
+    pub kind: LinkEvent,
+}
+
+/// What [`NodeEvent`] reports.
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub enum LinkEvent {
+    /// A peer appeared (a UDP or TCP client of a server link, a connected `tcp` or
+    /// `udpout` endpoint, a serial port opened).
+    PeerAdded {
+        /// Its address.
+        peer: String,
+    },
+    /// A peer went away (a TCP client closed, a UDP client went quiet).
+    PeerRemoved {
+        /// Its address.
+        peer: String,
+    },
+    /// The link's version changed.
+    VersionChanged {
+        /// Before.
+        from: LinkVersion,
+        /// After.
+        to: LinkVersion,
+        /// Why.
+        cause: SwitchCause,
+    },
+    /// A vehicle link ([`LinkRole::Vehicle`]) was asked for PROTOCOL_VERSION.
+    ProtocolVersionRequested {
+        /// The requester (sysid, compid).
+        from: (u8, u8),
+        /// What the link answered.
+        answer: ProtocolVersionAnswer,
+    },
+    /// A vehicle link applied a SETUP_SIGNING.
+    SigningSetup {
+        /// The sender (sysid, compid).
+        from: (u8, u8),
+        /// What changed.
+        setup: SigningSetup,
+    },
+    /// The link refused a frame (bad signature, replay, unsigned on a signed link).
+    Rejected(Rejected),
+}
+
+/// Events for the node's link events, from [`NodeHandle::events`]: a bounded queue like
+/// [`Subscription`].
+pub type EventSubscription = mpsc::Receiver<NodeEvent>;
+
 /// How many frames a subscriber may fall behind.
 const SUBSCRIPTION_DEPTH: usize = 1024;
 
 enum Command {
     Report(oneshot::Sender<NodeReport>),
     Send {
+        to: SendTo,
         msg_id: u32,
         payload: Vec<u8>,
         done: oneshot::Sender<usize>,
     },
     Subscribe(mpsc::Sender<Incoming>, oneshot::Sender<()>),
+    Events(mpsc::Sender<NodeEvent>, oneshot::Sender<()>),
     Shutdown,
 }
 
@@ -167,6 +233,7 @@ pub struct NodeBuilder {
     log_dir: Option<PathBuf>,
     options: Options,
     heartbeat: Option<(Vec<u8>, Duration)>,
+    role: Option<LinkRole>,
 }
 
 impl NodeBuilder {
@@ -212,6 +279,21 @@ impl NodeBuilder {
             period.max(Duration::from_millis(10)),
         ));
         self
+    }
+
+    /// Whose links they are, for every link (default [`LinkRole::Relay`], or what each
+    /// [`LinkSpec`] says): [`LinkRole::Vehicle`] makes the node's component answer the
+    /// MAVLink 2 handshake and SETUP_SIGNING on each link by that link's rules.
+    #[must_use]
+    pub const fn role(mut self, role: LinkRole) -> Self {
+        self.role = Some(role);
+        self
+    }
+
+    /// The role set with [`role`](Self::role), if any.
+    #[must_use]
+    pub const fn link_role(&self) -> Option<LinkRole> {
+        self.role
     }
 
     /// The dialect whose CRC_EXTRA, lengths and target offsets the links use (default
@@ -262,7 +344,10 @@ impl NodeBuilder {
         options.peer_timeout = options.peer_timeout.max(router_config.route_ttl);
         // An endpoint that is not up yet is tried again, as mavlink-router does.
         options.keep_trying = true;
-        for spec in self.links {
+        for mut spec in self.links {
+            if let Some(role) = self.role {
+                spec.config.role = role;
+            }
             let mut io =
                 Link::open(&spec.conn, &options)
                     .await
@@ -294,6 +379,8 @@ impl NodeBuilder {
             buf: [0; MAX_FRAME_LEN],
             subscribers: Vec::new(),
             subscriber_drops: 0,
+            watchers: Vec::new(),
+            pending: Vec::new(),
             heartbeat: self.heartbeat.map(|(payload, period)| Heartbeat {
                 payload,
                 period,
@@ -340,6 +427,7 @@ impl Node {
             log_dir: None,
             options: Options::default(),
             heartbeat: None,
+            role: None,
         }
     }
 
@@ -382,6 +470,12 @@ impl Node {
         self.task.is_finished()
     }
 
+    /// Resolves when the node's task has ended on its own (a link failed); then
+    /// [`shutdown`](Self::shutdown) says why.
+    pub async fn closed(&self) {
+        self.commands.closed().await;
+    }
+
     /// Stops the node: queued frames go out, links close, the log is written out.
     /// Returns the final report.
     ///
@@ -409,20 +503,45 @@ impl NodeHandle {
     pub async fn send<M: Message>(&self, message: &M) -> usize {
         let mut payload = [0u8; MAX_PAYLOAD_LEN];
         let len = message.encode(&mut payload);
-        self.send_payload(M::ID, payload[..len].to_vec()).await
+        self.send_payload(SendTo::Target, M::ID, payload[..len].to_vec())
+            .await
     }
 
     /// Like [`send`](Self::send), for a message of a dialect's enum (`MavMessage`).
     pub async fn send_message<S: MessageSet>(&self, message: &S) -> usize {
         let mut payload = [0u8; MAX_PAYLOAD_LEN];
         let len = message.encode(&mut payload);
-        self.send_payload(message.id(), payload[..len].to_vec())
+        self.send_payload(SendTo::Target, message.id(), payload[..len].to_vec())
             .await
     }
 
-    async fn send_payload(&self, msg_id: u32, payload: Vec<u8>) -> usize {
+    /// Like [`send_message`](Self::send_message), sent where component `(sysid, compid)`
+    /// was heard as if the message were addressed to it: an answer without target fields
+    /// (PARAM_VALUE for a read or a set) goes back to the link the request came from.
+    pub async fn send_answer<S: MessageSet>(&self, to: (u8, u8), message: &S) -> usize {
+        let mut payload = [0u8; MAX_PAYLOAD_LEN];
+        let len = message.encode(&mut payload);
+        self.send_payload(
+            SendTo::Component(to.0, to.1),
+            message.id(),
+            payload[..len].to_vec(),
+        )
+        .await
+    }
+
+    /// Like [`send_message`](Self::send_message), onto one router link only (the one an
+    /// [`Incoming`] or a [`NodeEvent`] names); 0 if it is gone.
+    pub async fn send_on<S: MessageSet>(&self, link: LinkId, message: &S) -> usize {
+        let mut payload = [0u8; MAX_PAYLOAD_LEN];
+        let len = message.encode(&mut payload);
+        self.send_payload(SendTo::Link(link), message.id(), payload[..len].to_vec())
+            .await
+    }
+
+    async fn send_payload(&self, to: SendTo, msg_id: u32, payload: Vec<u8>) -> usize {
         let (done, rx) = oneshot::channel();
         let command = Command::Send {
+            to,
             msg_id,
             payload,
             done,
@@ -446,6 +565,17 @@ impl NodeHandle {
             .is_ok()
         {
             // Registered before this returns: nothing that arrives later is missed.
+            let _ = registered.await;
+        }
+        rx
+    }
+
+    /// Every link event from now on (peers, version changes, handshakes answered, signing
+    /// set up, frames refused). Dropping the receiver unsubscribes.
+    pub async fn events(&self) -> EventSubscription {
+        let (tx, rx) = mpsc::channel(SUBSCRIPTION_DEPTH);
+        let (done, registered) = oneshot::channel();
+        if self.commands.send(Command::Events(tx, done)).await.is_ok() {
             let _ = registered.await;
         }
         rx
@@ -478,6 +608,9 @@ struct Driver {
     buf: [u8; MAX_FRAME_LEN],
     subscribers: Vec<mpsc::Sender<Incoming>>,
     subscriber_drops: u64,
+    watchers: Vec<mpsc::Sender<NodeEvent>>,
+    /// Peer events of the last dispatch, for the watchers.
+    pending: Vec<NodeEvent>,
     heartbeat: Option<Heartbeat>,
 }
 
@@ -495,6 +628,8 @@ struct Feed<'a> {
     template: &'a LinkConfig,
     peers: &'a mut HashMap<PeerId, (LinkId, Framing, String)>,
     owners: &'a mut Vec<Option<(usize, PeerId)>>,
+    /// Peer events, when someone watches.
+    pending: Option<&'a mut Vec<NodeEvent>>,
 }
 
 impl Input for Feed<'_> {
@@ -508,6 +643,15 @@ impl Input for Feed<'_> {
                     self.owners.resize(id.index() + 1, None);
                 }
                 self.owners[id.index()] = Some((self.slot, peer.id));
+                if let Some(pending) = &mut self.pending {
+                    pending.push(NodeEvent {
+                        link: self.template.name.clone(),
+                        link_id: id,
+                        kind: LinkEvent::PeerAdded {
+                            peer: peer.addr.to_string(),
+                        },
+                    });
+                }
             }
             Err(e) => tracing::warn!("{}: {e}", self.template.name),
         }
@@ -519,6 +663,13 @@ impl Input for Feed<'_> {
             self.router.remove_link(id);
             if let Some(o) = self.owners.get_mut(id.index()) {
                 *o = None;
+            }
+            if let Some(pending) = &mut self.pending {
+                pending.push(NodeEvent {
+                    link: self.template.name.clone(),
+                    link_id: id,
+                    kind: LinkEvent::PeerRemoved { peer: addr },
+                });
             }
         }
     }
@@ -544,6 +695,7 @@ impl Driver {
                 template: &slot.template,
                 peers: &mut slot.peers,
                 owners: &mut self.owners,
+                pending: (!self.watchers.is_empty()).then_some(&mut self.pending),
             },
         )
     }
@@ -611,7 +763,7 @@ impl Driver {
                 hb.next = now + hb.period;
                 self.router.send(
                     now,
-                    None,
+                    SendTo::Target,
                     mavstack_dialects::common::Heartbeat::ID,
                     &hb.payload,
                 );
@@ -636,16 +788,21 @@ impl Driver {
                     let _ = tx.send(self.report(clock::now()));
                 }
                 Some(Some(Command::Send {
+                    to,
                     msg_id,
                     payload,
                     done,
                 })) => {
-                    let queued = self.router.send(clock::now(), None, msg_id, &payload);
+                    let queued = self.router.send(clock::now(), to, msg_id, &payload);
                     self.flush();
                     let _ = done.send(queued);
                 }
                 Some(Some(Command::Subscribe(tx, done))) => {
                     self.subscribers.push(tx);
+                    let _ = done.send(());
+                }
+                Some(Some(Command::Events(tx, done))) => {
+                    self.watchers.push(tx);
                     let _ = done.send(());
                 }
                 Some(Some(Command::Shutdown) | None) => break,
@@ -727,7 +884,11 @@ impl Driver {
                         continue;
                     }
                     let name = self.link_label(link);
-                    let incoming = Incoming { link: name, frame };
+                    let incoming = Incoming {
+                        link: name,
+                        link_id: link,
+                        frame,
+                    };
                     self.subscribers.retain(|s| !s.is_closed());
                     for s in &self.subscribers {
                         if s.try_send(incoming.clone()).is_err() {
@@ -735,14 +896,33 @@ impl Driver {
                         }
                     }
                 }
-                Event::VersionChanged { link, from, to } => {
-                    tracing::info!("{}: {from} → {to}", self.link_label(link));
+                Event::VersionChanged {
+                    link,
+                    from,
+                    to,
+                    cause,
+                } => {
+                    tracing::info!("{}: {from} → {to} ({cause})", self.link_label(link));
+                    self.tell(link, LinkEvent::VersionChanged { from, to, cause });
                 }
                 Event::Rejected { link, rejected } => {
                     tracing::debug!("{}: rejected {:?}", self.link_label(link), rejected.reason);
+                    self.tell(link, LinkEvent::Rejected(rejected));
+                }
+                Event::ProtocolVersionRequested { link, from, answer } => {
+                    tracing::info!("{}: handshake request: {answer}", self.link_label(link));
+                    self.tell(link, LinkEvent::ProtocolVersionRequested { from, answer });
+                }
+                Event::SigningSetup { link, from, setup } => {
+                    tracing::info!("{}: SETUP_SIGNING applied", self.link_label(link));
+                    self.tell(link, LinkEvent::SigningSetup { from, setup });
                 }
                 _ => {}
             }
+        }
+        let pending = core::mem::take(&mut self.pending);
+        for event in pending {
+            self.publish(event);
         }
         if let Some((path, log)) = &mut self.log {
             log.flush_if_due().map_err(|source| NodeError::Log {
@@ -751,6 +931,28 @@ impl Driver {
             })?;
         }
         Ok(())
+    }
+
+    /// Tells the watchers what happened on `link`.
+    fn tell(&mut self, link: LinkId, kind: LinkEvent) {
+        if self.watchers.is_empty() {
+            return;
+        }
+        let event = NodeEvent {
+            link: self.link_label(link),
+            link_id: link,
+            kind,
+        };
+        self.publish(event);
+    }
+
+    fn publish(&mut self, event: NodeEvent) {
+        self.watchers.retain(|w| !w.is_closed());
+        for w in &self.watchers {
+            if w.try_send(event.clone()).is_err() {
+                self.subscriber_drops += 1;
+            }
+        }
     }
 
     fn link_label(&self, link: LinkId) -> String {

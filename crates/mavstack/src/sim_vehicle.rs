@@ -17,27 +17,44 @@
 //! # Ok(()) }
 //! ```
 
-use mavstack_core::MessageSet as _;
-use mavstack_dialects::common::MavMessage;
+use mavstack_channel::SigningSetup;
+use mavstack_core::wire::Version;
+use mavstack_core::{Message as _, MessageSet as _};
+use mavstack_dialects::common::{AutopilotVersion, CommandLong, MavCmd, MavMessage};
+use mavstack_router::LinkRole;
 use mavstack_services::Address;
 use mavstack_services::param::{Name, Value};
 use mavstack_sim::{Autopilot, SimConfig, Vehicle};
 use mavstack_transport::clock;
-use tokio::sync::oneshot;
+use tokio::sync::{mpsc, oneshot};
 use tokio::task::JoinHandle;
 
-use crate::node::{Node, NodeBuilder, NodeError, NodeHandle, NodeReport, Subscription};
+use crate::node::{
+    EventSubscription, LinkEvent, Node, NodeBuilder, NodeError, NodeEvent, NodeHandle, NodeReport,
+    Subscription,
+};
 
 /// A simulated vehicle running on its own [`Node`]: it answers parameters, missions and
-/// commands and streams telemetry on the node's links, as `mavstack vehicle` does (the
-/// node's links forward between them like any node's; the MAVLink 2 handshake and
-/// SETUP_SIGNING are `mavstack vehicle`'s, not this one's yet).
+/// commands and streams telemetry on every link of the node, as `mavstack vehicle` does.
+/// One vehicle, one parameter table and one mission store, whatever the number of links;
+/// answers go back on the link the request came from, HEARTBEAT and telemetry go on every
+/// link, and frames for other systems are forwarded between the links by the router's rules.
+///
+/// Unless the builder says otherwise ([`NodeBuilder::role`]), its links are vehicle links
+/// ([`LinkRole::Vehicle`]): each answers the MAVLink 2 handshake by its own `version`
+/// (PROTOCOL_VERSION, or a MAVLink 1 NACK on a `version=1` link), applies SETUP_SIGNING when
+/// `secure`, and carries the MAVLINK2 capability bit in AUTOPILOT_VERSION exactly when it
+/// accepts MAVLink 2.
 #[derive(Debug)]
 pub struct SimVehicle {
     node: Node,
     stop: oneshot::Sender<()>,
     task: JoinHandle<()>,
 }
+
+/// One line of what the vehicle does (parameter sets, modes, plans, link versions,
+/// handshakes, refused frames), for a log or a timeline.
+pub type LogLines = mpsc::UnboundedSender<String>;
 
 impl SimVehicle {
     /// A system 1, component 1 vehicle of `autopilot`'s flavour with `params`, advertising
@@ -55,19 +72,48 @@ impl SimVehicle {
         }
     }
 
-    /// Starts a node from `builder` with the vehicle's identity, and the vehicle on it.
+    /// Starts a node from `builder` with the vehicle's identity, and the vehicle on it; what
+    /// it does goes to `tracing` at level info.
     ///
     /// # Errors
     /// [`NodeError`] if a link cannot be opened.
     pub async fn start(builder: NodeBuilder, config: SimConfig) -> Result<Self, NodeError> {
+        Self::start_logged(builder, config, None).await
+    }
+
+    /// Like [`start`](Self::start), with what the vehicle does sent to `log` as lines
+    /// (`vehicle: link MAVLink 1 → MAVLink 2 (...)`, `vehicle ← handshake request: ...`).
+    ///
+    /// # Errors
+    /// [`NodeError`] if a link cannot be opened.
+    pub async fn start_logged(
+        builder: NodeBuilder,
+        config: SimConfig,
+        log: Option<LogLines>,
+    ) -> Result<Self, NodeError> {
+        let builder = if builder.link_role().is_none() {
+            builder.role(LinkRole::Vehicle {
+                protocol_version: true,
+            })
+        } else {
+            builder
+        };
         let node = builder
             .identity(config.own.system, config.own.component)
             .start()
             .await?;
         let frames = node.subscribe().await;
+        let events = node.handle().events().await;
+        let flavour = config.autopilot;
         let sim = Vehicle::new(config, clock::now());
+        say(&log, || {
+            format!(
+                "vehicle: {flavour} flavour, {} parameters",
+                sim.param_count()
+            )
+        });
         let (stop, stopped) = oneshot::channel();
-        let task = tokio::spawn(drive(node.handle(), frames, sim, stopped));
+        let task = tokio::spawn(drive(node.handle(), frames, events, sim, log, stopped));
         Ok(Self { node, stop, task })
     }
 
@@ -88,35 +134,118 @@ impl SimVehicle {
     }
 }
 
-/// The vehicle's loop: frames for it in, its messages out, its timers.
+fn say(log: &Option<LogLines>, line: impl FnOnce() -> String) {
+    match log {
+        Some(tx) => {
+            let _ = tx.send(line());
+        }
+        None => tracing::info!("{}", line()),
+    }
+}
+
+const fn version_name(v: Version) -> &'static str {
+    match v {
+        Version::V1 => "MAVLink 1",
+        Version::V2 => "MAVLink 2",
+    }
+}
+
+/// A message's name in the common dialect, or its number.
+fn message_name(id: u32) -> String {
+    MavMessage::info(id).map_or_else(|| format!("message {id}"), |m| m.name.to_owned())
+}
+
+/// The vehicle's loop: frames for it in, its messages out, its timers, its links' events.
 async fn drive(
     node: NodeHandle,
     mut frames: Subscription,
+    mut events: EventSubscription,
     mut sim: Vehicle,
+    log: Option<LogLines>,
     mut stopped: oneshot::Receiver<()>,
 ) {
     loop {
         while let Some(out) = sim.poll_transmit() {
-            node.send_message(&out.message).await;
+            // Answers go back where the requester was heard; broadcasts everywhere.
+            let to = (out.target.system, out.target.component);
+            node.send_answer(to, &out.message).await;
         }
         while let Some(line) = sim.poll_log() {
-            tracing::info!("vehicle: {line}");
+            say(&log, || format!("vehicle: {line}"));
         }
         let wake = clock::to_tokio(sim.poll_timeout());
         tokio::select! {
             _ = &mut stopped => break,
             incoming = frames.recv() => {
                 let Some(incoming) = incoming else { break };
-                let frame = incoming.frame.frame.view();
+                let rf = &incoming.frame;
+                // Handshake requests are the link's (answered, refused or ignored).
+                if rf.protocol_version_request.is_some() || rf.answered {
+                    continue;
+                }
+                let frame = rf.frame.view();
                 let from = Address {
                     system: frame.sysid(),
                     component: frame.compid(),
                 };
-                if let Ok(message) = MavMessage::decode(frame.msg_id(), frame.payload()) {
-                    sim.handle_message(clock::now(), from, &message);
+                let Ok(message) = MavMessage::decode(frame.msg_id(), frame.payload()) else {
+                    continue;
+                };
+                if let MavMessage::CommandLong(CommandLong { command, param1, .. }) = &message
+                    && (*command == MavCmd::REQUEST_AUTOPILOT_CAPABILITIES
+                        || (*command == MavCmd::REQUEST_MESSAGE
+                            && *param1 == AutopilotVersion::ID as f32))
+                {
+                    say(&log, || {
+                        format!(
+                            "vehicle ← AUTOPILOT_VERSION requested ({})",
+                            version_name(frame.version())
+                        )
+                    });
                 }
+                sim.handle_message(clock::now(), from, &message);
+            }
+            event = events.recv() => {
+                let Some(event) = event else { break };
+                link_event(&node, &sim, &log, event).await;
             }
             () = tokio::time::sleep_until(wake) => sim.handle_timeout(clock::now()),
         }
+    }
+}
+
+/// What the vehicle does about one of its links' events: greets a new peer, says the rest.
+async fn link_event(node: &NodeHandle, sim: &Vehicle, log: &Option<LogLines>, event: NodeEvent) {
+    let link = &event.link;
+    match event.kind {
+        LinkEvent::PeerAdded { .. } => {
+            if let Some(hello) = sim.greeting(clock::now()) {
+                node.send_on(event.link_id, &hello).await;
+            }
+        }
+        LinkEvent::VersionChanged { from, to, cause } => {
+            say(log, || {
+                format!("vehicle: link {from} → {to} ({cause}) [{link}]")
+            });
+        }
+        LinkEvent::ProtocolVersionRequested { answer, .. } => {
+            say(log, || {
+                format!("vehicle ← handshake request: {answer} [{link}]")
+            });
+        }
+        LinkEvent::Rejected(r) => say(log, || {
+            format!(
+                "vehicle ✗ rejected {}: {} [{link}]",
+                message_name(r.msg_id),
+                r.reason
+            )
+        }),
+        LinkEvent::SigningSetup { setup, .. } => say(log, || match setup {
+            SigningSetup::Enabled { .. } => {
+                format!("vehicle: SETUP_SIGNING accepted, link signed from now on [{link}]")
+            }
+            SigningSetup::Disabled => format!("vehicle: SETUP_SIGNING turned signing off [{link}]"),
+        }),
+        _ => {}
     }
 }

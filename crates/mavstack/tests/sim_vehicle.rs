@@ -100,3 +100,78 @@ async fn a_ground_station_node_reads_telemetry_and_a_parameter_of_the_in_process
     gcs.shutdown().await.expect("ground station stops");
     vehicle.shutdown().await.expect("vehicle stops");
 }
+
+#[tokio::test]
+async fn a_vehicle_link_with_version_1_refuses_the_handshake_and_reports_it_as_an_event() {
+    use mavstack::channel::ProtocolVersionAnswer;
+    use mavstack::core::wire::Version;
+    use mavstack::dialects::common::{CommandLong, MavCmd};
+    use mavstack::{LinkEvent, NodeEvent};
+    let none = |_: &str| None;
+    let vehicle = SimVehicle::start(
+        Node::builder()
+            .link(LinkSpec::parse("udpin:127.0.0.1:0?version=1&name=legacy", &none).expect("spec")),
+        SimVehicle::config(Autopilot::Px4, params::defaults(Autopilot::Px4)),
+    )
+    .await
+    .expect("vehicle starts");
+    let mut events = vehicle.node().handle().events().await;
+    let port = vehicle.node().local_addrs()[0].expect("bound").port();
+    // The ground station's link is MAVLink 2 from the start: the request goes in MAVLink 2.
+    let gcs = Node::builder()
+        .identity(255, 190)
+        .link(LinkSpec::parse(&format!("udpout:127.0.0.1:{port}?version=2"), &none).expect("spec"))
+        .start()
+        .await
+        .expect("ground station starts");
+    let mut frames = gcs.subscribe().await;
+    let request = CommandLong {
+        target_system: 1,
+        target_component: 1,
+        command: MavCmd::REQUEST_MESSAGE,
+        param1: 300.0,
+        ..CommandLong::default()
+    };
+    assert_eq!(gcs.send(&request).await, 1);
+
+    let event = tokio::time::timeout(Duration::from_secs(3), async {
+        loop {
+            match events.recv().await {
+                Some(NodeEvent {
+                    link,
+                    kind: LinkEvent::ProtocolVersionRequested { from, answer },
+                    ..
+                }) => return Some((link, from, answer)),
+                Some(_) => {}
+                None => return None,
+            }
+        }
+    })
+    .await
+    .ok()
+    .flatten()
+    .expect("the handshake request, as an event");
+    assert_eq!(event.0, "legacy");
+    assert_eq!(event.1, (255, 190));
+    assert!(matches!(event.2, ProtocolVersionAnswer::Nacked(_)));
+    // The refusal, in MAVLink 1.
+    let ack = tokio::time::timeout(Duration::from_secs(3), async {
+        while let Some(incoming) = frames.recv().await {
+            let f = incoming.frame.frame.view();
+            if let Ok(MavMessage::CommandAck(a)) = MavMessage::decode(f.msg_id(), f.payload()) {
+                return Some((f.version(), a.command, a.result));
+            }
+        }
+        None
+    })
+    .await
+    .ok()
+    .flatten()
+    .expect("COMMAND_ACK");
+    assert_eq!(ack.0, Version::V1);
+    assert_eq!(ack.1, MavCmd::REQUEST_MESSAGE);
+    assert_ne!(ack.2, mavstack::dialects::common::MavResult::ACCEPTED);
+
+    gcs.shutdown().await.expect("ground station stops");
+    vehicle.shutdown().await.expect("vehicle stops");
+}
