@@ -23,34 +23,33 @@ use core::time::Duration;
 use std::net::UdpSocket;
 
 use clap::Args;
+use mavstack::router::LinkId;
+use mavstack::sim_vehicle::SimVehicle;
+use mavstack::system::{System, Wanted};
+use mavstack::{
+    EventSubscription, Incoming, LinkEvent, LinkSpec, Node, NodeEvent, NodeHandle, Subscription,
+};
 use mavstack_channel::{
-    Authentication, CommandEncoding, Config, Event, HandshakeMethod, HandshakeResult,
+    Authentication, CommandEncoding, HandshakeMethod, HandshakeResult, ReceivedFrame,
     SigningConfig, Target,
 };
 use mavstack_core::Message;
 use mavstack_core::signing::{self, SecretKey};
 use mavstack_core::wire::{FrameHeader, MAX_FRAME_LEN, Version, emit_message};
 use mavstack_dialects::common::{
-    AutopilotVersion, CommandLong, Heartbeat, MavAutopilot, MavCmd, MavFrame, MavMissionType,
-    MavProtocolCapability, MavType, MissionItemInt, ProtocolVersion, RadioStatus, SetupSigning,
+    AutopilotVersion, CommandLong, Heartbeat, MavCmd, MavFrame, MavMessage, MavMissionType,
+    MavProtocolCapability, MissionItemInt, ProtocolVersion, RadioStatus, SetupSigning,
 };
-use mavstack_services::Address;
-use mavstack_services::mission::MissionEvent;
 use mavstack_services::param::Name;
-use mavstack_transport::channel_protocol::{
-    ChannelCommand, ChannelEvent, ChannelEventKind, ChannelProtocol, RawMessage,
-};
-use mavstack_transport::{ConnSpec, Connection, Dest, PeerId, clock};
+use mavstack_transport::{ConnSpec, clock};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
-use crate::gcs_cmd::{Remote, fetch_params, mission_op, set_param, value_text};
+use crate::gcs_cmd::{ground_station, set_param, value_text};
 use crate::link_cmd::runtime;
 use crate::radio_cmd::{open_radio_side, run_radio};
 use crate::vehicle_cmd::{Log, version_name};
 use crate::{Failure, other};
-use mavstack::sim_vehicle::SimVehicle;
-use mavstack::{LinkSpec, Node};
 use mavstack_sim::Autopilot;
 use mavstack_sim::flight;
 
@@ -93,11 +92,24 @@ impl Timeline {
     }
 }
 
-/// The ground station's side of the demo.
+/// What the ground station's node reports: a frame for it, or something on its link.
+#[allow(
+    clippy::large_enum_variant,
+    reason = "a few per second, moved once: boxing would buy nothing"
+)]
+enum Seen {
+    Frame(Incoming),
+    Link(NodeEvent),
+}
+
+/// The ground station's side of the demo: a ground-station node (its HEARTBEAT every second)
+/// and what it sees.
 struct Ground {
-    conn: Connection<ChannelProtocol>,
-    peer: Option<PeerId>,
-    heartbeat_due: Instant,
+    node: Node,
+    handle: NodeHandle,
+    frames: Subscription,
+    events: EventSubscription,
+    link: Option<LinkId>,
     seen_v1_status: bool,
     seen_v2_status: bool,
     seen_hb: Option<Version>,
@@ -105,52 +117,40 @@ struct Ground {
 }
 
 impl Ground {
-    async fn send(&self, command: ChannelCommand) -> Result<(), Failure> {
-        self.conn.send(command).await.map_err(other)
+    /// Sends `message` on the link to the vehicle.
+    async fn send(&self, message: &MavMessage) -> Result<(), Failure> {
+        let link = self.link.ok_or_else(|| other("no link to the vehicle"))?;
+        self.handle.send_on(link, message).await;
+        Ok(())
     }
 
-    /// Takes events until `found` says yes (returns it) or `within` passes (`None`); sends a
-    /// ground-station HEARTBEAT every second meanwhile and narrates what it sees.
+    /// Takes what the node reports until `found` says yes (returns it) or `within` passes
+    /// (`None`), narrating what it sees.
     async fn wait(
         &mut self,
         timeline: &Timeline,
         within: Duration,
-        mut found: impl FnMut(&ChannelEvent) -> bool,
-    ) -> Result<Option<ChannelEvent>, Failure> {
+        mut found: impl FnMut(&Seen) -> bool,
+    ) -> Result<Option<Seen>, Failure> {
         let deadline = Instant::now() + within;
         loop {
-            if Instant::now() >= self.heartbeat_due {
-                self.heartbeat_due = Instant::now() + Duration::from_secs(1);
-                let hb = RawMessage::new(&Heartbeat {
-                    r#type: MavType::GCS,
-                    autopilot: MavAutopilot::INVALID,
-                    mavlink_version: 3,
-                    ..Heartbeat::default()
-                });
-                self.send(ChannelCommand::to_all(hb)).await?;
-            }
-            let event = tokio::select! {
-                () = tokio::time::sleep_until(deadline.min(self.heartbeat_due)) => {
-                    if Instant::now() >= deadline {
-                        return Ok(None);
-                    }
-                    continue;
-                }
-                e = self.conn.recv() => e.ok_or_else(|| other("the ground station's link closed"))?,
+            let closed = || other("the ground station's node stopped");
+            let seen = tokio::select! {
+                () = tokio::time::sleep_until(deadline) => return Ok(None),
+                f = self.frames.recv() => Seen::Frame(f.ok_or_else(closed)?),
+                e = self.events.recv() => Seen::Link(e.ok_or_else(closed)?),
             };
-            self.narrate(timeline, &event);
-            if found(&event) {
-                return Ok(Some(event));
+            self.narrate(timeline, &seen);
+            if found(&seen) {
+                return Ok(Some(seen));
             }
         }
     }
 
-    fn narrate(&mut self, timeline: &Timeline, event: &ChannelEvent) {
-        let ChannelEventKind::Channel(e) = &event.event else {
-            return;
-        };
-        match e {
-            Event::Frame(rf) => {
+    fn narrate(&mut self, timeline: &Timeline, seen: &Seen) {
+        match seen {
+            Seen::Frame(incoming) => {
+                let rf = &incoming.frame;
                 let f = &rf.frame;
                 if f.msg_id() == RadioStatus::ID {
                     let first = match f.version() {
@@ -168,8 +168,9 @@ impl Ground {
                             }
                         ));
                     }
-                } else if f.msg_id() == Heartbeat::ID && f.sysid() == 1 {
-                    self.peer.get_or_insert(event.peer);
+                }
+                if f.msg_id() == Heartbeat::ID && (f.sysid(), f.compid()) == (1, 1) {
+                    self.link.get_or_insert(incoming.link_id);
                     let signed = matches!(rf.auth, Authentication::Verified { .. });
                     if self.seen_hb != Some(f.version()) || (signed && !self.seen_signed_hb) {
                         self.seen_hb = Some(f.version());
@@ -186,23 +187,25 @@ impl Ground {
                     }
                 }
             }
-            Event::VersionChanged { from, to, cause } => {
-                timeline.say(format!("ground station: link {from} → {to} ({cause})"));
-            }
-            Event::Rejected(r) => {
-                timeline.say(format!(
-                    "ground station ✗ rejected {}: {}",
-                    crate::vehicle_cmd::message_name(r.msg_id),
-                    r.reason
-                ));
-            }
-            _ => {}
+            Seen::Link(event) => match &event.kind {
+                LinkEvent::VersionChanged { from, to, cause } => {
+                    timeline.say(format!("ground station: link {from} → {to} ({cause})"));
+                }
+                LinkEvent::Rejected(r) => {
+                    timeline.say(format!(
+                        "ground station ✗ rejected {}: {}",
+                        crate::vehicle_cmd::message_name(r.msg_id),
+                        r.reason
+                    ));
+                }
+                _ => {}
+            },
         }
     }
 }
 
-fn request(command: MavCmd, param1: f32) -> RawMessage {
-    RawMessage::new(&CommandLong {
+fn request(command: MavCmd, param1: f32) -> MavMessage {
+    MavMessage::CommandLong(CommandLong {
         target_system: 1,
         target_component: 1,
         command,
@@ -211,8 +214,16 @@ fn request(command: MavCmd, param1: f32) -> RawMessage {
     })
 }
 
-fn is_message(event: &ChannelEvent, id: u32) -> bool {
-    matches!(&event.event, ChannelEventKind::Channel(Event::Frame(rf)) if rf.frame.msg_id() == id)
+/// The frame, if `seen` is one with message `id`.
+fn frame_of(seen: &Seen, id: u32) -> Option<&ReceivedFrame> {
+    match seen {
+        Seen::Frame(incoming) if incoming.frame.frame.msg_id() == id => Some(&incoming.frame),
+        _ => None,
+    }
+}
+
+fn is_message(seen: &Seen, id: u32) -> bool {
+    frame_of(seen, id).is_some()
 }
 
 /// A forged COMMAND_LONG: signed with the wrong key, timestamp far in the future (the frame
@@ -312,28 +323,30 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
         timeline.log(),
         stopped(stop_rx.clone()),
     ));
-    let gcs_conn = Connection::open(
-        &format!("udpout:{radio_a_addr}").parse().map_err(other)?,
-        ChannelProtocol::new(Config::ground_station(255, 190)).map_err(other)?,
-    )
-    .await
-    .map_err(other)?;
+    let gcs = ground_station(255, 190)
+        .link(LinkSpec::parse(&format!("udpout:{radio_a_addr}"), &|_| None).map_err(other)?)
+        .start()
+        .await
+        .map_err(other)?;
+    let handle = gcs.handle();
+    let frames = gcs.subscribe().await;
+    let events = handle.events().await;
     let mut ground = Ground {
-        conn: gcs_conn,
-        peer: None,
-        heartbeat_due: Instant::now(),
+        node: gcs,
+        handle,
+        frames,
+        events,
+        link: None,
         seen_v1_status: false,
         seen_v2_status: false,
         seen_hb: None,
         seen_signed_hb: false,
     };
-    let outcome = match script(timeline, &mut ground, &mut tap_rx, radio_a_addr).await {
-        Ok(()) => services(timeline, ground.conn).await,
-        Err(e) => {
-            let _ = ground.conn.close().await;
-            Err(e)
-        }
-    };
+    let mut outcome = script(timeline, &mut ground, &mut tap_rx, radio_a_addr).await;
+    if outcome.is_ok() {
+        outcome = services(timeline, &ground.handle).await;
+    }
+    let _ = ground.node.shutdown().await;
     let _ = stop_tx.send(true);
     let report = vehicle.shutdown().await.map_err(other)?;
     tap.abort();
@@ -386,23 +399,18 @@ fn demo_mission() -> Vec<MissionItemInt> {
 
 /// Step 8: the configuration services over the signed link — the parameter table, a
 /// parameter set, a mission uploaded and read back.
-async fn services(timeline: &Timeline, conn: Connection<ChannelProtocol>) -> Result<(), Failure> {
-    let mut remote = Remote::find(
-        conn,
-        Address::new(255, 190),
-        Some(1),
-        Some(1),
-        Duration::from_secs(3),
-        "the radio",
-    )
-    .await?;
+async fn services(timeline: &Timeline, node: &NodeHandle) -> Result<(), Failure> {
+    let since = |began: Instant| began.elapsed().as_secs_f64() * 1000.0;
+    let mut vehicle = System::wait(node, Wanted::System(1, Some(1)), Duration::from_secs(3))
+        .await
+        .map_err(other)?;
     timeline.say("ground station → PARAM_REQUEST_LIST, signed");
-    let began = remote.elapsed();
-    let table = fetch_params(&mut remote).await?;
+    let began = Instant::now();
+    let table = vehicle.params().await.map_err(other)?;
     timeline.say(format!(
         "ground station ← {} PARAM_VALUEs in {:.0} ms (ArduPilot C-cast encoding)",
         table.len(),
-        remote.since(began) * 1000.0
+        since(began)
     ));
     let name = Name::new("WPNAV_SPEED").map_err(other)?;
     let current = table
@@ -410,8 +418,7 @@ async fn services(timeline: &Timeline, conn: Connection<ChannelProtocol>) -> Res
         .find(|(n, _)| *n == name)
         .map(|(_, v)| *v)
         .ok_or_else(|| other("demo step failed: no WPNAV_SPEED in the table"))?;
-    let mut client = remote.param_client();
-    let set = set_param(&mut remote, &mut client, name, current, 750.0).await?;
+    let set = set_param(&mut vehicle, name, current, 750.0).await?;
     timeline.say(format!(
         "ground station → PARAM_SET WPNAV_SPEED {} → 750; vehicle confirms {}",
         value_text(current),
@@ -419,29 +426,19 @@ async fn services(timeline: &Timeline, conn: Connection<ChannelProtocol>) -> Res
     ));
     let items = demo_mission();
     let count = items.len();
-    let mut missions = remote.mission_client();
-    let target = remote.target();
-    missions
-        .upload(remote.now(), target, MavMissionType::MISSION, items.clone())
-        .map_err(other)?;
-    let began = remote.elapsed();
-    match mission_op(&mut remote, &mut missions).await? {
-        MissionEvent::Uploaded { result: Ok(()), .. } => {}
-        e => return Err(other(format!("demo step failed: mission upload: {e:?}"))),
-    }
+    let began = Instant::now();
+    vehicle
+        .upload_mission(MavMissionType::MISSION, items.clone())
+        .await
+        .map_err(|e| other(format!("demo step failed: mission upload: {e}")))?;
     timeline.say(format!(
         "ground station → mission of {count} items (MISSION_COUNT, MISSION_ITEM_INT × {count}) accepted in {:.0} ms",
-        remote.since(began) * 1000.0
+        since(began)
     ));
-    missions
-        .download(remote.now(), target, MavMissionType::MISSION)
-        .map_err(other)?;
-    let back = match mission_op(&mut remote, &mut missions).await? {
-        MissionEvent::Downloaded {
-            result: Ok(back), ..
-        } => back,
-        e => return Err(other(format!("demo step failed: mission download: {e:?}"))),
-    };
+    let back = vehicle
+        .download_mission(MavMissionType::MISSION)
+        .await
+        .map_err(|e| other(format!("demo step failed: mission download: {e}")))?;
     let same = back.len() == items.len()
         && back.iter().zip(&items).all(|(a, b)| {
             (a.command, a.frame, a.x, a.y, a.z.to_bits())
@@ -454,7 +451,7 @@ async fn services(timeline: &Timeline, conn: Connection<ChannelProtocol>) -> Res
         "ground station ← mission read back: {} items, identical",
         back.len()
     ));
-    remote.close().await
+    Ok(())
 }
 
 /// Asks the vehicle for AUTOPILOT_VERSION on the signed link and waits for a verified answer;
@@ -462,20 +459,18 @@ async fn services(timeline: &Timeline, conn: Connection<ChannelProtocol>) -> Res
 async fn signed_autopilot_version(
     timeline: &Timeline,
     ground: &mut Ground,
-    peer: PeerId,
     failure: &str,
 ) -> Result<(), Failure> {
     ground
-        .send(ChannelCommand::Send {
-            dest: Dest::Peer(peer),
-            message: request(MavCmd::REQUEST_MESSAGE, AutopilotVersion::ID as f32),
-        })
+        .send(&request(
+            MavCmd::REQUEST_MESSAGE,
+            AutopilotVersion::ID as f32,
+        ))
         .await?;
     let answer = ground
         .wait(timeline, Duration::from_secs(3), |e| {
-            matches!(&e.event, ChannelEventKind::Channel(Event::Frame(rf))
-                if rf.frame.msg_id() == AutopilotVersion::ID
-                    && matches!(rf.auth, Authentication::Verified { .. }))
+            frame_of(e, AutopilotVersion::ID)
+                .is_some_and(|rf| matches!(rf.auth, Authentication::Verified { .. }))
         })
         .await?;
     answer
@@ -489,17 +484,17 @@ async fn script(
     tap: &mut mpsc::UnboundedReceiver<Vec<u8>>,
     radio_addr: core::net::SocketAddr,
 ) -> Result<(), Failure> {
-    let need = |found: Option<ChannelEvent>, what: &str| {
+    let need = |found: Option<Seen>, what: &str| {
         found.ok_or_else(|| other(format!("demo step failed: {what}")))
     };
     // 1. Discovery, in MAVLink 1.
     let hb = ground
         .wait(timeline, Duration::from_secs(4), |e| {
-            is_message(e, Heartbeat::ID)
+            frame_of(e, Heartbeat::ID).is_some_and(|rf| rf.frame.sysid() == 1)
         })
         .await?;
     need(hb, "no HEARTBEAT from the vehicle")?;
-    let peer = ground.peer.ok_or_else(|| other("no link to the vehicle"))?;
+    let link = ground.link.ok_or_else(|| other("no link to the vehicle"))?;
     let _ = ground
         .wait(timeline, Duration::from_millis(900), |e| {
             is_message(e, RadioStatus::ID)
@@ -507,42 +502,50 @@ async fn script(
         .await?;
     // 2. The handshake.
     timeline.say("ground station → COMMAND_LONG REQUEST_MESSAGE(300) in MAVLink 2 (the handshake)");
-    ground
-        .send(ChannelCommand::StartHandshake {
-            peer,
-            target: Target::new(1, 1),
-            method: HandshakeMethod::RequestMessage300,
-            encoding: CommandEncoding::Long,
+    let handshake = {
+        let node = ground.handle.clone();
+        tokio::spawn(async move {
+            node.handshake(
+                link,
+                Target::new(1, 1),
+                HandshakeMethod::RequestMessage300,
+                CommandEncoding::Long,
+            )
+            .await
         })
-        .await?;
+    };
     let done = ground
         .wait(timeline, Duration::from_secs(4), |e| {
-            matches!(e.event, ChannelEventKind::Channel(Event::Handshake(_)))
+            matches!(
+                e,
+                Seen::Link(NodeEvent {
+                    kind: LinkEvent::Handshake(_),
+                    ..
+                })
+            )
         })
         .await?;
-    let done = need(done, "no handshake outcome")?;
-    if let ChannelEventKind::Channel(Event::Handshake(o)) = &done.event {
-        match &o.result {
-            HandshakeResult::ProtocolVersion(v) => timeline.say(format!(
-                "ground station ← {} {} (min {}, max {}) in MAVLink 2 after {} request(s): the vehicle speaks MAVLink 2",
-                ProtocolVersion::NAME,
-                v.version,
-                v.min_version,
-                v.max_version,
-                o.attempts
-            )),
-            other_result => {
-                return Err(other(format!(
-                    "demo step failed: handshake ended with {}",
-                    other_result.name()
-                )));
-            }
+    need(done, "no handshake outcome")?;
+    let outcome = handshake.await.map_err(other)?.map_err(other)?;
+    match &outcome.result {
+        HandshakeResult::ProtocolVersion(v) => timeline.say(format!(
+            "ground station ← {} {} (min {}, max {}) in MAVLink 2 after {} request(s): the vehicle speaks MAVLink 2",
+            ProtocolVersion::NAME,
+            v.version,
+            v.min_version,
+            v.max_version,
+            outcome.attempts
+        )),
+        other_result => {
+            return Err(other(format!(
+                "demo step failed: handshake ended with {}",
+                other_result.name()
+            )));
         }
     }
     let v2 = ground
         .wait(timeline, Duration::from_secs(3), |e| {
-            matches!(&e.event, ChannelEventKind::Channel(Event::Frame(rf))
-                if rf.frame.msg_id() == Heartbeat::ID && rf.frame.version() == Version::V2)
+            frame_of(e, Heartbeat::ID).is_some_and(|rf| rf.frame.version() == Version::V2)
         })
         .await?;
     need(v2, "the vehicle's heartbeats did not switch to MAVLink 2")?;
@@ -552,10 +555,10 @@ async fn script(
     // 3. Capabilities.
     timeline.say("ground station → REQUEST_MESSAGE(AUTOPILOT_VERSION)");
     ground
-        .send(ChannelCommand::Send {
-            dest: Dest::Peer(peer),
-            message: request(MavCmd::REQUEST_MESSAGE, AutopilotVersion::ID as f32),
-        })
+        .send(&request(
+            MavCmd::REQUEST_MESSAGE,
+            AutopilotVersion::ID as f32,
+        ))
         .await?;
     let av = ground
         .wait(timeline, Duration::from_secs(3), |e| {
@@ -563,7 +566,7 @@ async fn script(
         })
         .await?;
     let av = need(av, "no AUTOPILOT_VERSION")?;
-    if let ChannelEventKind::Channel(Event::Frame(rf)) = &av.event {
+    if let Some(rf) = frame_of(&av, AutopilotVersion::ID) {
         let caps = AutopilotVersion::decode(rf.frame.payload()).capabilities;
         timeline.say(format!(
             "ground station ← AUTOPILOT_VERSION: MAV_PROTOCOL_CAPABILITY_MAVLINK2 {}",
@@ -580,33 +583,28 @@ async fn script(
         "ground station → SETUP_SIGNING (key, timestamp) over the secure link; signs from now on",
     );
     ground
-        .send(ChannelCommand::Send {
-            dest: Dest::Peer(peer),
-            message: RawMessage::new(&SetupSigning {
-                target_system: 1,
-                target_component: 1,
-                secret_key: KEY,
-                initial_timestamp: now_ts,
-            }),
-        })
+        .send(&MavMessage::SetupSigning(SetupSigning {
+            target_system: 1,
+            target_component: 1,
+            secret_key: KEY,
+            initial_timestamp: now_ts,
+        }))
         .await?;
     ground
-        .send(ChannelCommand::SetSigning {
-            peer: Some(peer),
-            signing: Some(SigningConfig::new(SecretKey::new(KEY), 1)),
-        })
-        .await?;
+        .handle
+        .set_signing(link, Some(SigningConfig::new(SecretKey::new(KEY), 1)))
+        .await
+        .map_err(other)?;
     let signed = ground
         .wait(timeline, Duration::from_secs(3), |e| {
-            matches!(&e.event, ChannelEventKind::Channel(Event::Frame(rf))
-                if rf.frame.msg_id() == Heartbeat::ID
-                    && matches!(rf.auth, Authentication::Verified { .. }))
+            frame_of(e, Heartbeat::ID)
+                .is_some_and(|rf| matches!(rf.auth, Authentication::Verified { .. }))
         })
         .await?;
     need(signed, "no signed HEARTBEAT from the vehicle")?;
     // 5. Signed traffic both ways.
     timeline.say("ground station → REQUEST_MESSAGE(AUTOPILOT_VERSION), signed");
-    signed_autopilot_version(timeline, ground, peer, "no signed AUTOPILOT_VERSION").await?;
+    signed_autopilot_version(timeline, ground, "no signed AUTOPILOT_VERSION").await?;
     timeline.say("ground station ← AUTOPILOT_VERSION, signed, signature verified");
     // 6. Attacks from the ground link.
     let captured = tokio::time::timeout(Duration::from_secs(1), tap.recv())
@@ -629,7 +627,7 @@ async fn script(
         .await?;
     // 7. The genuine stream still flows.
     timeline.say("ground station → REQUEST_MESSAGE(AUTOPILOT_VERSION), signed, after the attacks");
-    signed_autopilot_version(timeline, ground, peer, "the genuine stream was locked out").await?;
+    signed_autopilot_version(timeline, ground, "the genuine stream was locked out").await?;
     timeline.say("ground station ← AUTOPILOT_VERSION: the genuine stream is still accepted");
     Ok(())
 }

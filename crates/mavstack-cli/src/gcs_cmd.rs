@@ -1,40 +1,34 @@
 //! `mavstack param`, `mission` and `command`: ground-station operations against a remote
-//! system, run by the clients of `mavstack-services` over a `mavstack-channel` link.
+//! system, over `mavstack::system::System` on a ground-station `Node`.
 //!
-//! Each command opens the link, waits for the target's HEARTBEAT (the first autopilot heard,
-//! or `--target-system`), runs the MAVLink 2 handshake when the target still speaks
-//! MAVLink 1, sends our own HEARTBEAT every second, then drives one service client until its
-//! operation ends. Results are printed for people, or as JSON with `--json`.
+//! Each command starts the node (our HEARTBEAT every second), waits for the target's
+//! HEARTBEAT (the first autopilot heard, or `--target-system`; the MAVLink 2 handshake when
+//! it still speaks MAVLink 1), runs one operation and prints its result for people, or as
+//! JSON with `--json`.
 
 use core::time::Duration;
 use std::io::Write as _;
 
 use anyhow::anyhow;
 use clap::{Args, Subcommand, ValueEnum};
-use mavstack_channel::{CommandEncoding, Config, Event, HandshakeMethod, SigningConfig, Target};
-use mavstack_core::MessageSet;
-use mavstack_core::wire::Version;
+use mavstack::router::LinkRole;
+use mavstack::system::{System, SystemError, Wanted};
+use mavstack::{LinkSpec, Node, NodeBuilder};
+use mavstack_channel::SigningConfig;
 use mavstack_dialects::common::{
-    CommandInt, CommandLong, GlobalPositionInt, Heartbeat, MavAutopilot, MavCmd, MavFrame,
-    MavMessage, MavMissionType, MavModeFlag, MavParamType, MavResult,
+    CommandInt, CommandLong, MavAutopilot, MavCmd, MavFrame, MavMissionType, MavModeFlag,
+    MavParamType, MavResult,
 };
-use mavstack_services::command::{Command, CommandClient, CommandError, CommandEvent};
+use mavstack_services::Address;
+use mavstack_services::command::{Command, CommandError};
 use mavstack_services::heartbeat::HeartbeatConfig;
-use mavstack_services::mission::{MissionClient, MissionConfig, MissionEvent};
-use mavstack_services::param::{
-    Encoding, Name, Param, ParamClient, ParamConfig, ParamEvent, ParamHandle, ParamRef, Value,
-};
-use mavstack_services::{Address, Service};
-use mavstack_transport::channel_protocol::{
-    ChannelCommand, ChannelEventKind, ChannelProtocol, RawMessage,
-};
-use mavstack_transport::{Connection, Dest, PeerId};
+use mavstack_services::param::{Name, Param, Value};
 use serde_json::json;
 use tokio::time::Instant;
 
-use crate::link_cmd::{parse_spec, runtime};
+use crate::link_cmd::runtime;
 use crate::mission_file;
-use crate::vehicle_cmd::{secret_key, service_time};
+use crate::vehicle_cmd::secret_key;
 use crate::{Failure, other};
 use mavstack_sim::Autopilot;
 use mavstack_sim::modes;
@@ -176,186 +170,61 @@ pub(crate) struct CommandArgs {
     force: bool,
 }
 
-/// Resends of a parameter or mission message before giving up. The services' default (5)
-/// loses about one 500-item upload in two on a link that drops 20 % each way (a round trip
-/// fails 36 % of the time); with 10 it is about one in 150.
-const PATIENT_RETRIES: u8 = 10;
-
-/// An open link to the target, with the driver loop every operation runs in.
+/// An open link to the target: a ground-station [`Node`] and the [`System`] found on it.
 pub(crate) struct Remote {
-    conn: Connection<ChannelProtocol>,
-    own: Address,
+    node: Node,
+    system: System,
     start: Instant,
-    peer: PeerId,
-    target: Address,
-    autopilot: MavAutopilot,
-    heartbeat: RawMessage,
-    next_beat: Instant,
-    /// The target's home altitude above mean sea level, once a GLOBAL_POSITION_INT came.
-    home_amsl: Option<f32>,
-}
-
-fn decode(event: &ChannelEventKind) -> Option<(Address, Version, MavMessage)> {
-    let ChannelEventKind::Channel(Event::Frame(rf)) = event else {
-        return None;
-    };
-    let msg = MavMessage::decode(rf.frame.msg_id(), rf.frame.payload()).ok()?;
-    Some((
-        Address::new(rf.frame.sysid(), rf.frame.compid()),
-        rf.frame.version(),
-        msg,
-    ))
 }
 
 impl Remote {
     /// Opens the link and waits for the target.
     pub(crate) async fn connect(args: &RemoteArgs) -> Result<Self, Failure> {
-        let spec = parse_spec(&args.conn)?;
-        let mut config = Config::ground_station(args.sysid, args.compid);
+        let mut spec =
+            LinkSpec::parse(&args.conn, &|_| None).map_err(|e| Failure::Input(anyhow!("{e}")))?;
         if let Some(key) = &args.key {
-            config.signing = Some(SigningConfig::new(secret_key(key, "--key")?, args.link_id));
+            spec.config.signing = Some(SigningConfig::new(secret_key(key, "--key")?, args.link_id));
         }
-        let protocol = ChannelProtocol::new(config)
-            .map_err(|e| Failure::Input(anyhow!("ground station configuration: {e}")))?;
-        let conn = Connection::open(&spec, protocol).await.map_err(other)?;
         let wait = crate::link_cmd::seconds(args.timeout, "--timeout")?;
-        let own = Address::new(args.sysid, args.compid);
-        Self::find(
-            conn,
-            own,
-            args.target_system,
-            args.target_component,
-            wait,
-            &args.conn,
-        )
-        .await
-    }
-
-    /// Waits on an open link for the target's HEARTBEAT, then runs the handshake if it
-    /// speaks MAVLink 1.
-    pub(crate) async fn find(
-        mut conn: Connection<ChannelProtocol>,
-        own: Address,
-        system: Option<u8>,
-        component: Option<u8>,
-        wait: Duration,
-        what: &str,
-    ) -> Result<Self, Failure> {
-        let heartbeat = HeartbeatConfig::ground_station().own.map_or_else(
-            || RawMessage::new(&Heartbeat::default()),
-            |h| RawMessage::new(&h),
-        );
         let start = Instant::now();
-        let deadline = start + wait;
-        let mut next_beat = start;
-        let found = loop {
-            let now = Instant::now();
-            if now >= deadline {
-                return Err(other(format!(
-                    "no vehicle heard on {what} within {:.1} s",
-                    wait.as_secs_f64()
-                )));
-            }
-            if now >= next_beat {
-                conn.send(ChannelCommand::to_all(heartbeat))
-                    .await
-                    .map_err(other)?;
-                next_beat = now + Duration::from_secs(1);
-            }
-            let Ok(event) = tokio::time::timeout_at(next_beat.min(deadline), conn.recv()).await
-            else {
-                continue;
-            };
-            let event = event.ok_or_else(|| other("the link closed"))?;
-            if let Some((from, version, MavMessage::Heartbeat(hb))) = decode(&event.event) {
-                let wanted = match system {
-                    Some(s) => from.system == s && component.is_none_or(|c| c == from.component),
-                    None => hb.autopilot != MavAutopilot::INVALID,
-                };
-                if wanted {
-                    break (event.peer, from, hb.autopilot, version);
-                }
-            }
-        };
-        let (peer, from, autopilot, version) = found;
-        let mut remote = Self {
-            conn,
-            own,
-            start,
-            peer,
-            target: Address::new(from.system, component.unwrap_or(from.component)),
-            autopilot,
-            heartbeat,
-            next_beat,
-            home_amsl: None,
-        };
-        if version == Version::V1 {
-            remote.handshake().await?;
-        }
-        Ok(remote)
-    }
-
-    /// The MAVLink 2 handshake (REQUEST_MESSAGE(300)); whatever the outcome, the link goes
-    /// on in the version the channel settles on.
-    async fn handshake(&mut self) -> Result<(), Failure> {
-        self.conn
-            .send(ChannelCommand::StartHandshake {
-                peer: self.peer,
-                target: Target::new(self.target.system, self.target.component),
-                method: HandshakeMethod::RequestMessage300,
-                encoding: CommandEncoding::Long,
-            })
+        let node = ground_station(args.sysid, args.compid)
+            .link(spec)
+            .start()
             .await
             .map_err(other)?;
-        let deadline = Instant::now() + Duration::from_secs(5);
-        while let Ok(Some(event)) = tokio::time::timeout_at(deadline, self.conn.recv()).await {
-            if let ChannelEventKind::Channel(Event::Handshake(_)) = event.event {
-                break;
+        let wanted = match args.target_system {
+            Some(s) => Wanted::System(s, args.target_component),
+            None => Wanted::AnyAutopilot,
+        };
+        let system = match System::wait(&node.handle(), wanted, wait).await {
+            Ok(system) => system,
+            Err(SystemError::NotFound { seconds }) => {
+                let _ = node.shutdown().await;
+                return Err(other(format!(
+                    "no vehicle heard on {} within {seconds:.1} s",
+                    args.conn
+                )));
             }
-        }
-        Ok(())
+            Err(e) => return Err(other(e)),
+        };
+        Ok(Self {
+            node,
+            system,
+            start,
+        })
     }
 
     /// The target's address.
     pub(crate) fn target(&self) -> Address {
-        self.target
-    }
-
-    /// The target's parameter encoding (ArduPilot C-cast, everyone else bytewise).
-    pub(crate) fn encoding(&self) -> Encoding {
-        Encoding::for_autopilot(self.autopilot)
+        self.system.target()
     }
 
     fn flavour(&self) -> Option<Autopilot> {
-        match self.autopilot {
+        match self.system.autopilot() {
             MavAutopilot::ARDUPILOTMEGA => Some(Autopilot::Ardupilot),
             MavAutopilot::PX4 => Some(Autopilot::Px4),
             _ => None,
         }
-    }
-
-    /// A parameter client for the target: its encoding, and patient retries (10) so that
-    /// lossy links still complete.
-    pub(crate) fn param_client(&self) -> ParamClient {
-        let config = ParamConfig {
-            retries: PATIENT_RETRIES,
-            ..ParamConfig::default()
-        };
-        ParamClient::new(config, self.encoding())
-    }
-
-    /// A mission client with patient retries (10 per message).
-    pub(crate) fn mission_client(&self) -> MissionClient {
-        let config = MissionConfig {
-            retries: PATIENT_RETRIES,
-            ..MissionConfig::default()
-        };
-        MissionClient::new(self.own, config)
-    }
-
-    /// The services' clock.
-    pub(crate) fn now(&self) -> mavstack_core::time::Instant {
-        service_time(self.start)
     }
 
     /// Seconds since the link opened.
@@ -368,70 +237,21 @@ impl Remote {
         ((self.elapsed() - began) * 1000.0).round() / 1000.0
     }
 
-    /// Drives `service` until `done` returns a result, or fails after `limit`.
-    pub(crate) async fn run<S: Service, R>(
-        &mut self,
-        service: &mut S,
-        limit: Duration,
-        mut done: impl FnMut(&mut S) -> Option<R>,
-    ) -> Result<R, Failure> {
-        let deadline = Instant::now() + limit;
-        loop {
-            while let Some(out) = service.poll_transmit() {
-                let message = ChannelCommand::Send {
-                    dest: Dest::Peer(self.peer),
-                    message: RawMessage::of(&out.message),
-                };
-                self.conn.send(message).await.map_err(other)?;
-            }
-            if let Some(result) = done(service) {
-                return Ok(result);
-            }
-            let now = Instant::now();
-            if now >= deadline {
-                return Err(other(format!(
-                    "no result within {:.0} s",
-                    limit.as_secs_f64()
-                )));
-            }
-            if now >= self.next_beat {
-                self.conn
-                    .send(ChannelCommand::to_all(self.heartbeat))
-                    .await
-                    .map_err(other)?;
-                self.next_beat = now + Duration::from_secs(1);
-            }
-            let timer = service
-                .poll_timeout()
-                .map(|t| self.start + Duration::from_micros(t.as_micros()));
-            let wake = timer
-                .map_or(deadline, |t| t.min(deadline))
-                .min(self.next_beat);
-            match tokio::time::timeout_at(wake, self.conn.recv()).await {
-                Err(_) => service.handle_timeout(service_time(self.start)),
-                Ok(None) => return Err(other("the link closed")),
-                Ok(Some(event)) => {
-                    if let Some((from, _, msg)) = decode(&event.event) {
-                        if let MavMessage::GlobalPositionInt(GlobalPositionInt {
-                            alt,
-                            relative_alt,
-                            ..
-                        }) = &msg
-                            && from.system == self.target.system
-                        {
-                            self.home_amsl = Some((alt - relative_alt) as f32 / 1000.0);
-                        }
-                        service.handle_message(service_time(self.start), from, &msg);
-                    }
-                }
-            }
-        }
-    }
-
     /// Closes the link.
     pub(crate) async fn close(self) -> Result<(), Failure> {
-        self.conn.close().await.map_err(other)
+        drop(self.system);
+        self.node.shutdown().await.map(drop).map_err(other)
     }
+}
+
+/// A ground station's node: `sysid/compid`, a GCS HEARTBEAT every second, ground-station
+/// links (they run the MAVLink 2 handshake).
+pub(crate) fn ground_station(sysid: u8, compid: u8) -> NodeBuilder {
+    let heartbeat = HeartbeatConfig::ground_station().own.unwrap_or_default();
+    Node::builder()
+        .identity(sysid, compid)
+        .role(LinkRole::GroundStation)
+        .heartbeat(&heartbeat, Duration::from_secs(1))
 }
 
 fn type_name(ty: MavParamType) -> &'static str {
@@ -476,54 +296,13 @@ fn print_lines(lines: &[String]) -> Result<(), Failure> {
 
 /// Fetches the whole table of the target.
 pub(crate) async fn fetch_params(remote: &mut Remote) -> Result<Vec<(Name, Value)>, Failure> {
-    let mut client = remote.param_client();
-    let target = remote.target();
-    client.fetch_all(remote.now(), target).map_err(other)?;
-    let result = remote
-        .run(&mut client, Duration::from_secs(600), |c| {
-            core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
-                ParamEvent::List { result, .. } => Some(result),
-                _ => None,
-            })
-        })
-        .await?;
-    result.map_err(|e| other(format!("parameter list from {target}: {e}")))
-}
-
-/// Reads one parameter by name.
-async fn read_param(
-    remote: &mut Remote,
-    client: &mut ParamClient,
-    name: Name,
-) -> Result<Param, Failure> {
-    let target = remote.target();
-    let handle = client.read(remote.now(), target, ParamRef::Name(name));
-    finish_param(remote, client, handle, name).await
-}
-
-/// Drives `client` until the read or set `handle` ends.
-async fn finish_param(
-    remote: &mut Remote,
-    client: &mut ParamClient,
-    handle: ParamHandle,
-    name: Name,
-) -> Result<Param, Failure> {
-    let result = remote
-        .run(client, Duration::from_secs(30), |c| {
-            core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
-                ParamEvent::Finished { handle: h, result } if h == handle => Some(result),
-                _ => None,
-            })
-        })
-        .await?;
-    result.map_err(|e| other(format!("{name}: {e}")))
+    remote.system.params().await.map_err(other)
 }
 
 /// Sets one parameter to `value` (converted to `current`'s type) and returns the value in
 /// force.
 pub(crate) async fn set_param(
-    remote: &mut Remote,
-    client: &mut ParamClient,
+    system: &mut System,
     name: Name,
     current: Value,
     value: f64,
@@ -547,11 +326,7 @@ pub(crate) async fn set_param(
             (v, _) => v,
         })
         .ok_or_else(|| other(format!("{name} has a type PARAM_SET cannot carry")))?;
-    let target = remote.target();
-    let handle = client
-        .set(remote.now(), target, name, typed)
-        .map_err(other)?;
-    finish_param(remote, client, handle, name).await
+    system.set_param(name, typed).await.map_err(other)
 }
 
 fn name_arg(text: &str) -> Result<Name, Failure> {
@@ -613,10 +388,9 @@ pub(crate) fn param(action: ParamAction) -> Result<(), Failure> {
                     .map(|n| name_arg(n))
                     .collect::<Result<Vec<_>, _>>()?;
                 let mut remote = Remote::connect(&args).await?;
-                let mut client = remote.param_client();
                 let mut lines = Vec::new();
                 for name in names {
-                    let p = read_param(&mut remote, &mut client, name).await?;
+                    let p = remote.system.param(name).await.map_err(other)?;
                     lines.push(if args.json {
                         param_json(usize::from(p.index), p.name, p.value).to_string()
                     } else {
@@ -638,9 +412,8 @@ pub(crate) fn param(action: ParamAction) -> Result<(), Failure> {
             } => {
                 let name = name_arg(&name)?;
                 let mut remote = Remote::connect(&args).await?;
-                let mut client = remote.param_client();
-                let before = read_param(&mut remote, &mut client, name).await?;
-                let after = set_param(&mut remote, &mut client, name, before.value, value).await?;
+                let before = remote.system.param(name).await.map_err(other)?;
+                let after = set_param(&mut remote.system, name, before.value, value).await?;
                 remote.close().await?;
                 let line = if args.json {
                     let mut j = param_json(usize::from(after.index), after.name, after.value);
@@ -661,16 +434,6 @@ pub(crate) fn param(action: ParamAction) -> Result<(), Failure> {
     })
 }
 
-/// Runs one mission operation to its event.
-pub(crate) async fn mission_op(
-    remote: &mut Remote,
-    client: &mut MissionClient,
-) -> Result<MissionEvent, Failure> {
-    remote
-        .run(client, Duration::from_secs(3600), |c| c.poll_event())
-        .await
-}
-
 pub(crate) fn mission(action: MissionAction) -> Result<(), Failure> {
     runtime()?.block_on(async {
         match action {
@@ -680,18 +443,11 @@ pub(crate) fn mission(action: MissionAction) -> Result<(), Failure> {
                 plan,
             } => {
                 let mut remote = Remote::connect(&args).await?;
-                let mut client = remote.mission_client();
                 let target = remote.target();
                 let began = remote.elapsed();
-                client
-                    .download(remote.now(), target, plan.mav())
-                    .map_err(other)?;
-                let event = mission_op(&mut remote, &mut client).await?;
+                let result = remote.system.download_mission(plan.mav()).await;
                 let seconds = remote.since(began);
                 remote.close().await?;
-                let MissionEvent::Downloaded { result, .. } = event else {
-                    return Err(other(format!("unexpected {event:?}")));
-                };
                 let items = result.map_err(|e| other(format!("download from {target}: {e}")))?;
                 let text = match &file {
                     Some(path) if path.ends_with(".json") => {
@@ -722,19 +478,12 @@ pub(crate) fn mission(action: MissionAction) -> Result<(), Failure> {
             } => {
                 let items = mission_file::load(&file).map_err(Failure::Input)?;
                 let mut remote = Remote::connect(&args).await?;
-                let mut client = remote.mission_client();
                 let target = remote.target();
                 let began = remote.elapsed();
                 let count = items.len();
-                client
-                    .upload(remote.now(), target, plan.mav(), items)
-                    .map_err(other)?;
-                let event = mission_op(&mut remote, &mut client).await?;
+                let result = remote.system.upload_mission(plan.mav(), items).await;
                 let seconds = remote.since(began);
                 remote.close().await?;
-                let MissionEvent::Uploaded { result, .. } = event else {
-                    return Err(other(format!("unexpected {event:?}")));
-                };
                 result.map_err(|e| other(format!("upload to {target}: {e}")))?;
                 let line = if args.json {
                     json!({"uploaded": count, "mission_type": mission_file::type_name(plan.mav()), "seconds": seconds}).to_string()
@@ -748,16 +497,9 @@ pub(crate) fn mission(action: MissionAction) -> Result<(), Failure> {
             }
             MissionAction::Clear { remote: args, plan } => {
                 let mut remote = Remote::connect(&args).await?;
-                let mut client = remote.mission_client();
                 let target = remote.target();
-                client
-                    .clear(remote.now(), target, plan.mav())
-                    .map_err(other)?;
-                let event = mission_op(&mut remote, &mut client).await?;
+                let result = remote.system.clear_mission(plan.mav()).await;
                 remote.close().await?;
-                let MissionEvent::Cleared { result, .. } = event else {
-                    return Err(other(format!("unexpected {event:?}")));
-                };
                 result.map_err(|e| other(format!("clear on {target}: {e}")))?;
                 let line = if args.json {
                     json!({"cleared": mission_file::type_name(plan.mav())}).to_string()
@@ -839,7 +581,7 @@ fn build_command(args: &CommandArgs, remote: &Remote) -> Result<(MavCmd, [f32; 7
             p[5] = f32::NAN;
             p[6] = match (remote.flavour(), alt) {
                 // PX4 takes an altitude above mean sea level.
-                (Some(Autopilot::Px4), Some(a)) => match remote.home_amsl {
+                (Some(Autopilot::Px4), Some(a)) => match remote.system.home_amsl() {
                     Some(home) => home + a,
                     None => f32::NAN,
                 },
@@ -920,6 +662,7 @@ pub(crate) fn command(args: &CommandArgs) -> Result<(), Failure> {
     }
     runtime()?.block_on(async {
         let mut remote = Remote::connect(&args.remote).await?;
+        remote.system.update();
         let (id, p) = build_command(args, &remote)?;
         let target = remote.target();
         let command = if args.int {
@@ -955,39 +698,30 @@ pub(crate) fn command(args: &CommandArgs) -> Result<(), Failure> {
                 ..CommandLong::default()
             })
         };
-        let mut client = CommandClient::new(
-            Address::new(args.remote.sysid, args.remote.compid),
-            Default::default(),
-        );
         let began = remote.elapsed();
-        let handle = client.send(remote.now(), target, command).map_err(other)?;
         let json = args.remote.json;
         let result = remote
-            .run(&mut client, Duration::from_secs(600), |c| {
-                core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
-                    CommandEvent::Progress {
-                        handle: h,
-                        progress,
-                    } if h == handle => {
-                        if !json {
-                            eprintln!("{}: in progress {progress}%", command_name(id));
-                        }
-                        None
-                    }
-                    CommandEvent::Finished { handle: h, result } if h == handle => Some(result),
-                    _ => None,
-                })
+            .system
+            .command(command, |progress| {
+                if !json {
+                    eprintln!("{}: in progress {progress}%", command_name(id));
+                }
             })
-            .await?;
+            .await;
         let seconds = remote.since(began);
         remote.close().await?;
         let (result, code, param2) = match &result {
             Ok(ack) => (Some(ack.result), 0, ack.result_param2),
-            Err(CommandError::Rejected {
-                result,
-                result_param2,
+            Err(SystemError::Command {
+                source:
+                    CommandError::Rejected {
+                        result,
+                        result_param2,
+                    },
+                ..
             }) => (Some(*result), 1, *result_param2),
-            Err(_) => (None, 1, 0),
+            Err(SystemError::Command { .. }) => (None, 1, 0),
+            Err(e) => return Err(other(e)),
         };
         let line = if json {
             json!({

@@ -17,7 +17,6 @@ use mavstack_core::wire::Version;
 use mavstack_dialects::common::MavMessage;
 use mavstack_services::Address;
 use tokio::sync::mpsc;
-use tokio::time::Instant;
 
 use crate::link_cmd::{interrupted, runtime};
 use crate::{Failure, other};
@@ -101,12 +100,6 @@ pub(crate) fn version_name(v: Version) -> &'static str {
         Version::V1 => "MAVLink 1",
         Version::V2 => "MAVLink 2",
     }
-}
-
-/// The services' time: microseconds since `start`.
-pub(crate) fn service_time(start: Instant) -> mavstack_core::time::Instant {
-    let us = u64::try_from(start.elapsed().as_micros()).unwrap_or(u64::MAX);
-    mavstack_core::time::Instant::from_micros(us)
 }
 
 /// Prints `--verbose` lines to stderr as they come.

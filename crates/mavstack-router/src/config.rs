@@ -4,7 +4,7 @@ use alloc::string::String;
 use alloc::vec::Vec;
 use core::time::Duration;
 
-use mavstack_channel::{Config as ChannelConfig, SigningConfig, VehicleVersion};
+use mavstack_channel::{Config as ChannelConfig, GroundPolicy, SigningConfig, VehicleVersion};
 
 /// Whose link it is: a router's, that forwards for others, or a vehicle's (any component
 /// that answers the MAVLink 2 handshake for itself).
@@ -24,6 +24,11 @@ pub enum LinkRole {
         /// PROTOCOL_VERSION support, which stays silent).
         protocol_version: bool,
     },
+    /// The link of the router's own component when it is a ground station: it can run the
+    /// MAVLink 2 handshake ([`crate::Router::start_handshake`]), and an `auto` link also
+    /// switches to MAVLink 2 on an AUTOPILOT_VERSION with the MAVLINK2 capability. A
+    /// `version=1` link never handshakes.
+    GroundStation,
 }
 
 /// Which framing a link carries (the `version` link option).
@@ -190,6 +195,17 @@ impl LinkConfig {
                 }
                 config
             }
+            LinkRole::GroundStation => match self.version {
+                VersionMode::Mavlink1 => {
+                    ChannelConfig::relay(sysid, compid, VehicleVersion::Mavlink1Only)
+                }
+                VersionMode::Mavlink2 => {
+                    let mut config = ChannelConfig::ground_station(sysid, compid);
+                    config.role = mavstack_channel::Role::GroundStation(GroundPolicy::Mavlink2);
+                    config
+                }
+                VersionMode::Auto => ChannelConfig::ground_station(sysid, compid),
+            },
         };
         config.signing.clone_from(&self.signing);
         config.secure = self.secure;

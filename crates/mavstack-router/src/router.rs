@@ -5,8 +5,9 @@ use alloc::vec::Vec;
 use core::time::Duration;
 
 use mavstack_channel::{
-    Channel, ConfigError, Event as ChannelEvent, LinkVersion, ProtocolVersionAnswer, ReceivedFrame,
-    Rejected, SigningSetup, SwitchCause,
+    Channel, CommandEncoding, ConfigError, Event as ChannelEvent, HandshakeError, HandshakeMethod,
+    HandshakeOutcome, LinkVersion, ProtocolVersionAnswer, ReceivedFrame, Rejected, SigningConfig,
+    SigningSetup, SwitchCause, Target,
 };
 use mavstack_core::message::Message as _;
 use mavstack_core::signing;
@@ -104,6 +105,13 @@ pub enum Event {
         link: LinkId,
         /// The value to store.
         timestamp: u64,
+    },
+    /// A handshake started with [`Router::start_handshake`] ended.
+    Handshake {
+        /// The link.
+        link: LinkId,
+        /// How it ended.
+        outcome: HandshakeOutcome,
     },
     /// A link's channel refused a frame (bad signature, replay, unsigned on a signed link).
     Rejected {
@@ -391,6 +399,9 @@ impl<D: Dialect> Router<D> {
                     from: (sysid, compid),
                     answer,
                 }),
+                ChannelEvent::Handshake(outcome) => {
+                    self.push_event(Event::Handshake { link: id, outcome });
+                }
                 ChannelEvent::SigningSetup {
                     sysid,
                     compid,
@@ -719,6 +730,52 @@ impl<D: Dialect> Router<D> {
         }
         self.scratch = dests;
         queued
+    }
+
+    /// Starts the MAVLink 2 handshake with `target` on a
+    /// [`LinkRole::GroundStation`](crate::LinkRole::GroundStation) link: the request goes out
+    /// in MAVLink 2 (signed when the link signs), is retried on the link's timer, and the
+    /// outcome comes as [`Event::Handshake`] (the link switches to MAVLink 2 when it
+    /// succeeds).
+    ///
+    /// # Errors
+    /// [`HandshakeError`]: not a ground-station link (or an unknown one), a handshake
+    /// already running on it, or a message id below 256 asked for.
+    pub fn start_handshake(
+        &mut self,
+        now: Instant,
+        link: LinkId,
+        target: Target,
+        method: HandshakeMethod,
+        encoding: CommandEncoding,
+    ) -> Result<(), HandshakeError> {
+        let l = self
+            .link_mut(link)
+            .ok_or(HandshakeError::NotGroundStation)?;
+        l.channel.start_handshake(now, target, method, encoding)?;
+        self.drain_channel_transmits(now, link);
+        Ok(())
+    }
+
+    /// Turns signing on (with `signing`) or off on `link`, as after a SETUP_SIGNING: every
+    /// frame the link sends from now on is signed with that key, and only frames that verify
+    /// are accepted.
+    ///
+    /// # Errors
+    /// [`ConfigError::SigningNeedsMavlink2`] on a `version=1` link (nothing changes); an
+    /// unknown link is ignored.
+    pub fn set_signing(
+        &mut self,
+        now: Instant,
+        link: LinkId,
+        signing: Option<SigningConfig>,
+    ) -> Result<(), ConfigError> {
+        let Some(l) = self.link_mut(link) else {
+            return Ok(());
+        };
+        l.channel.set_signing(signing)?;
+        self.drain_channel(now, link);
+        Ok(())
     }
 
     // ----- output ----------------------------------------------------------------------

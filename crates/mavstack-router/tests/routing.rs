@@ -672,3 +672,84 @@ fn vehicle_links_answer_the_handshake_in_their_own_version_and_set_the_capabilit
     // A relay link's frames are not the router's business: sent as given.
     assert!(caps.contains(&(relay, mission_int | mavlink2)));
 }
+
+#[test]
+fn a_ground_station_link_runs_the_handshake_with_a_vehicle_link() {
+    use mavstack_channel::{
+        CommandEncoding, HandshakeMethod, HandshakeResult, LinkVersion, Target,
+    };
+    use mavstack_router::{Event, LinkRole};
+    let mut gcs_config = RouterConfig::default();
+    gcs_config.system_id = 255;
+    gcs_config.component_id = 190;
+    let mut gcs = Router::new(gcs_config, DialectInfo::<MavMessage>::new());
+    let mut veh_config = RouterConfig::default();
+    veh_config.component_id = 1;
+    let mut veh = Router::new(veh_config, DialectInfo::<MavMessage>::new());
+    let g = link(&mut gcs, "to vehicle", |c| c.role = LinkRole::GroundStation);
+    let v = link(&mut veh, "to gcs", |c| {
+        c.role = LinkRole::Vehicle {
+            protocol_version: true,
+        }
+    });
+    assert!(
+        veh.start_handshake(
+            T0,
+            v,
+            Target::new(255, 190),
+            HandshakeMethod::RequestMessage300,
+            CommandEncoding::Long
+        )
+        .is_err(),
+        "a vehicle link answers the handshake, it does not run it"
+    );
+    gcs.start_handshake(
+        T0,
+        g,
+        Target::new(1, 1),
+        HandshakeMethod::RequestMessage300,
+        CommandEncoding::Long,
+    )
+    .unwrap();
+    let mut outcome = None;
+    let mut buf = [0u8; MAX_FRAME_LEN];
+    for _ in 0..4 {
+        while let Some(t) = gcs.poll_transmit(&mut buf) {
+            veh.handle_datagram(T0, v, &buf[..t.len]);
+        }
+        while let Some(t) = veh.poll_transmit(&mut buf) {
+            gcs.handle_datagram(T0, g, &buf[..t.len]);
+        }
+        while let Some(e) = gcs.poll_event() {
+            if let Event::Handshake { link, outcome: o } = e {
+                assert_eq!(link, g);
+                outcome = Some(o);
+            }
+        }
+    }
+    let outcome = outcome.expect("the handshake ended");
+    assert!(matches!(
+        outcome.result,
+        HandshakeResult::ProtocolVersion(_)
+    ));
+    assert_eq!(gcs.channel(g).unwrap().version(), LinkVersion::Mavlink2);
+    assert_eq!(veh.channel(v).unwrap().version(), LinkVersion::Mavlink2);
+
+    // Signing turned on by hand on both ends (what SETUP_SIGNING does on the vehicle's).
+    let k = key(3);
+    gcs.set_signing(T0, g, Some(SigningConfig::new(k.clone(), 1)))
+        .unwrap();
+    assert_eq!(
+        gcs.channel(g).unwrap().version(),
+        LinkVersion::SignedMavlink2
+    );
+    let mut payload = [0u8; 255];
+    let len = hb().encode(&mut payload);
+    assert_eq!(
+        gcs.send(T0, SendTo::Target, Heartbeat::ID, &payload[..len]),
+        1
+    );
+    let t = gcs.poll_transmit(&mut buf).unwrap();
+    let f = Frame::new_checked(&buf[..t.len]).unwrap();
+    assert!(verify(&f, &k).is_ok());
+}

@@ -63,17 +63,21 @@ pub mod node;
 pub mod router_conf;
 #[cfg(feature = "sim")]
 pub mod sim_vehicle;
+#[cfg(feature = "services")]
+pub mod system;
 
 pub use link_spec::{LinkSpec, LinkSpecError, redacted};
 pub use node::{
     EventSubscription, Incoming, LinkEvent, LinkReport, Node, NodeBuilder, NodeError, NodeEvent,
-    NodeHandle, NodeReport, Subscription,
+    NodeHandle, NodeReport, RequestError, Subscription,
 };
 
 pub use mavstack_channel as channel;
 pub use mavstack_core as core;
 pub use mavstack_dialects as dialects;
 pub use mavstack_router as router;
+#[cfg(feature = "services")]
+pub use mavstack_services as services;
 #[cfg(feature = "sim")]
 pub use mavstack_sim as sim;
 pub use mavstack_transport as transport;

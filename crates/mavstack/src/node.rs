@@ -19,7 +19,9 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 
 use mavstack_channel::{
-    LinkVersion, ProtocolVersionAnswer, ReceivedFrame, Rejected, SigningSetup, SwitchCause,
+    CommandEncoding, ConfigError, HandshakeError, HandshakeMethod, HandshakeOutcome, LinkVersion,
+    ProtocolVersionAnswer, ReceivedFrame, Rejected, SigningConfig, SigningSetup, SwitchCause,
+    Target,
 };
 use mavstack_core::time::Instant;
 use mavstack_core::wire::MAX_FRAME_LEN;
@@ -70,12 +72,29 @@ pub enum NodeError {
     Stopped(String),
 }
 
+/// Why a request to a running node failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RequestError {
+    /// The handshake could not start on that link.
+    #[error("handshake: {0}")]
+    Handshake(#[from] HandshakeError),
+    /// Signing could not be set up on that link.
+    #[error("signing: {0}")]
+    Signing(#[from] ConfigError),
+    /// The node has stopped.
+    #[error("the node has stopped")]
+    Stopped,
+}
+
 /// One router link's counters, as the node reports them.
 #[derive(Clone, Debug, PartialEq, Eq)]
 #[non_exhaustive]
 pub struct LinkReport {
     /// The configured link's name.
     pub name: String,
+    /// The router link of its peer (none for a server link without clients yet).
+    pub link_id: Option<LinkId>,
     /// The peer (a UDP or TCP client of a server link, the target of `udpout`, ...), if
     /// any yet.
     pub peer: Option<String>,
@@ -179,6 +198,8 @@ pub enum LinkEvent {
         /// What the link answered.
         answer: ProtocolVersionAnswer,
     },
+    /// A handshake started with [`NodeHandle::handshake`] ended.
+    Handshake(HandshakeOutcome),
     /// A vehicle link applied a SETUP_SIGNING.
     SigningSetup {
         /// The sender (sysid, compid).
@@ -207,6 +228,18 @@ enum Command {
     },
     Subscribe(mpsc::Sender<Incoming>, oneshot::Sender<()>),
     Events(mpsc::Sender<NodeEvent>, oneshot::Sender<()>),
+    Handshake {
+        link: LinkId,
+        target: Target,
+        method: HandshakeMethod,
+        encoding: CommandEncoding,
+        done: oneshot::Sender<Result<(), HandshakeError>>,
+    },
+    SetSigning {
+        link: LinkId,
+        signing: Option<SigningConfig>,
+        done: oneshot::Sender<Result<(), ConfigError>>,
+    },
     Shutdown,
 }
 
@@ -387,11 +420,16 @@ impl NodeBuilder {
                 next: clock::now(),
             }),
         };
+        let identity = (
+            driver.router.config().system_id,
+            driver.router.config().component_id,
+        );
         let task = tokio::spawn(driver.run());
         Ok(Node {
             commands: tx,
             task,
             local_addrs,
+            identity,
         })
     }
 }
@@ -412,6 +450,7 @@ pub struct Node {
     commands: mpsc::Sender<Command>,
     task: JoinHandle<Result<NodeReport, NodeError>>,
     local_addrs: Vec<Option<SocketAddr>>,
+    identity: (u8, u8),
 }
 
 impl Node {
@@ -451,6 +490,7 @@ impl Node {
     pub fn handle(&self) -> NodeHandle {
         NodeHandle {
             commands: self.commands.clone(),
+            identity: self.identity,
         }
     }
 
@@ -493,9 +533,16 @@ impl Node {
 #[derive(Clone, Debug)]
 pub struct NodeHandle {
     commands: mpsc::Sender<Command>,
+    identity: (u8, u8),
 }
 
 impl NodeHandle {
+    /// The node's own (system id, component id).
+    #[must_use]
+    pub const fn identity(&self) -> (u8, u8) {
+        self.identity
+    }
+
     /// Sends `message` as the node's own component: on the links its target fields lead to
     /// (every link for a broadcast or a system not heard yet), each link framing it in its
     /// own version and signing it when it signs (see `mavstack_router::Router::send`).
@@ -568,6 +615,68 @@ impl NodeHandle {
             let _ = registered.await;
         }
         rx
+    }
+
+    /// Runs the MAVLink 2 handshake with `target` on `link` (a
+    /// [`LinkRole::GroundStation`] link) and waits for its outcome: PROTOCOL_VERSION (the
+    /// link is MAVLink 2 now), a NACK, or no answer after the retries.
+    ///
+    /// # Errors
+    /// [`RequestError::Handshake`] if it cannot start there, [`RequestError::Stopped`].
+    pub async fn handshake(
+        &self,
+        link: LinkId,
+        target: Target,
+        method: HandshakeMethod,
+        encoding: CommandEncoding,
+    ) -> Result<HandshakeOutcome, RequestError> {
+        let mut events = self.events().await;
+        let (done, started) = oneshot::channel();
+        let command = Command::Handshake {
+            link,
+            target,
+            method,
+            encoding,
+            done,
+        };
+        self.commands
+            .send(command)
+            .await
+            .map_err(|_| RequestError::Stopped)?;
+        started.await.map_err(|_| RequestError::Stopped)??;
+        while let Some(event) = events.recv().await {
+            if let NodeEvent {
+                link_id,
+                kind: LinkEvent::Handshake(outcome),
+                ..
+            } = event
+                && link_id == link
+            {
+                return Ok(outcome);
+            }
+        }
+        Err(RequestError::Stopped)
+    }
+
+    /// Turns signing on or off on `link` (after sending SETUP_SIGNING to the peer, for one).
+    ///
+    /// # Errors
+    /// [`RequestError::Signing`] on a `version=1` link, [`RequestError::Stopped`].
+    pub async fn set_signing(
+        &self,
+        link: LinkId,
+        signing: Option<SigningConfig>,
+    ) -> Result<(), RequestError> {
+        let (done, rx) = oneshot::channel();
+        self.commands
+            .send(Command::SetSigning {
+                link,
+                signing,
+                done,
+            })
+            .await
+            .map_err(|_| RequestError::Stopped)?;
+        Ok(rx.await.map_err(|_| RequestError::Stopped)??)
     }
 
     /// Every link event from now on (peers, version changes, handshakes answered, signing
@@ -805,6 +914,28 @@ impl Driver {
                     self.watchers.push(tx);
                     let _ = done.send(());
                 }
+                Some(Some(Command::Handshake {
+                    link,
+                    target,
+                    method,
+                    encoding,
+                    done,
+                })) => {
+                    let started =
+                        self.router
+                            .start_handshake(clock::now(), link, target, method, encoding);
+                    self.flush();
+                    let _ = done.send(started);
+                }
+                Some(Some(Command::SetSigning {
+                    link,
+                    signing,
+                    done,
+                })) => {
+                    let set = self.router.set_signing(clock::now(), link, signing);
+                    self.drain_events()?;
+                    let _ = done.send(set);
+                }
                 Some(Some(Command::Shutdown) | None) => break,
                 None => {}
             }
@@ -913,6 +1044,14 @@ impl Driver {
                     tracing::info!("{}: handshake request: {answer}", self.link_label(link));
                     self.tell(link, LinkEvent::ProtocolVersionRequested { from, answer });
                 }
+                Event::Handshake { link, outcome } => {
+                    tracing::info!(
+                        "{}: handshake: {}",
+                        self.link_label(link),
+                        outcome.result.name()
+                    );
+                    self.tell(link, LinkEvent::Handshake(outcome));
+                }
                 Event::SigningSetup { link, from, setup } => {
                     tracing::info!("{}: SETUP_SIGNING applied", self.link_label(link));
                     self.tell(link, LinkEvent::SigningSetup { from, setup });
@@ -982,6 +1121,7 @@ impl Driver {
             if slot.peers.is_empty() {
                 links.push(LinkReport {
                     name: slot.template.name.clone(),
+                    link_id: None,
                     peer: None,
                     version: mode_of(&slot.template).as_str(),
                     rx_frames: 0,
@@ -1006,6 +1146,7 @@ impl Driver {
                 let c = &status.counters;
                 links.push(LinkReport {
                     name: slot.template.name.clone(),
+                    link_id: Some(*id),
                     peer,
                     version: status.mode.as_str(),
                     rx_frames: c.rx_frames,

@@ -1,0 +1,666 @@
+//! [`System`]: a remote MAVLink system as a ground station or companion sees it, through a
+//! [`Node`](crate::Node): its parameters, missions, commands and telemetry (feature
+//! `services`).
+//!
+//! ```no_run
+//! # async fn run() -> Result<(), Box<dyn core::error::Error>> {
+//! use core::time::Duration;
+//! use mavstack::router::LinkRole;
+//! use mavstack::system::{System, Wanted};
+//! use mavstack::{LinkSpec, Node};
+//! let none = |_: &str| None;
+//! let gcs = Node::builder()
+//!     .identity(255, 190)
+//!     .role(LinkRole::GroundStation)
+//!     .link(LinkSpec::parse("udpin:0.0.0.0:14550", &none)?)
+//!     .start()
+//!     .await?;
+//! // The first autopilot heard; the MAVLink 2 handshake if it speaks MAVLink 1.
+//! let mut vehicle = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(10)).await?;
+//! let table = vehicle.params().await?;
+//! println!("{} parameters from {}", table.len(), vehicle.target());
+//! # Ok(()) }
+//! ```
+//!
+//! Every operation runs the `mavstack-services` state machine for it (retries, timeouts,
+//! IN_PROGRESS) over the node's link to the system, and ends when its future resolves;
+//! dropping the future abandons it.
+
+use core::marker::PhantomData;
+use core::time::Duration;
+
+use mavstack_channel::{CommandEncoding, HandshakeMethod, HandshakeOutcome, Target};
+use mavstack_core::wire::Version;
+use mavstack_core::{Message, MessageSet as _};
+use mavstack_dialects::common::{
+    CommandAck, CommandLong, GlobalPositionInt, MavAutopilot, MavCmd, MavMessage, MavMissionType,
+    MavType, MissionItemInt,
+};
+use mavstack_router::LinkId;
+use mavstack_services::command::{
+    Command, CommandClient, CommandConfig, CommandError, CommandEvent,
+};
+use mavstack_services::mission::{MissionClient, MissionConfig, MissionError, MissionEvent};
+use mavstack_services::param::{
+    Encoding, Name, Param, ParamClient, ParamConfig, ParamError, ParamEvent, ParamRef, Value,
+};
+use mavstack_services::{Address, Service};
+use mavstack_transport::clock;
+
+use crate::node::{NodeHandle, Subscription};
+
+/// Retries per message of parameter and mission operations by default: with 10, a 500-item
+/// upload over a link that drops 20 % each way fails about once in 150 (with the services'
+/// default 3, about once in two).
+pub const PATIENT_RETRIES: u8 = 10;
+
+/// Which system [`System::wait`] waits for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Wanted {
+    /// The first HEARTBEAT of an autopilot (not a ground station, not MAV_AUTOPILOT_INVALID).
+    AnyAutopilot,
+    /// This system; any component, or this one.
+    System(u8, Option<u8>),
+}
+
+/// Why an operation on a [`System`] failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SystemError {
+    /// No HEARTBEAT of the wanted system in time.
+    #[error("no vehicle heard within {seconds:.1} s")]
+    NotFound {
+        /// How long it waited.
+        seconds: f64,
+    },
+    /// The operation did not end in time.
+    #[error("no result within {seconds:.0} s")]
+    Timeout {
+        /// Its limit.
+        seconds: f64,
+    },
+    /// A parameter operation failed.
+    #[error("parameter {what}: {source}")]
+    Param {
+        /// Which (a name, or "list").
+        what: String,
+        /// Why.
+        source: ParamError,
+    },
+    /// A mission operation failed.
+    #[error("{what}: {source}")]
+    Mission {
+        /// Which (upload, download, clear, set current).
+        what: &'static str,
+        /// Why.
+        source: MissionError,
+    },
+    /// A command was not accepted.
+    #[error("command {command}: {source}")]
+    Command {
+        /// The command.
+        command: String,
+        /// Why.
+        source: CommandError,
+    },
+    /// The request could not start (another like it is running).
+    #[error("{0}")]
+    Busy(String),
+    /// The node stopped.
+    #[error("the node has stopped")]
+    Stopped,
+}
+
+/// A remote system reached through a node's link.
+#[derive(Debug)]
+pub struct System {
+    node: NodeHandle,
+    frames: Subscription,
+    own: Address,
+    target: Address,
+    link: LinkId,
+    link_name: String,
+    autopilot: MavAutopilot,
+    mav_type: MavType,
+    found_in: Version,
+    handshake: Option<HandshakeOutcome>,
+    home_amsl: Option<f32>,
+    retries: u8,
+}
+
+impl System {
+    /// Waits up to `wait` for the `wanted` system's HEARTBEAT on any link of `node`; if it
+    /// came in MAVLink 1 on a ground-station link
+    /// ([`LinkRole::GroundStation`](crate::router::LinkRole::GroundStation)), runs the
+    /// MAVLink 2 handshake (REQUEST_MESSAGE(300)) there: whatever its outcome, the link goes
+    /// on in the version it settles on ([`handshake`](Self::handshake) tells).
+    ///
+    /// # Errors
+    /// [`SystemError::NotFound`], [`SystemError::Stopped`].
+    pub async fn wait(
+        node: &NodeHandle,
+        wanted: Wanted,
+        wait: Duration,
+    ) -> Result<Self, SystemError> {
+        let mut frames = node.subscribe().await;
+        let deadline = tokio::time::Instant::now() + wait;
+        let found = tokio::time::timeout_at(deadline, async {
+            while let Some(incoming) = frames.recv().await {
+                let f = incoming.frame.frame.view();
+                let Ok(MavMessage::Heartbeat(hb)) = MavMessage::decode(f.msg_id(), f.payload())
+                else {
+                    continue;
+                };
+                let ok = match wanted {
+                    Wanted::AnyAutopilot => {
+                        hb.autopilot != MavAutopilot::INVALID && hb.r#type != MavType::GCS
+                    }
+                    Wanted::System(s, c) => f.sysid() == s && c.is_none_or(|c| c == f.compid()),
+                };
+                if ok {
+                    let component = match wanted {
+                        Wanted::System(_, Some(c)) => c,
+                        _ => f.compid(),
+                    };
+                    let (target, version) = (Address::new(f.sysid(), component), f.version());
+                    return Some((incoming, target, hb, version));
+                }
+            }
+            None
+        })
+        .await;
+        let (incoming, target, hb, found_in) = match found {
+            Ok(Some(found)) => found,
+            Ok(None) => return Err(SystemError::Stopped),
+            Err(_) => {
+                return Err(SystemError::NotFound {
+                    seconds: wait.as_secs_f64(),
+                });
+            }
+        };
+        let (sysid, compid) = node.identity();
+        let mut system = Self {
+            node: node.clone(),
+            frames,
+            own: Address::new(sysid, compid),
+            target,
+            link: incoming.link_id,
+            link_name: incoming.link,
+            autopilot: hb.autopilot,
+            mav_type: hb.r#type,
+            found_in,
+            handshake: None,
+            home_amsl: None,
+            retries: PATIENT_RETRIES,
+        };
+        if found_in == Version::V1 {
+            let outcome = system
+                .node
+                .handshake(
+                    system.link,
+                    Target::new(target.system, target.component),
+                    HandshakeMethod::RequestMessage300,
+                    CommandEncoding::Long,
+                )
+                .await;
+            // A link that cannot handshake (not a ground-station link, version=1) stays as
+            // it is.
+            system.handshake = outcome.ok();
+        }
+        Ok(system)
+    }
+
+    /// Its address (system, and the component that answered or was asked for).
+    #[must_use]
+    pub const fn target(&self) -> Address {
+        self.target
+    }
+
+    /// The autopilot its HEARTBEAT names.
+    #[must_use]
+    pub const fn autopilot(&self) -> MavAutopilot {
+        self.autopilot
+    }
+
+    /// The vehicle type its HEARTBEAT names.
+    #[must_use]
+    pub const fn mav_type(&self) -> MavType {
+        self.mav_type
+    }
+
+    /// The router link it was found on.
+    #[must_use]
+    pub const fn link(&self) -> LinkId {
+        self.link
+    }
+
+    /// The name of that link.
+    #[must_use]
+    pub fn link_name(&self) -> &str {
+        &self.link_name
+    }
+
+    /// The framing of the HEARTBEAT that found it.
+    #[must_use]
+    pub const fn found_in(&self) -> Version {
+        self.found_in
+    }
+
+    /// The outcome of the handshake [`wait`](Self::wait) ran, if it ran one.
+    #[must_use]
+    pub const fn handshake(&self) -> Option<&HandshakeOutcome> {
+        self.handshake.as_ref()
+    }
+
+    /// Its home altitude above mean sea level (m), once a GLOBAL_POSITION_INT of it was seen
+    /// during an operation.
+    #[must_use]
+    pub const fn home_amsl(&self) -> Option<f32> {
+        self.home_amsl
+    }
+
+    /// Takes in what the system sent since the last operation (its home altitude, for
+    /// [`home_amsl`](Self::home_amsl)).
+    pub fn update(&mut self) {
+        while let Ok(incoming) = self.frames.try_recv() {
+            let f = incoming.frame.frame.view();
+            if let Ok(msg) = MavMessage::decode(f.msg_id(), f.payload()) {
+                self.note(Address::new(f.sysid(), f.compid()), &msg);
+            }
+        }
+    }
+
+    /// Retries per message of later parameter and mission operations (default
+    /// [`PATIENT_RETRIES`]).
+    pub const fn set_retries(&mut self, retries: u8) {
+        self.retries = retries;
+    }
+
+    /// Its parameter encoding (ArduPilot's C cast, everyone else's bytewise).
+    #[must_use]
+    pub fn encoding(&self) -> Encoding {
+        Encoding::for_autopilot(self.autopilot)
+    }
+
+    fn param_client(&self) -> ParamClient {
+        let config = ParamConfig {
+            retries: self.retries,
+            ..ParamConfig::default()
+        };
+        ParamClient::new(config, self.encoding())
+    }
+
+    fn mission_client(&self) -> MissionClient {
+        let config = MissionConfig {
+            retries: self.retries,
+            ..MissionConfig::default()
+        };
+        MissionClient::new(self.own, config)
+    }
+
+    // ----- parameters --------------------------------------------------------------------
+
+    /// The whole parameter table, by index.
+    ///
+    /// # Errors
+    /// [`SystemError::Param`] (entries still missing after the retries), [`SystemError::Busy`],
+    /// [`SystemError::Timeout`] (10 minutes), [`SystemError::Stopped`].
+    pub async fn params(&mut self) -> Result<Vec<(Name, Value)>, SystemError> {
+        let mut client = self.param_client();
+        client
+            .fetch_all(clock::now(), self.target)
+            .map_err(|e| SystemError::Busy(e.to_string()))?;
+        let result = self
+            .run(&mut client, Duration::from_secs(600), |c| {
+                core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
+                    ParamEvent::List { result, .. } => Some(result),
+                    _ => None,
+                })
+            })
+            .await?;
+        result.map_err(|source| SystemError::Param {
+            what: "list".to_owned(),
+            source,
+        })
+    }
+
+    /// One parameter, read by name.
+    ///
+    /// # Errors
+    /// [`SystemError::Param`] (no answer, or no such parameter), [`SystemError::Stopped`].
+    pub async fn param(&mut self, name: Name) -> Result<Param, SystemError> {
+        let mut client = self.param_client();
+        let handle = client.read(clock::now(), self.target, ParamRef::Name(name));
+        self.param_result(&mut client, handle, name).await
+    }
+
+    /// Sets a parameter and waits for the system's confirmation; returns the value in force
+    /// (the system may have clamped or refused it).
+    ///
+    /// # Errors
+    /// [`SystemError::Param`], [`SystemError::Busy`], [`SystemError::Stopped`].
+    pub async fn set_param(&mut self, name: Name, value: Value) -> Result<Param, SystemError> {
+        let mut client = self.param_client();
+        let handle = client
+            .set(clock::now(), self.target, name, value)
+            .map_err(|e| SystemError::Busy(e.to_string()))?;
+        self.param_result(&mut client, handle, name).await
+    }
+
+    async fn param_result(
+        &mut self,
+        client: &mut ParamClient,
+        handle: mavstack_services::param::ParamHandle,
+        name: Name,
+    ) -> Result<Param, SystemError> {
+        let result = self
+            .run(client, Duration::from_secs(30), |c| {
+                core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
+                    ParamEvent::Finished { handle: h, result } if h == handle => Some(result),
+                    _ => None,
+                })
+            })
+            .await?;
+        result.map_err(|source| SystemError::Param {
+            what: name.to_string(),
+            source,
+        })
+    }
+
+    // ----- missions ------------------------------------------------------------------------
+
+    /// Uploads `items` as the system's plan of `kind` (mission, fence or rally).
+    ///
+    /// # Errors
+    /// [`SystemError::Mission`], [`SystemError::Busy`], [`SystemError::Stopped`].
+    pub async fn upload_mission(
+        &mut self,
+        kind: MavMissionType,
+        items: Vec<MissionItemInt>,
+    ) -> Result<(), SystemError> {
+        let mut client = self.mission_client();
+        client
+            .upload(clock::now(), self.target, kind, items)
+            .map_err(|e| SystemError::Busy(e.to_string()))?;
+        match self.mission_op(&mut client).await? {
+            MissionEvent::Uploaded { result, .. } => {
+                result.map_err(|source| SystemError::Mission {
+                    what: "upload",
+                    source,
+                })
+            }
+            _ => Err(unexpected("upload")),
+        }
+    }
+
+    /// Downloads the system's plan of `kind`.
+    ///
+    /// # Errors
+    /// [`SystemError::Mission`], [`SystemError::Busy`], [`SystemError::Stopped`].
+    pub async fn download_mission(
+        &mut self,
+        kind: MavMissionType,
+    ) -> Result<Vec<MissionItemInt>, SystemError> {
+        let mut client = self.mission_client();
+        client
+            .download(clock::now(), self.target, kind)
+            .map_err(|e| SystemError::Busy(e.to_string()))?;
+        match self.mission_op(&mut client).await? {
+            MissionEvent::Downloaded { result, .. } => {
+                result.map_err(|source| SystemError::Mission {
+                    what: "download",
+                    source,
+                })
+            }
+            _ => Err(unexpected("download")),
+        }
+    }
+
+    /// Clears the system's plan of `kind`.
+    ///
+    /// # Errors
+    /// [`SystemError::Mission`], [`SystemError::Busy`], [`SystemError::Stopped`].
+    pub async fn clear_mission(&mut self, kind: MavMissionType) -> Result<(), SystemError> {
+        let mut client = self.mission_client();
+        client
+            .clear(clock::now(), self.target, kind)
+            .map_err(|e| SystemError::Busy(e.to_string()))?;
+        match self.mission_op(&mut client).await? {
+            MissionEvent::Cleared { result, .. } => result.map_err(|source| SystemError::Mission {
+                what: "clear",
+                source,
+            }),
+            _ => Err(unexpected("clear")),
+        }
+    }
+
+    /// Makes mission item `seq` the current one.
+    ///
+    /// # Errors
+    /// [`SystemError::Mission`], [`SystemError::Busy`], [`SystemError::Stopped`].
+    pub async fn set_current_mission_item(&mut self, seq: u16) -> Result<(), SystemError> {
+        let mut client = self.mission_client();
+        client
+            .set_current(clock::now(), self.target, seq)
+            .map_err(|e| SystemError::Busy(e.to_string()))?;
+        match self.mission_op(&mut client).await? {
+            MissionEvent::CurrentSet { result, .. } => {
+                result.map_err(|source| SystemError::Mission {
+                    what: "set current",
+                    source,
+                })
+            }
+            _ => Err(unexpected("set current")),
+        }
+    }
+
+    async fn mission_op(
+        &mut self,
+        client: &mut MissionClient,
+    ) -> Result<MissionEvent, SystemError> {
+        self.run(client, Duration::from_secs(3600), MissionClient::poll_event)
+            .await
+    }
+
+    // ----- commands ------------------------------------------------------------------------
+
+    /// Sends a command (COMMAND_LONG or COMMAND_INT; its target fields are the system's) with
+    /// the services' retries and waits for the final COMMAND_ACK; `progress` hears each
+    /// IN_PROGRESS (0–100, 255 unknown).
+    ///
+    /// # Errors
+    /// [`SystemError::Command`] (refused, or no acknowledgement), [`SystemError::Busy`],
+    /// [`SystemError::Stopped`].
+    pub async fn command(
+        &mut self,
+        command: Command,
+        mut progress: impl FnMut(u8),
+    ) -> Result<CommandAck, SystemError> {
+        let id = command.id();
+        let mut client = CommandClient::new(self.own, CommandConfig::default());
+        let handle = client
+            .send(clock::now(), self.target, command)
+            .map_err(|e| SystemError::Busy(e.to_string()))?;
+        let result = self
+            .run(&mut client, Duration::from_secs(600), |c| {
+                core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
+                    CommandEvent::Progress {
+                        handle: h,
+                        progress: p,
+                    } if h == handle => {
+                        progress(p);
+                        None
+                    }
+                    CommandEvent::Finished { handle: h, result } if h == handle => Some(result),
+                    _ => None,
+                })
+            })
+            .await?;
+        result.map_err(|source| SystemError::Command {
+            command: command_name(id),
+            source,
+        })
+    }
+
+    /// Asks the system to send message `id` once (MAV_CMD_REQUEST_MESSAGE); returns its
+    /// acknowledgement (the message itself arrives on the node's subscriptions).
+    ///
+    /// # Errors
+    /// As [`command`](Self::command).
+    pub async fn request_message(&mut self, id: u32) -> Result<CommandAck, SystemError> {
+        let command = Command::Long(CommandLong {
+            command: MavCmd::REQUEST_MESSAGE,
+            param1: id as f32,
+            ..CommandLong::default()
+        });
+        self.command(command, |_| {}).await
+    }
+
+    /// Asks the system to stream message `id` every `interval` (MAV_CMD_SET_MESSAGE_INTERVAL;
+    /// `None` stops it).
+    ///
+    /// # Errors
+    /// As [`command`](Self::command).
+    pub async fn set_message_interval(
+        &mut self,
+        id: u32,
+        interval: Option<Duration>,
+    ) -> Result<CommandAck, SystemError> {
+        let us = interval.map_or(-1.0, |d| d.as_micros() as f32);
+        let command = Command::Long(CommandLong {
+            command: MavCmd::SET_MESSAGE_INTERVAL,
+            param1: id as f32,
+            param2: us,
+            ..CommandLong::default()
+        });
+        self.command(command, |_| {}).await
+    }
+
+    // ----- telemetry -----------------------------------------------------------------------
+
+    /// Messages `T` from this system from now on, decoded (see [`Telemetry`]).
+    pub async fn subscribe<T: Message>(&self) -> Telemetry<T> {
+        Telemetry {
+            frames: self.node.subscribe().await,
+            system: self.target.system,
+            message: PhantomData,
+        }
+    }
+
+    // ----- the driver ----------------------------------------------------------------------
+
+    /// Drives `service` (any `mavstack-services` state machine) over the system's link until
+    /// `done` returns a result, or fails after `limit`.
+    ///
+    /// # Errors
+    /// [`SystemError::Timeout`], [`SystemError::Stopped`].
+    pub async fn run<S: Service, R>(
+        &mut self,
+        service: &mut S,
+        limit: Duration,
+        mut done: impl FnMut(&mut S) -> Option<R>,
+    ) -> Result<R, SystemError> {
+        // What waited in the queue came before this operation: not its answers.
+        self.update();
+        let deadline = tokio::time::Instant::now() + limit;
+        loop {
+            while let Some(out) = service.poll_transmit() {
+                if self.node.send_on(self.link, &out.message).await == 0
+                    && self.node.report().await.is_none()
+                {
+                    return Err(SystemError::Stopped);
+                }
+            }
+            if let Some(result) = done(service) {
+                return Ok(result);
+            }
+            let now = tokio::time::Instant::now();
+            if now >= deadline {
+                return Err(SystemError::Timeout {
+                    seconds: limit.as_secs_f64(),
+                });
+            }
+            let wake = service
+                .poll_timeout()
+                .map_or(deadline, |t| clock::to_tokio(t).min(deadline));
+            tokio::select! {
+                () = tokio::time::sleep_until(wake) => service.handle_timeout(clock::now()),
+                incoming = self.frames.recv() => {
+                    let incoming = incoming.ok_or(SystemError::Stopped)?;
+                    let f = incoming.frame.frame.view();
+                    if let Ok(msg) = MavMessage::decode(f.msg_id(), f.payload()) {
+                        let from = Address::new(f.sysid(), f.compid());
+                        self.note(from, &msg);
+                        service.handle_message(clock::now(), from, &msg);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Keeps what the system tells about itself in passing.
+    fn note(&mut self, from: Address, msg: &MavMessage) {
+        if let MavMessage::GlobalPositionInt(GlobalPositionInt {
+            alt, relative_alt, ..
+        }) = msg
+            && from.system == self.target.system
+        {
+            self.home_amsl = Some((alt - relative_alt) as f32 / 1000.0);
+        }
+    }
+}
+
+fn unexpected(what: &'static str) -> SystemError {
+    SystemError::Busy(format!(
+        "{what}: the mission client reported another operation"
+    ))
+}
+
+/// A MAV_CMD's name without its prefix, or its number.
+fn command_name(c: MavCmd) -> String {
+    c.name().map_or_else(
+        || c.0.to_string(),
+        |n| n.strip_prefix("MAV_CMD_").unwrap_or(n).to_owned(),
+    )
+}
+
+/// One message of a [`Telemetry`] subscription.
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub struct Sample<T> {
+    /// The sending component.
+    pub from: Address,
+    /// Its framing.
+    pub version: Version,
+    /// Its sequence number.
+    pub seq: u8,
+    /// The message.
+    pub message: T,
+}
+
+/// Messages of type `T` from one system (from [`System::subscribe`]): a bounded queue like
+/// the node's subscriptions; dropping it unsubscribes.
+#[derive(Debug)]
+pub struct Telemetry<T> {
+    frames: Subscription,
+    system: u8,
+    message: PhantomData<fn() -> T>,
+}
+
+impl<T: Message> Telemetry<T> {
+    /// The next one; `None` once the node has stopped.
+    pub async fn recv(&mut self) -> Option<Sample<T>> {
+        while let Some(incoming) = self.frames.recv().await {
+            let f = incoming.frame.frame.view();
+            if f.msg_id() == T::ID && f.sysid() == self.system {
+                return Some(Sample {
+                    from: Address::new(f.sysid(), f.compid()),
+                    version: f.version(),
+                    seq: f.seq(),
+                    message: T::decode(f.payload()),
+                });
+            }
+        }
+        None
+    }
+}
