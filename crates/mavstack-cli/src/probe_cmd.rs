@@ -7,22 +7,20 @@ use std::collections::BTreeMap;
 
 use anyhow::anyhow;
 use clap::{Args, ValueEnum};
+use mavstack::router::LinkId;
+use mavstack::{EventSubscription, Incoming, LinkEvent, LinkSpec, NodeHandle, Subscription};
 use mavstack_channel::{
-    Authentication, CommandEncoding, Config, Event, HandshakeMethod, HandshakeResult,
-    SigningConfig, Target,
+    Authentication, CommandEncoding, HandshakeMethod, HandshakeResult, SigningConfig, Target,
 };
 use mavstack_core::Message;
 use mavstack_core::wire::Version;
 use mavstack_dialects::common::{
     AutopilotVersion, CommandLong, Heartbeat, MavAutopilot, MavCmd, MavProtocolCapability, MavType,
 };
-use mavstack_transport::channel_protocol::{
-    ChannelCommand, ChannelEvent, ChannelEventKind, ChannelProtocol, RawMessage,
-};
-use mavstack_transport::{Connection, Dest, PeerId};
 use tokio::time::Instant;
 
-use crate::link_cmd::{parse_spec, runtime, seconds};
+use crate::gcs_cmd::ground_station;
+use crate::link_cmd::{runtime, seconds};
 use crate::vehicle_cmd::secret_key;
 use crate::{Failure, other};
 
@@ -72,7 +70,7 @@ pub(crate) struct ProbeArgs {
 /// What the probe learnt about one system.
 #[derive(Debug)]
 struct System {
-    peer: PeerId,
+    link: LinkId,
     autopilot: u8,
     kind: u8,
     version_before: Version,
@@ -83,78 +81,68 @@ struct System {
 }
 
 struct Probe {
-    conn: Connection<ChannelProtocol>,
+    node: NodeHandle,
+    frames: Subscription,
+    events: EventSubscription,
     systems: BTreeMap<(u8, u8), System>,
-    outcomes: BTreeMap<PeerId, HandshakeResult>,
+    outcomes: BTreeMap<LinkId, HandshakeResult>,
     /// Heartbeats seen after each system's handshake ended.
     after: BTreeMap<(u8, u8), Version>,
     handshake_done: BTreeMap<(u8, u8), bool>,
 }
 
 impl Probe {
-    async fn send(&self, command: ChannelCommand) -> Result<(), Failure> {
-        self.conn.send(command).await.map_err(other)
-    }
-
-    /// Takes events until `until`, recording what they say.
+    /// Takes what the node reports until `until`, recording what it says.
     async fn pump(&mut self, until: Instant) -> Result<(), Failure> {
+        let closed = || Failure::Other(anyhow!("the link closed"));
         loop {
-            let event = tokio::select! {
+            tokio::select! {
                 () = tokio::time::sleep_until(until) => return Ok(()),
-                e = self.conn.recv() => match e {
-                    Some(e) => e,
-                    None => return Err(Failure::Other(anyhow!("the link closed"))),
-                },
-            };
-            self.note(event);
-        }
-    }
-
-    fn note(&mut self, event: ChannelEvent) {
-        let peer = event.peer;
-        let ChannelEventKind::Channel(event) = event.event else {
-            return;
-        };
-        match event {
-            Event::Frame(rf) => {
-                let f = &rf.frame;
-                let key = (f.sysid(), f.compid());
-                let signed = !matches!(
-                    rf.auth,
-                    Authentication::Unsigned | Authentication::AllowedUnsigned
-                );
-                if f.msg_id() == Heartbeat::ID {
-                    let hb = Heartbeat::decode(f.payload());
-                    if hb.r#type == MavType::GCS {
-                        return;
-                    }
-                    let system = self.systems.entry(key).or_insert(System {
-                        peer,
-                        autopilot: hb.autopilot.0,
-                        kind: hb.r#type.0,
-                        version_before: f.version(),
-                        version_after: None,
-                        capability: None,
-                        signed: false,
-                        handshake: None,
-                    });
-                    system.signed |= signed && f.is_signed();
-                    if self.handshake_done.get(&key).copied().unwrap_or(false) {
-                        self.after.entry(key).or_insert(f.version());
-                    }
-                } else if let Some(system) = self.systems.get_mut(&key) {
-                    system.signed |= f.is_signed();
-                    if f.msg_id() == AutopilotVersion::ID {
-                        let av = AutopilotVersion::decode(f.payload());
-                        system.capability =
-                            Some(av.capabilities.0 & MavProtocolCapability::MAVLINK2.0 != 0);
+                f = self.frames.recv() => self.note(f.ok_or_else(closed)?),
+                e = self.events.recv() => {
+                    let e = e.ok_or_else(closed)?;
+                    if let LinkEvent::Handshake(outcome) = e.kind {
+                        self.outcomes.insert(e.link_id, outcome.result);
                     }
                 }
             }
-            Event::Handshake(outcome) => {
-                self.outcomes.insert(peer, outcome.result);
+        }
+    }
+
+    fn note(&mut self, incoming: Incoming) {
+        let rf = &incoming.frame;
+        let f = &rf.frame;
+        let key = (f.sysid(), f.compid());
+        let signed = !matches!(
+            rf.auth,
+            Authentication::Unsigned | Authentication::AllowedUnsigned
+        );
+        if f.msg_id() == Heartbeat::ID {
+            let hb = Heartbeat::decode(f.payload());
+            if hb.r#type == MavType::GCS {
+                return;
             }
-            _ => {}
+            let system = self.systems.entry(key).or_insert(System {
+                link: incoming.link_id,
+                autopilot: hb.autopilot.0,
+                kind: hb.r#type.0,
+                version_before: f.version(),
+                version_after: None,
+                capability: None,
+                signed: false,
+                handshake: None,
+            });
+            system.signed |= signed && f.is_signed();
+            if self.handshake_done.get(&key).copied().unwrap_or(false) {
+                self.after.entry(key).or_insert(f.version());
+            }
+        } else if let Some(system) = self.systems.get_mut(&key) {
+            system.signed |= f.is_signed();
+            if f.msg_id() == AutopilotVersion::ID {
+                let av = AutopilotVersion::decode(f.payload());
+                system.capability =
+                    Some(av.capabilities.0 & MavProtocolCapability::MAVLINK2.0 != 0);
+            }
         }
     }
 }
@@ -178,7 +166,8 @@ fn report(key: (u8, u8), s: &System, method: &str) -> String {
 }
 
 pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
-    let spec = parse_spec(&args.conn)?;
+    let mut spec =
+        LinkSpec::parse(&args.conn, &|_| None).map_err(|e| Failure::Input(anyhow!("{e}")))?;
     let wait = seconds(args.timeout, "--timeout")?;
     if args.method == Method::RequestMessageOther && args.other_id < 256 {
         return Err(Failure::Input(anyhow!(
@@ -198,38 +187,49 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
     } else {
         CommandEncoding::Long
     };
-    let mut config = Config::ground_station(args.sysid, args.compid);
-    config.signing = args
+    spec.config.signing = args
         .key
         .as_deref()
         .map(|k| secret_key(k, "--key").map(|key| SigningConfig::new(key, args.link_id)))
         .transpose()?;
-    let protocol =
-        ChannelProtocol::new(config).map_err(|e| Failure::Input(anyhow!("probe: {e}")))?;
+    if args.sysid == 0 || args.compid == 0 {
+        return Err(Failure::Input(anyhow!(
+            "probe: --sysid and --compid must be 1 to 255"
+        )));
+    }
     runtime()?.block_on(async {
-        let conn = Connection::open(&spec, protocol).await.map_err(other)?;
+        // Our HEARTBEAT twice a second: a vehicle waiting on udpin learns us at once.
+        let gcs = Heartbeat {
+            r#type: MavType::GCS,
+            autopilot: MavAutopilot::INVALID,
+            mavlink_version: 3,
+            ..Heartbeat::default()
+        };
+        let node = ground_station(args.sysid, args.compid)
+            .heartbeat(&gcs, Duration::from_millis(500))
+            .link(spec)
+            .start()
+            .await
+            .map_err(other)?;
+        let handle = node.handle();
         let mut probe = Probe {
-            conn,
+            frames: node.subscribe().await,
+            events: handle.events().await,
+            node: handle,
             systems: BTreeMap::new(),
             outcomes: BTreeMap::new(),
             after: BTreeMap::new(),
             handshake_done: BTreeMap::new(),
         };
-        let gcs_heartbeat = RawMessage::new(&Heartbeat {
-            r#type: MavType::GCS,
-            autopilot: MavAutopilot::INVALID,
-            mavlink_version: 3,
-            ..Heartbeat::default()
-        });
         // 1. Find the systems: heartbeats until the first, then a little longer for others.
         let give_up = Instant::now() + wait;
         while probe.systems.is_empty() && Instant::now() < give_up {
-            probe.send(ChannelCommand::to_all(gcs_heartbeat)).await?;
-            let next = (Instant::now() + Duration::from_millis(500)).min(give_up);
+            let next = (Instant::now() + Duration::from_millis(100)).min(give_up);
             probe.pump(next).await?;
         }
         if probe.systems.is_empty() {
-            probe.conn.close().await.map_err(other)?;
+            drop(probe);
+            node.shutdown().await.map_err(other)?;
             return Err(Failure::Other(anyhow!(
                 "no system found on {} within {} s",
                 args.conn,
@@ -242,24 +242,22 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
         let keys: Vec<(u8, u8)> = probe.systems.keys().copied().collect();
         let method_name = method.name();
         for key in keys {
-            let Some(peer) = probe.systems.get(&key).map(|s| s.peer) else {
+            let Some(link) = probe.systems.get(&key).map(|s| s.link) else {
                 continue;
             };
             // 2. AUTOPILOT_VERSION, in the link's current framing.
-            let request = RawMessage::new(&CommandLong {
+            let request = CommandLong {
                 target_system: key.0,
                 target_component: key.1,
                 command: MavCmd::REQUEST_MESSAGE,
                 param1: AutopilotVersion::ID as f32,
                 ..CommandLong::default()
-            });
+            };
             for _ in 0..3 {
                 probe
-                    .send(ChannelCommand::Send {
-                        dest: Dest::Peer(peer),
-                        message: request,
-                    })
-                    .await?;
+                    .node
+                    .send_on(link, &mavstack_dialects::common::MavMessage::CommandLong(request))
+                    .await;
                 probe
                     .pump(Instant::now() + Duration::from_millis(400))
                     .await?;
@@ -271,30 +269,29 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
                     break;
                 }
             }
-            // 3. The handshake; the channel retries and times out by itself.
-            probe.outcomes.remove(&peer);
-            probe
-                .send(ChannelCommand::StartHandshake {
-                    peer,
-                    target: Target::new(key.0, key.1),
-                    method,
-                    encoding,
+            // 3. The handshake; the link retries and times out by itself.
+            probe.outcomes.remove(&link);
+            let handshake = {
+                let node = probe.node.clone();
+                tokio::spawn(async move {
+                    node.handshake(link, Target::new(key.0, key.1), method, encoding)
+                        .await
                 })
-                .await?;
+            };
             let deadline = Instant::now() + Duration::from_secs(5);
-            while !probe.outcomes.contains_key(&peer) && Instant::now() < deadline {
+            while !probe.outcomes.contains_key(&link) && Instant::now() < deadline {
                 probe
                     .pump(Instant::now() + Duration::from_millis(100))
                     .await?;
             }
-            let result = probe.outcomes.get(&peer).map(HandshakeResult::name);
+            handshake.abort();
+            let result = probe.outcomes.get(&link).map(HandshakeResult::name);
             probe.handshake_done.insert(key, true);
             // 4. The version the system uses now: its next heartbeat.
             let deadline = Instant::now() + Duration::from_millis(2500);
             while !probe.after.contains_key(&key) && Instant::now() < deadline {
-                probe.send(ChannelCommand::to_all(gcs_heartbeat)).await?;
                 probe
-                    .pump(Instant::now() + Duration::from_millis(250))
+                    .pump(Instant::now() + Duration::from_millis(100))
                     .await?;
             }
             if let Some(system) = probe.systems.get_mut(&key) {
@@ -305,7 +302,8 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
         for (key, system) in &probe.systems {
             println!("{}", report(*key, system, method_name));
         }
-        probe.conn.close().await.map_err(other)?;
+        drop(probe);
+        node.shutdown().await.map_err(other)?;
         Ok(())
     })
 }
