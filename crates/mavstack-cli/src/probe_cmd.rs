@@ -256,7 +256,10 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
             for _ in 0..3 {
                 probe
                     .node
-                    .send_on(link, &mavstack_dialects::common::MavMessage::CommandLong(request))
+                    .send_on(
+                        link,
+                        &mavstack_dialects::common::MavMessage::CommandLong(request),
+                    )
                     .await;
                 probe
                     .pump(Instant::now() + Duration::from_millis(400))

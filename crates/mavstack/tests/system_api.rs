@@ -1,0 +1,236 @@
+//! The `System` API of a ground-station `Node` against the in-process simulated vehicle:
+//! discovery, the handshake, parameters, missions, commands and typed telemetry, over a
+//! clean loopback link and through `tests-interop/lossy_relay.py` dropping 20 % of the
+//! datagrams each way.
+#![cfg(feature = "sim")]
+
+use core::time::Duration;
+use std::path::PathBuf;
+use std::process::{Child, Command as Process};
+
+use mavstack::channel::HandshakeResult;
+use mavstack::dialects::common::{
+    Attitude, CommandLong, MavCmd, MavFrame, MavMissionType, MavResult, MissionItemInt,
+};
+use mavstack::router::LinkRole;
+use mavstack::services::command::Command;
+use mavstack::services::heartbeat::HeartbeatEvent;
+use mavstack::services::param::{Name, Value};
+use mavstack::sim::{Autopilot, params};
+use mavstack::sim_vehicle::SimVehicle;
+use mavstack::system::{Discovery, System, Wanted};
+use mavstack::{LinkSpec, Node};
+
+fn none(_: &str) -> Option<u32> {
+    None
+}
+
+fn ground_station() -> mavstack::NodeBuilder {
+    Node::builder()
+        .identity(255, 190)
+        .role(LinkRole::GroundStation)
+        .heartbeat(
+            &mavstack::dialects::common::Heartbeat {
+                r#type: mavstack::dialects::common::MavType::GCS,
+                autopilot: mavstack::dialects::common::MavAutopilot::INVALID,
+                mavlink_version: 3,
+                ..Default::default()
+            },
+            Duration::from_secs(1),
+        )
+}
+
+/// `n` waypoints around the simulator's home.
+fn plan(n: u16) -> Vec<MissionItemInt> {
+    (0..n)
+        .map(|i| MissionItemInt {
+            seq: i,
+            frame: MavFrame::GLOBAL_RELATIVE_ALT_INT,
+            command: MavCmd::NAV_WAYPOINT,
+            autocontinue: 1,
+            x: -353_632_610 + i32::from(i) * 100,
+            y: 1_491_652_300 + i32::from(i) * 100,
+            z: 20.0 + f32::from(i),
+            ..MissionItemInt::default()
+        })
+        .collect()
+}
+
+fn same_plan(a: &[MissionItemInt], b: &[MissionItemInt]) -> bool {
+    a.len() == b.len()
+        && a.iter().zip(b).all(|(a, b)| {
+            (a.command, a.frame, a.x, a.y, a.z.to_bits())
+                == (b.command, b.frame, b.x, b.y, b.z.to_bits())
+        })
+}
+
+#[tokio::test]
+async fn a_ground_station_finds_handshakes_and_operates_the_simulated_vehicle() {
+    let vehicle = SimVehicle::start(
+        Node::builder().link(LinkSpec::parse("udpin:127.0.0.1:0", &none).expect("spec")),
+        SimVehicle::config(Autopilot::Ardupilot, params::defaults(Autopilot::Ardupilot)),
+    )
+    .await
+    .expect("vehicle starts");
+    let port = vehicle.node().local_addrs()[0].expect("bound").port();
+    let gcs = ground_station()
+        .link(LinkSpec::parse(&format!("udpout:127.0.0.1:{port}"), &none).expect("spec"))
+        .start()
+        .await
+        .expect("ground station starts");
+    let mut discovery = Discovery::new(&gcs.handle()).await;
+
+    let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
+        .await
+        .expect("the vehicle is found");
+    assert_eq!((v.target().system, v.target().component), (1, 1));
+    // It started in MAVLink 1: the handshake ran and succeeded.
+    let outcome = v.handshake().expect("a handshake ran");
+    assert!(matches!(
+        outcome.result,
+        HandshakeResult::ProtocolVersion(_)
+    ));
+    let appeared = tokio::time::timeout(Duration::from_secs(3), discovery.next())
+        .await
+        .expect("discovery reports")
+        .expect("an event");
+    assert!(matches!(appeared, HeartbeatEvent::New(p) if p.address == v.target()));
+
+    let table = v.params().await.expect("the parameter table");
+    assert_eq!(table.len(), params::defaults(Autopilot::Ardupilot).len());
+    let name = Name::new("WPNAV_SPEED").expect("name");
+    let set = v
+        .set_param(name, Value::F32(640.0))
+        .await
+        .expect("set confirmed");
+    assert_eq!(set.value.as_f64(), 640.0);
+    assert_eq!(v.param(name).await.expect("read").value.as_f64(), 640.0);
+
+    let items = plan(8);
+    v.upload_mission(MavMissionType::MISSION, items.clone())
+        .await
+        .expect("upload");
+    let back = v
+        .download_mission(MavMissionType::MISSION)
+        .await
+        .expect("download");
+    assert!(same_plan(&back, &items), "read back {back:?}");
+
+    let ack = v
+        .command(
+            Command::Long(CommandLong {
+                command: MavCmd::COMPONENT_ARM_DISARM,
+                param1: 1.0,
+                ..CommandLong::default()
+            }),
+            |_| {},
+        )
+        .await
+        .expect("arming is accepted");
+    assert_eq!(ack.result, MavResult::ACCEPTED);
+
+    let mut attitude = v.subscribe::<Attitude>().await;
+    let sample = tokio::time::timeout(Duration::from_secs(3), attitude.recv())
+        .await
+        .expect("ATTITUDE streams")
+        .expect("a sample");
+    assert_eq!(sample.from, v.target());
+    assert!(sample.message.roll.is_finite());
+
+    // The vehicle goes away: discovery says so within its 3 s timeout.
+    vehicle.shutdown().await.expect("vehicle stops");
+    let lost = tokio::time::timeout(Duration::from_secs(6), async {
+        loop {
+            match discovery.next().await {
+                Some(HeartbeatEvent::Lost(a)) => return Some(a),
+                Some(_) => {}
+                None => return None,
+            }
+        }
+    })
+    .await
+    .expect("lost in time");
+    assert_eq!(lost, Some(v.target()));
+    drop(v);
+    gcs.shutdown().await.expect("ground station stops");
+}
+
+/// `tests-interop/lossy_relay.py` between `listen` and `forward`, dropping `loss` each way.
+struct Relay(Child);
+
+impl Relay {
+    fn start(listen: u16, forward: u16, loss: f64) -> Self {
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let python = std::env::var_os("MAVSTACK_PYTHON").map_or_else(
+            || {
+                let venv = root.join(".venv/bin/python");
+                if venv.exists() {
+                    venv
+                } else {
+                    PathBuf::from("python3")
+                }
+            },
+            PathBuf::from,
+        );
+        let child = Process::new(python)
+            .arg(root.join("tests-interop/lossy_relay.py"))
+            .args(["--listen", &format!("127.0.0.1:{listen}")])
+            .args(["--forward", &format!("127.0.0.1:{forward}")])
+            .args(["--loss", &loss.to_string(), "--seed", "7"])
+            .spawn()
+            .expect("python runs lossy_relay.py");
+        Self(child)
+    }
+}
+
+impl Drop for Relay {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[tokio::test]
+async fn parameters_and_a_mission_go_through_a_link_that_drops_a_fifth_of_the_datagrams() {
+    let gcs = ground_station()
+        .link(LinkSpec::parse("udpin:127.0.0.1:0", &none).expect("spec"))
+        .start()
+        .await
+        .expect("ground station starts");
+    let gcs_port = gcs.local_addrs()[0].expect("bound").port();
+    let listen = std::net::UdpSocket::bind("127.0.0.1:0")
+        .and_then(|s| s.local_addr())
+        .expect("a free port")
+        .port();
+    let _relay = Relay::start(listen, gcs_port, 0.2);
+    let vehicle = SimVehicle::start(
+        Node::builder()
+            .link(LinkSpec::parse(&format!("udpout:127.0.0.1:{listen}"), &none).expect("spec")),
+        SimVehicle::config(Autopilot::Px4, params::defaults(Autopilot::Px4)),
+    )
+    .await
+    .expect("vehicle starts");
+
+    let mut v = System::wait(
+        &gcs.handle(),
+        Wanted::System(1, Some(1)),
+        Duration::from_secs(10),
+    )
+    .await
+    .expect("the vehicle is found through the relay");
+    let table = v.params().await.expect("every parameter despite the loss");
+    assert_eq!(table.len(), params::defaults(Autopilot::Px4).len());
+    let items = plan(40);
+    v.upload_mission(MavMissionType::MISSION, items.clone())
+        .await
+        .expect("upload despite the loss");
+    let back = v
+        .download_mission(MavMissionType::MISSION)
+        .await
+        .expect("download despite the loss");
+    assert!(same_plan(&back, &items));
+
+    drop(v);
+    vehicle.shutdown().await.expect("vehicle stops");
+    gcs.shutdown().await.expect("ground station stops");
+}
