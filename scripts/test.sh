@@ -21,13 +21,25 @@ step "cargo test (workspace, all features)"
 cargo test --workspace --all-features --locked
 
 step "examples, against the in-process simulated vehicle"
-gs="$(cargo run -q --locked -p mavstack --features sim --example ground_station -- 4)"
-for want in "ATTITUDE roll" "GLOBAL_POSITION_INT -35.36" "HEARTBEAT MAV_TYPE_QUADROTOR MAV_AUTOPILOT_ARDUPILOTMEGA" "link vehicle (2)"; do
-    if ! grep -qF "$want" <<<"$gs"; then
-        printf 'ground_station example: no "%s" in its output:\n%s\n' "$want" "$gs" >&2
-        exit 1
-    fi
-done
+# Each example runs and its output must show what it is for.
+example() {
+    local name="$1"
+    shift
+    local out
+    out="$(cargo run -q --locked -p mavstack --features sim --example "$name" -- ${ARGS:-})"
+    for want in "$@"; do
+        if ! grep -qF "$want" <<<"$out"; then
+            printf '%s example: no "%s" in its output:\n%s\n' "$name" "$want" "$out" >&2
+            exit 1
+        fi
+    done
+}
+ARGS=4 example ground_station "ATTITUDE roll" "GLOBAL_POSITION_INT -35.36" \
+    "HEARTBEAT MAV_TYPE_QUADROTOR MAV_AUTOPILOT_ARDUPILOTMEGA" "link vehicle (2)"
+example mission_upload "uploaded 6 items from the built-in plan" "read back 6 items: identical"
+example companion "companion ← ATTITUDE from 1/1" "ground station ← MAV_SYS_ID = 1 (through the companion)" \
+    "companion link fc" "companion link gcs"
+example vehicle_in_test "RTL_ALT set to 3000, arming MAV_RESULT_ACCEPTED"
 
 step "feature matrix"
 cargo build -p mavstack --locked

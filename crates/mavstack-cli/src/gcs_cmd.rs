@@ -453,11 +453,11 @@ pub(crate) fn mission(action: MissionAction) -> Result<(), Failure> {
                     Some(path) if path.ends_with(".json") => {
                         format!("{:#}\n", mission_file::to_json(plan.mav(), &items))
                     }
-                    Some(_) => mission_file::to_wpl(&items),
+                    Some(_) => mavstack_services::wpl::to_text(&items),
                     None if args.json => {
                         format!("{}\n", mission_file::to_json(plan.mav(), &items))
                     }
-                    None => mission_file::to_wpl(&items),
+                    None => mavstack_services::wpl::to_text(&items),
                 };
                 match &file {
                     Some(path) => std::fs::write(path, text)

@@ -1,125 +1,23 @@
 //! Mission plans on disk: QGroundControl's `QGC WPL 110` text format (also MAVProxy's and
-//! Mission Planner's) and JSON.
+//! Mission Planner's; read and written by `mavstack_services::wpl`) and JSON.
 //!
-//! WPL: a `QGC WPL 110` line, then one tab-separated line per item:
-//! `SEQ CURRENT FRAME COMMAND P1 P2 P3 P4 X Y Z AUTOCONTINUE`, with X/Y in degrees for
-//! global frames (metres for local ones). JSON: `{"mission_type": "mission", "items": [...]}`,
+//! JSON: `{"mission_type": "mission", "items": [...]}`,
 //! each item with `seq`, `frame`, `command` (numbers), `current`, `autocontinue`,
 //! `param1`–`param4`, `x`/`y` (degE7 for global frames, as MISSION_ITEM_INT carries them),
 //! `z`; NaN parameters are `null`. Items read from either format are renumbered in order.
 
 use anyhow::{Context, anyhow, bail};
 use mavstack_dialects::common::{MavCmd, MavFrame, MavMissionType, MissionItemInt};
-use mavstack_services::mission::is_global;
+use mavstack_services::wpl::{self, WplError};
 use serde_json::{Map, Value as Json, json};
 
-/// The scale between file units and MISSION_ITEM_INT's integers.
-fn scale(frame: MavFrame) -> f64 {
-    if is_global(frame) { 1e7 } else { 1e4 }
-}
-
-fn fmt_f32(v: f32) -> String {
-    if v.is_nan() {
-        "nan".to_owned()
-    } else {
-        format!("{v}")
-    }
-}
-
-/// The plan as QGC WPL 110 text.
-pub(crate) fn to_wpl(items: &[MissionItemInt]) -> String {
-    let mut out = String::from("QGC WPL 110\n");
-    for (i, it) in items.iter().enumerate() {
-        let s = scale(it.frame);
-        let coordinate = |v: i32| {
-            if is_global(it.frame) {
-                format!("{:.8}", f64::from(v) / s)
-            } else {
-                format!("{}", f64::from(v) / s)
-            }
-        };
-        out.push_str(&format!(
-            "{i}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\n",
-            it.current,
-            it.frame.0,
-            it.command.0,
-            fmt_f32(it.param1),
-            fmt_f32(it.param2),
-            fmt_f32(it.param3),
-            fmt_f32(it.param4),
-            coordinate(it.x),
-            coordinate(it.y),
-            fmt_f32(it.z),
-            it.autocontinue,
-        ));
-    }
-    out
-}
-
-/// A QGC WPL 110 text's items; errors name the line.
+/// A QGC WPL 110 text's items; errors start with the line number (`2: ...`), as the file
+/// name is put before them (`plan.waypoints:2: ...`).
 pub(crate) fn from_wpl(text: &str) -> anyhow::Result<Vec<MissionItemInt>> {
-    let mut lines = text.lines().enumerate();
-    match lines.next() {
-        Some((_, first)) if first.trim().starts_with("QGC WPL 110") => {}
-        Some((_, first)) => bail!("1: expected \"QGC WPL 110\", got {:?}", first.trim()),
-        None => bail!("empty file: expected \"QGC WPL 110\""),
-    }
-    let mut items = Vec::new();
-    for (i, line) in lines {
-        let line = line.trim();
-        if line.is_empty() {
-            continue;
-        }
-        let item = wpl_line(line, items.len()).map_err(|e| anyhow!("{}: {e}", i + 1))?;
-        items.push(item);
-    }
-    Ok(items)
-}
-
-fn wpl_line(line: &str, seq: usize) -> anyhow::Result<MissionItemInt> {
-    let fields: Vec<&str> = line.split_whitespace().collect();
-    if fields.len() != 12 {
-        bail!(
-            "expected 12 fields (SEQ CURRENT FRAME COMMAND P1 P2 P3 P4 X Y Z AUTOCONTINUE), got {}",
-            fields.len()
-        );
-    }
-    let int = |i: usize, what: &str| -> anyhow::Result<u16> {
-        fields[i]
-            .parse::<u16>()
-            .map_err(|_| anyhow!("{what} {:?} is not a number 0-65535", fields[i]))
-    };
-    let float = |i: usize, what: &str| -> anyhow::Result<f64> {
-        fields[i]
-            .parse::<f64>()
-            .map_err(|_| anyhow!("{what} {:?} is not a number", fields[i]))
-    };
-    let frame = MavFrame(u8::try_from(int(2, "frame")?).map_err(|_| anyhow!("frame too big"))?);
-    let s = scale(frame);
-    let fixed = |v: f64, what: &str| -> anyhow::Result<i32> {
-        let scaled = (v * s).round();
-        if scaled.is_nan() {
-            return Ok(0);
-        }
-        if scaled.abs() > f64::from(i32::MAX) {
-            bail!("{what} {v} is out of range");
-        }
-        Ok(scaled as i32)
-    };
-    Ok(MissionItemInt {
-        seq: u16::try_from(seq).map_err(|_| anyhow!("more than 65,535 items"))?,
-        current: u8::from(int(1, "current")? != 0),
-        frame,
-        command: MavCmd(int(3, "command")?),
-        param1: float(4, "param1")? as f32,
-        param2: float(5, "param2")? as f32,
-        param3: float(6, "param3")? as f32,
-        param4: float(7, "param4")? as f32,
-        x: fixed(float(8, "x")?, "x")?,
-        y: fixed(float(9, "y")?, "y")?,
-        z: float(10, "z")? as f32,
-        autocontinue: u8::from(int(11, "autocontinue")? != 0),
-        ..MissionItemInt::default()
+    wpl::parse(text).map_err(|e| match e {
+        WplError::Line { line, what } => anyhow!("{line}: {what}"),
+        WplError::Header { found } => anyhow!("1: expected \"QGC WPL 110\", got {found:?}"),
+        e => anyhow!("{e}"),
     })
 }
 
@@ -246,14 +144,14 @@ mod tests {
         2\t0\t3\t16\t0\t0\t0\tnan\t-35.36200000\t149.16400000\t30\t1\n";
 
     #[test]
-    fn wpl_round_trips_through_mission_item_int() {
+    fn wpl_and_json_round_trip_through_mission_item_int() {
         let items = from_wpl(PLAN).expect("valid");
         assert_eq!(items.len(), 3);
         assert_eq!(items[0].x, -353_632_610);
         assert_eq!(items[2].y, 1_491_640_000);
         assert_eq!(items[1].command, MavCmd::NAV_TAKEOFF);
         assert!(items[2].param4.is_nan());
-        let again = from_wpl(&to_wpl(&items)).expect("own output");
+        let again = from_wpl(&wpl::to_text(&items)).expect("own output");
         assert_eq!(format!("{again:?}"), format!("{items:?}"));
         let json = to_json(MavMissionType::MISSION, &items).to_string();
         let back = from_json(&json).expect("own JSON");

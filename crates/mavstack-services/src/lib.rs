@@ -124,6 +124,7 @@ pub mod param;
 mod rtt;
 pub mod stream;
 pub mod timesync;
+pub mod wpl;
 
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::MavMessage;
