@@ -203,6 +203,29 @@ pub trait Service {
     fn poll_timeout(&self) -> Option<Instant>;
 }
 
+/// Two services side by side (a parameter server and a mission server, say): every message
+/// goes to both, their transmits and timers are merged. Nest pairs for more.
+impl<A: Service, B: Service> Service for (A, B) {
+    fn handle_message(&mut self, now: Instant, from: Address, message: &MavMessage) -> bool {
+        let a = self.0.handle_message(now, from, message);
+        let b = self.1.handle_message(now, from, message);
+        a || b
+    }
+
+    fn handle_timeout(&mut self, now: Instant) {
+        self.0.handle_timeout(now);
+        self.1.handle_timeout(now);
+    }
+
+    fn poll_transmit(&mut self) -> Option<Outgoing> {
+        self.0.poll_transmit().or_else(|| self.1.poll_transmit())
+    }
+
+    fn poll_timeout(&self) -> Option<Instant> {
+        earliest(self.0.poll_timeout(), self.1.poll_timeout())
+    }
+}
+
 /// The earlier of two optional deadlines.
 fn earliest(a: Option<Instant>, b: Option<Instant>) -> Option<Instant> {
     match (a, b) {

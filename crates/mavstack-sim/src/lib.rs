@@ -812,3 +812,24 @@ impl Vehicle {
         self.params.len()
     }
 }
+
+/// The vehicle as one [`Service`]: what runs it on a node (`mavstack::serve`) runs it like
+/// any other component.
+impl Service for Vehicle {
+    fn handle_message(&mut self, now: Instant, from: Address, message: &MavMessage) -> bool {
+        Self::handle_message(self, now, from, message);
+        true
+    }
+
+    fn handle_timeout(&mut self, now: Instant) {
+        Self::handle_timeout(self, now);
+    }
+
+    fn poll_transmit(&mut self) -> Option<Outgoing> {
+        Self::poll_transmit(self)
+    }
+
+    fn poll_timeout(&self) -> Option<Instant> {
+        Some(Self::poll_timeout(self))
+    }
+}

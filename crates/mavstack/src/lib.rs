@@ -61,6 +61,8 @@
 pub mod link_spec;
 pub mod node;
 pub mod router_conf;
+#[cfg(feature = "services")]
+pub mod serve;
 #[cfg(feature = "sim")]
 pub mod sim_vehicle;
 #[cfg(feature = "services")]

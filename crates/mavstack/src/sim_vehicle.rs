@@ -18,27 +18,28 @@
 //! ```
 
 use mavstack_channel::SigningSetup;
-use mavstack_core::wire::Version;
+use mavstack_core::time::Instant;
 use mavstack_core::{Message as _, MessageSet as _};
 use mavstack_dialects::common::{AutopilotVersion, CommandLong, MavCmd, MavMessage};
 use mavstack_router::LinkRole;
-use mavstack_services::Address;
 use mavstack_services::param::{Name, Value};
+use mavstack_services::{Address, Outgoing, Service};
 use mavstack_sim::{Autopilot, SimConfig, Vehicle};
 use mavstack_transport::clock;
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 
 use crate::node::{
-    EventSubscription, LinkEvent, Node, NodeBuilder, NodeError, NodeEvent, NodeHandle, NodeReport,
-    Subscription,
+    EventSubscription, LinkEvent, Node, NodeBuilder, NodeError, NodeHandle, NodeReport,
 };
+use crate::serve::{Served, ServedHandle};
 
 /// A simulated vehicle running on its own [`Node`]: it answers parameters, missions and
 /// commands and streams telemetry on every link of the node, as `mavstack vehicle` does.
 /// One vehicle, one parameter table and one mission store, whatever the number of links;
 /// answers go back on the link the request came from, HEARTBEAT and telemetry go on every
 /// link, and frames for other systems are forwarded between the links by the router's rules.
+/// It is a [`Served`] component: the vehicle model is a `mavstack-services` [`Service`].
 ///
 /// Unless the builder says otherwise ([`NodeBuilder::role`]), its links are vehicle links
 /// ([`LinkRole::Vehicle`]): each answers the MAVLink 2 handshake by its own `version`
@@ -48,13 +49,59 @@ use crate::node::{
 #[derive(Debug)]
 pub struct SimVehicle {
     node: Node,
-    stop: oneshot::Sender<()>,
-    task: JoinHandle<()>,
+    served: Served<Narrated>,
+    events: JoinHandle<()>,
 }
 
 /// One line of what the vehicle does (parameter sets, modes, plans, link versions,
 /// handshakes, refused frames), for a log or a timeline.
 pub type LogLines = mpsc::UnboundedSender<String>;
+
+/// The simulated vehicle, saying what it does.
+#[derive(Debug)]
+struct Narrated {
+    sim: Vehicle,
+    log: Option<LogLines>,
+}
+
+impl Narrated {
+    fn tell(&mut self) {
+        while let Some(line) = self.sim.poll_log() {
+            say(&self.log, || format!("vehicle: {line}"));
+        }
+    }
+}
+
+impl Service for Narrated {
+    fn handle_message(&mut self, now: Instant, from: Address, message: &MavMessage) -> bool {
+        if let MavMessage::CommandLong(CommandLong {
+            command, param1, ..
+        }) = message
+            && (*command == MavCmd::REQUEST_AUTOPILOT_CAPABILITIES
+                || (*command == MavCmd::REQUEST_MESSAGE && *param1 == AutopilotVersion::ID as f32))
+        {
+            say(&self.log, || {
+                "vehicle ← AUTOPILOT_VERSION requested".to_owned()
+            });
+        }
+        self.sim.handle_message(now, from, message);
+        self.tell();
+        true
+    }
+
+    fn handle_timeout(&mut self, now: Instant) {
+        self.sim.handle_timeout(now);
+        self.tell();
+    }
+
+    fn poll_transmit(&mut self) -> Option<Outgoing> {
+        self.sim.poll_transmit()
+    }
+
+    fn poll_timeout(&self) -> Option<Instant> {
+        Some(self.sim.poll_timeout())
+    }
+}
 
 impl SimVehicle {
     /// A system 1, component 1 vehicle of `autopilot`'s flavour with `params`, advertising
@@ -102,7 +149,6 @@ impl SimVehicle {
             .identity(config.own.system, config.own.component)
             .start()
             .await?;
-        let frames = node.subscribe().await;
         let events = node.handle().events().await;
         let flavour = config.autopilot;
         let sim = Vehicle::new(config, clock::now());
@@ -112,9 +158,20 @@ impl SimVehicle {
                 sim.param_count()
             )
         });
-        let (stop, stopped) = oneshot::channel();
-        let task = tokio::spawn(drive(node.handle(), frames, events, sim, log, stopped));
-        Ok(Self { node, stop, task })
+        let served = Served::start(
+            &node.handle(),
+            Narrated {
+                sim,
+                log: log.clone(),
+            },
+        )
+        .await;
+        let events = tokio::spawn(link_events(node.handle(), served.handle(), events, log));
+        Ok(Self {
+            node,
+            served,
+            events,
+        })
     }
 
     /// The node the vehicle runs on (its links' addresses, reports).
@@ -128,8 +185,8 @@ impl SimVehicle {
     /// # Errors
     /// [`NodeError`] if a link failed.
     pub async fn shutdown(self) -> Result<NodeReport, NodeError> {
-        let _ = self.stop.send(());
-        let _ = self.task.await;
+        self.events.abort();
+        let _ = self.served.stop().await;
         self.node.shutdown().await
     }
 }
@@ -143,109 +200,53 @@ fn say(log: &Option<LogLines>, line: impl FnOnce() -> String) {
     }
 }
 
-const fn version_name(v: Version) -> &'static str {
-    match v {
-        Version::V1 => "MAVLink 1",
-        Version::V2 => "MAVLink 2",
-    }
-}
-
 /// A message's name in the common dialect, or its number.
 fn message_name(id: u32) -> String {
     MavMessage::info(id).map_or_else(|| format!("message {id}"), |m| m.name.to_owned())
 }
 
-/// The vehicle's loop: frames for it in, its messages out, its timers, its links' events.
-async fn drive(
+/// What the vehicle does about its links' events: greets a new peer, says the rest.
+async fn link_events(
     node: NodeHandle,
-    mut frames: Subscription,
+    vehicle: ServedHandle<Narrated>,
     mut events: EventSubscription,
-    mut sim: Vehicle,
     log: Option<LogLines>,
-    mut stopped: oneshot::Receiver<()>,
 ) {
-    loop {
-        while let Some(out) = sim.poll_transmit() {
-            // Answers go back where the requester was heard; broadcasts everywhere.
-            let to = (out.target.system, out.target.component);
-            node.send_answer(to, &out.message).await;
-        }
-        while let Some(line) = sim.poll_log() {
-            say(&log, || format!("vehicle: {line}"));
-        }
-        let wake = clock::to_tokio(sim.poll_timeout());
-        tokio::select! {
-            _ = &mut stopped => break,
-            incoming = frames.recv() => {
-                let Some(incoming) = incoming else { break };
-                let rf = &incoming.frame;
-                // Handshake requests are the link's (answered, refused or ignored).
-                if rf.protocol_version_request.is_some() || rf.answered {
-                    continue;
+    while let Some(event) = events.recv().await {
+        let link = &event.link;
+        match event.kind {
+            LinkEvent::PeerAdded { .. } => {
+                let now = clock::now();
+                if let Some(Some(hello)) = vehicle.with(move |v| v.sim.greeting(now)).await {
+                    node.send_on(event.link_id, &hello).await;
                 }
-                let frame = rf.frame.view();
-                let from = Address {
-                    system: frame.sysid(),
-                    component: frame.compid(),
-                };
-                let Ok(message) = MavMessage::decode(frame.msg_id(), frame.payload()) else {
-                    continue;
-                };
-                if let MavMessage::CommandLong(CommandLong { command, param1, .. }) = &message
-                    && (*command == MavCmd::REQUEST_AUTOPILOT_CAPABILITIES
-                        || (*command == MavCmd::REQUEST_MESSAGE
-                            && *param1 == AutopilotVersion::ID as f32))
-                {
-                    say(&log, || {
-                        format!(
-                            "vehicle ← AUTOPILOT_VERSION requested ({})",
-                            version_name(frame.version())
-                        )
-                    });
+            }
+            LinkEvent::VersionChanged { from, to, cause } => {
+                say(&log, || {
+                    format!("vehicle: link {from} → {to} ({cause}) [{link}]")
+                });
+            }
+            LinkEvent::ProtocolVersionRequested { answer, .. } => {
+                say(&log, || {
+                    format!("vehicle ← handshake request: {answer} [{link}]")
+                });
+            }
+            LinkEvent::Rejected(r) => say(&log, || {
+                format!(
+                    "vehicle ✗ rejected {}: {} [{link}]",
+                    message_name(r.msg_id),
+                    r.reason
+                )
+            }),
+            LinkEvent::SigningSetup { setup, .. } => say(&log, || match setup {
+                SigningSetup::Enabled { .. } => {
+                    format!("vehicle: SETUP_SIGNING accepted, link signed from now on [{link}]")
                 }
-                sim.handle_message(clock::now(), from, &message);
-            }
-            event = events.recv() => {
-                let Some(event) = event else { break };
-                link_event(&node, &sim, &log, event).await;
-            }
-            () = tokio::time::sleep_until(wake) => sim.handle_timeout(clock::now()),
+                SigningSetup::Disabled => {
+                    format!("vehicle: SETUP_SIGNING turned signing off [{link}]")
+                }
+            }),
+            _ => {}
         }
-    }
-}
-
-/// What the vehicle does about one of its links' events: greets a new peer, says the rest.
-async fn link_event(node: &NodeHandle, sim: &Vehicle, log: &Option<LogLines>, event: NodeEvent) {
-    let link = &event.link;
-    match event.kind {
-        LinkEvent::PeerAdded { .. } => {
-            if let Some(hello) = sim.greeting(clock::now()) {
-                node.send_on(event.link_id, &hello).await;
-            }
-        }
-        LinkEvent::VersionChanged { from, to, cause } => {
-            say(log, || {
-                format!("vehicle: link {from} → {to} ({cause}) [{link}]")
-            });
-        }
-        LinkEvent::ProtocolVersionRequested { answer, .. } => {
-            say(log, || {
-                format!("vehicle ← handshake request: {answer} [{link}]")
-            });
-        }
-        LinkEvent::Rejected(r) => say(log, || {
-            format!(
-                "vehicle ✗ rejected {}: {} [{link}]",
-                message_name(r.msg_id),
-                r.reason
-            )
-        }),
-        LinkEvent::SigningSetup { setup, .. } => say(log, || match setup {
-            SigningSetup::Enabled { .. } => {
-                format!("vehicle: SETUP_SIGNING accepted, link signed from now on [{link}]")
-            }
-            SigningSetup::Disabled => format!("vehicle: SETUP_SIGNING turned signing off [{link}]"),
-        }),
-        _ => {}
     }
 }

@@ -1,0 +1,184 @@
+//! Serving from a `Node`: a companion computer's own parameter table, mission store and
+//! command handler (`mavstack::serve::Served` over `mavstack-services` servers), operated by
+//! a ground station through the `System` API; a dropped operation's future cancels it
+//! cleanly, and a stopped node frees its socket.
+#![cfg(feature = "services")]
+
+use core::time::Duration;
+
+use mavstack::dialects::common::{
+    CommandLong, Heartbeat, MavAutopilot, MavCmd, MavFrame, MavMissionType, MavResult, MavType,
+    MissionItemInt,
+};
+use mavstack::router::LinkRole;
+use mavstack::serve::Served;
+use mavstack::services::Address;
+use mavstack::services::command::{
+    Command, CommandError, CommandHandler, CommandServer, CommandServerConfig, Request, Response,
+};
+use mavstack::services::mission::{MissionConfig, MissionServer};
+use mavstack::services::param::{Encoding, Name, ParamServer, Value};
+use mavstack::system::{System, SystemError, Wanted};
+use mavstack::{LinkSpec, Node};
+
+fn none(_: &str) -> Option<u32> {
+    None
+}
+
+/// The companion's commands: it triggers its camera, and knows nothing else.
+#[derive(Debug, Default)]
+struct Camera {
+    shots: u32,
+}
+
+impl CommandHandler for Camera {
+    fn handle_command(
+        &mut self,
+        _now: mavstack::core::time::Instant,
+        request: &Request,
+    ) -> Response {
+        if request.command.id() == MavCmd::IMAGE_START_CAPTURE {
+            self.shots += 1;
+            Response::done(MavResult::ACCEPTED)
+        } else {
+            Response::done(MavResult::UNSUPPORTED)
+        }
+    }
+}
+
+type Companion = (ParamServer, (MissionServer, CommandServer<Camera>));
+
+#[tokio::test]
+async fn a_ground_station_uses_a_companions_own_parameters_missions_and_commands() {
+    let own = Address::new(1, 191);
+    let node = Node::builder()
+        .identity(1, 191)
+        .role(LinkRole::Vehicle {
+            protocol_version: true,
+        })
+        .heartbeat(
+            &Heartbeat {
+                r#type: MavType::ONBOARD_CONTROLLER,
+                autopilot: MavAutopilot::INVALID,
+                mavlink_version: 3,
+                ..Heartbeat::default()
+            },
+            Duration::from_secs(1),
+        )
+        .link(LinkSpec::parse("udpin:127.0.0.1:0", &none).expect("spec"))
+        .start()
+        .await
+        .expect("companion starts");
+    let port = node.local_addrs()[0].expect("bound").port();
+    let mut params = ParamServer::new(own, Encoding::Bytewise);
+    let exposure = Name::new("CAM_EXPOSURE").expect("name");
+    params.insert(exposure, Value::F32(0.01)).expect("insert");
+    params
+        .insert(Name::new("CAM_MODE").expect("name"), Value::U8(1))
+        .expect("insert");
+    let companion: Companion = (
+        params,
+        (
+            MissionServer::new(own, MissionConfig::default()),
+            CommandServer::new(own, CommandServerConfig::default(), Camera::default()),
+        ),
+    );
+    let served = Served::start(&node.handle(), companion).await;
+
+    let gcs = Node::builder()
+        .identity(255, 190)
+        .role(LinkRole::GroundStation)
+        .heartbeat(&Heartbeat::default(), Duration::from_secs(1))
+        .link(LinkSpec::parse(&format!("udpout:127.0.0.1:{port}?version=2"), &none).expect("spec"))
+        .start()
+        .await
+        .expect("ground station starts");
+    let mut c = System::wait(
+        &gcs.handle(),
+        Wanted::System(1, Some(191)),
+        Duration::from_secs(5),
+    )
+    .await
+    .expect("the companion is found");
+
+    // A dropped operation is cancelled (polled once: its request is on its way), and the
+    // next one works.
+    let cut = tokio::select! {
+        biased;
+        r = c.params() => Some(r),
+        () = core::future::ready(()) => None,
+    };
+    assert!(cut.is_none(), "the list could not finish in one poll");
+    let table = c.params().await.expect("the companion's table");
+    assert_eq!(table.len(), 2);
+    let set = c
+        .set_param(exposure, Value::F32(0.02))
+        .await
+        .expect("set confirmed");
+    assert_eq!(set.value, Value::F32(0.02));
+    let held = served
+        .with(move |(params, _)| params.get(exposure))
+        .await
+        .flatten();
+    assert_eq!(
+        held,
+        Some(Value::F32(0.02)),
+        "the served table holds the new value"
+    );
+
+    let survey: Vec<MissionItemInt> = (0..3)
+        .map(|i| MissionItemInt {
+            seq: i,
+            frame: MavFrame::GLOBAL_RELATIVE_ALT_INT,
+            command: MavCmd::NAV_WAYPOINT,
+            x: 473_977_420 + i32::from(i),
+            y: 85_455_940,
+            z: 30.0,
+            autocontinue: 1,
+            ..MissionItemInt::default()
+        })
+        .collect();
+    c.upload_mission(MavMissionType::MISSION, survey.clone())
+        .await
+        .expect("upload");
+    let stored = served
+        .with(|(_, (missions, _))| missions.plan(MavMissionType::MISSION).to_vec())
+        .await
+        .expect("served");
+    assert_eq!(stored.len(), 3);
+    assert_eq!(stored[2].x, survey[2].x);
+
+    let shoot = Command::Long(CommandLong {
+        command: MavCmd::IMAGE_START_CAPTURE,
+        ..CommandLong::default()
+    });
+    let ack = c.command(shoot, |_| {}).await.expect("accepted");
+    assert_eq!(ack.result, MavResult::ACCEPTED);
+    let refused = c
+        .command(
+            Command::Long(CommandLong {
+                command: MavCmd::NAV_TAKEOFF,
+                ..CommandLong::default()
+            }),
+            |_| {},
+        )
+        .await;
+    assert!(matches!(
+        refused,
+        Err(SystemError::Command {
+            source: CommandError::Rejected {
+                result: MavResult::UNSUPPORTED,
+                ..
+            },
+            ..
+        })
+    ));
+
+    drop(c);
+    gcs.shutdown().await.expect("ground station stops");
+    let (_, (_, commands)) = served.stop().await.expect("the service comes back");
+    assert_eq!(commands.handler().shots, 1);
+    node.shutdown().await.expect("companion stops");
+    // Its socket is closed: the port can be bound again.
+    std::net::UdpSocket::bind(("127.0.0.1", port)).expect("the port is free again");
+}
