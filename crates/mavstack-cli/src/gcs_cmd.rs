@@ -294,11 +294,6 @@ fn print_lines(lines: &[String]) -> Result<(), Failure> {
     Ok(())
 }
 
-/// Fetches the whole table of the target.
-pub(crate) async fn fetch_params(remote: &mut Remote) -> Result<Vec<(Name, Value)>, Failure> {
-    remote.system.params().await.map_err(other)
-}
-
 /// Sets one parameter to `value` (converted to `current`'s type) and returns the value in
 /// force.
 pub(crate) async fn set_param(
@@ -339,7 +334,20 @@ pub(crate) fn param(action: ParamAction) -> Result<(), Failure> {
             ParamAction::List { remote: args, save } => {
                 let mut remote = Remote::connect(&args).await?;
                 let began = remote.elapsed();
-                let table = fetch_params(&mut remote).await?;
+                // Progress on a terminal, not when piped.
+                let tty = std::io::IsTerminal::is_terminal(&std::io::stderr());
+                let table = remote
+                    .system
+                    .params_with_progress(|got, of| {
+                        if tty {
+                            eprint!("\r{got}/{of} parameters");
+                        }
+                    })
+                    .await
+                    .map_err(other)?;
+                if tty {
+                    eprint!("\r");
+                }
                 let seconds = remote.since(began);
                 let target = remote.target();
                 remote.close().await?;

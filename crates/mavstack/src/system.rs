@@ -42,6 +42,7 @@ use mavstack_services::command::{
 };
 use mavstack_services::heartbeat::{HeartbeatConfig, HeartbeatEvent, Heartbeats, Peer};
 use mavstack_services::mission::{MissionClient, MissionConfig, MissionError, MissionEvent};
+use mavstack_services::param::list::ListFetch;
 use mavstack_services::param::{
     Encoding, Name, Param, ParamClient, ParamConfig, ParamError, ParamEvent, ParamRef, Value,
 };
@@ -307,16 +308,43 @@ impl System {
     /// [`SystemError::Param`] (entries still missing after the retries), [`SystemError::Busy`],
     /// [`SystemError::Timeout`] (10 minutes), [`SystemError::Stopped`].
     pub async fn params(&mut self) -> Result<Vec<(Name, Value)>, SystemError> {
+        self.params_with_progress(|_, _| {}).await
+    }
+
+    /// Like [`params`](Self::params), telling `progress` (values received, count) each time
+    /// more have come.
+    ///
+    /// # Errors
+    /// As [`params`](Self::params).
+    pub async fn params_with_progress(
+        &mut self,
+        mut progress: impl FnMut(usize, usize),
+    ) -> Result<Vec<(Name, Value)>, SystemError> {
         let mut client = self.param_client();
+        let target = self.target;
         client
-            .fetch_all(clock::now(), self.target)
+            .fetch_all(clock::now(), target)
             .map_err(|e| SystemError::Busy(e.to_string()))?;
+        let mut told = (0, 0);
         let result = self
             .run(&mut client, Duration::from_secs(600), |c| {
-                core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
+                if let Some(ListFetch::Collecting(list)) = c.list_state(target) {
+                    let now = (list.count() - list.missing(), list.count());
+                    if now != told {
+                        told = now;
+                        progress(now.0, now.1);
+                    }
+                }
+                let result = core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
                     ParamEvent::List { result, .. } => Some(result),
                     _ => None,
-                })
+                });
+                if let Some(Ok(table)) = &result
+                    && told != (table.len(), table.len())
+                {
+                    progress(table.len(), table.len());
+                }
+                result
             })
             .await?;
         result.map_err(|source| SystemError::Param {
@@ -535,6 +563,55 @@ impl System {
             ..CommandLong::default()
         });
         self.command(command, |_| {}).await
+    }
+
+    // ----- the link --------------------------------------------------------------------------
+
+    /// What the link to the system carries now: `"1"`, `"2"`, `"signed"` or `"auto"` (see
+    /// [`LinkReport::version`](crate::LinkReport)); `None` once the node has stopped or the
+    /// peer went away.
+    pub async fn link_version(&self) -> Option<&'static str> {
+        let report = self.node.report().await?;
+        report
+            .links
+            .iter()
+            .find(|l| l.link_id == Some(self.link))
+            .map(|l| l.version)
+    }
+
+    /// Sets up signing with the system: sends SETUP_SIGNING with `key` and a timestamp of
+    /// now over the link (which should be a secure one: a wire, or a link already signed),
+    /// then signs the link with `key` and link id `link_id`. The system confirms nothing:
+    /// a signed answer to the next request is the proof.
+    ///
+    /// # Errors
+    /// [`SystemError::Busy`] on a link that cannot sign (`version=1`),
+    /// [`SystemError::Stopped`].
+    pub async fn setup_signing(
+        &mut self,
+        key: mavstack_core::signing::SecretKey,
+        link_id: u8,
+    ) -> Result<(), SystemError> {
+        let timestamp =
+            mavstack_core::signing::timestamp_from_unix_micros(clock::now().as_micros());
+        let setup = MavMessage::SetupSigning(mavstack_dialects::common::SetupSigning {
+            target_system: self.target.system,
+            target_component: self.target.component,
+            secret_key: *key.as_bytes(),
+            initial_timestamp: timestamp,
+        });
+        if self.node.send_on(self.link, &setup).await == 0 {
+            return Err(SystemError::Stopped);
+        }
+        let mut signing = mavstack_channel::SigningConfig::new(key, link_id);
+        signing.initial_timestamp = timestamp;
+        self.node
+            .set_signing(self.link, Some(signing))
+            .await
+            .map_err(|e| match e {
+                crate::node::RequestError::Stopped => SystemError::Stopped,
+                e => SystemError::Busy(e.to_string()),
+            })
     }
 
     // ----- telemetry -----------------------------------------------------------------------

@@ -234,3 +234,55 @@ async fn parameters_and_a_mission_go_through_a_link_that_drops_a_fifth_of_the_da
     vehicle.shutdown().await.expect("vehicle stops");
     gcs.shutdown().await.expect("ground station stops");
 }
+
+#[tokio::test]
+async fn signing_is_set_up_over_a_secure_link_and_the_list_reports_its_progress() {
+    let vehicle = SimVehicle::start(
+        Node::builder()
+            .link(LinkSpec::parse("udpin:127.0.0.1:0?secure=true", &none).expect("spec")),
+        SimVehicle::config(Autopilot::Ardupilot, params::defaults(Autopilot::Ardupilot)),
+    )
+    .await
+    .expect("vehicle starts");
+    let port = vehicle.node().local_addrs()[0].expect("bound").port();
+    let gcs = ground_station()
+        .link(LinkSpec::parse(&format!("udpout:127.0.0.1:{port}"), &none).expect("spec"))
+        .start()
+        .await
+        .expect("ground station starts");
+    let mut v = System::wait(
+        &gcs.handle(),
+        Wanted::System(1, Some(1)),
+        Duration::from_secs(5),
+    )
+    .await
+    .expect("found");
+    assert_eq!(v.link_version().await, Some("2"), "after the handshake");
+
+    v.setup_signing(mavstack::core::signing::SecretKey::new([7; 32]), 3)
+        .await
+        .expect("signing set up");
+    assert_eq!(v.link_version().await, Some("signed"));
+    let mut seen = Vec::new();
+    let table = v
+        .params_with_progress(|got, of| seen.push((got, of)))
+        .await
+        .expect("the table, over the signed link");
+    let n = table.len();
+    assert_eq!(
+        seen.last(),
+        Some(&(n, n)),
+        "progress ends at the count: {seen:?}"
+    );
+    assert!(
+        seen.windows(2).all(|w| w[0].0 < w[1].0),
+        "progress only grows: {seen:?}"
+    );
+    // The vehicle's side is signed too: its frames to us verified with the key.
+    let report = vehicle.node().report().await.expect("report");
+    assert!(report.links.iter().any(|l| l.version == "signed"));
+
+    drop(v);
+    gcs.shutdown().await.expect("ground station stops");
+    vehicle.shutdown().await.expect("vehicle stops");
+}
