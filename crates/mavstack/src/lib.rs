@@ -1,40 +1,89 @@
 //! # mavstack
 //!
-//! The MAVLink stack in one crate: [`Node`], one MAVLink component with any number of
-//! links (UDP, TCP, serial), each with its own version and signing
-//! ([`LinkSpec`]: a connection string and link options), the router core between them, and
-//! one tokio task that owns every socket.
+//! The MAVLink stack in one crate. A [`Node`] is one MAVLink component (a system and
+//! component id) with any number of links — UDP, TCP, serial — each with its own version and
+//! signing ([`LinkSpec`]: a connection string and link options), the router core between
+//! them, and one tokio task that owns every socket. On a node:
 //!
-//! A ground station: system 255, MAVLink 2 towards the vehicle, printing its attitude.
+//! - [`system::System`] is a remote system as a ground station sees it: its parameters,
+//!   missions, commands and telemetry (feature `services`);
+//! - [`serve::Served`] runs your own component's services — a parameter table, a mission
+//!   store, command handlers — for vehicles and companion computers;
+//! - [`sim_vehicle::SimVehicle`] is a simulated ArduPilot or PX4 vehicle, in-process, for a
+//!   ground station's tests (feature `sim`).
+//!
+//! ## A ground station
+//!
+//! System 255, a HEARTBEAT every second, a link that runs the MAVLink 2 handshake when the
+//! vehicle still speaks MAVLink 1; then the first autopilot heard, its parameters, a
+//! mission, and its attitude as it streams (the `ground_station` and `mission_upload`
+//! examples run this against the simulated vehicle):
 //!
 //! ```no_run
 //! # async fn run() -> Result<(), Box<dyn core::error::Error>> {
-//! use mavstack::core::MessageSet as _;
-//! use mavstack::dialects::common::MavMessage;
+//! use core::time::Duration;
+//! use mavstack::dialects::common::{Attitude, MavMissionType};
+//! use mavstack::router::LinkRole;
+//! use mavstack::services::heartbeat::HeartbeatConfig;
+//! use mavstack::services::wpl;
+//! use mavstack::system::{System, Wanted};
 //! use mavstack::{LinkSpec, Node};
 //! let none = |_: &str| None;
 //! let gcs = Node::builder()
 //!     .identity(255, 190)
-//!     .link(LinkSpec::parse("udpin:0.0.0.0:14550?version=2", &none)?)
+//!     .role(LinkRole::GroundStation)
+//!     .heartbeat(&HeartbeatConfig::ground_station().own.unwrap_or_default(), Duration::from_secs(1))
+//!     .link(LinkSpec::parse("udpin:0.0.0.0:14550", &none)?)
 //!     .start()
 //!     .await?;
-//! let mut frames = gcs.subscribe().await;
-//! while let Some(incoming) = frames.recv().await {
-//!     let f = incoming.frame.frame.view();
-//!     if let Ok(MavMessage::Attitude(a)) = MavMessage::decode(f.msg_id(), f.payload()) {
-//!         println!("{}/{} roll {:.2} rad on {}", f.sysid(), f.compid(), a.roll, incoming.link);
-//!     }
+//! let mut vehicle = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(10)).await?;
+//! let table = vehicle.params().await?;
+//! println!("{} parameters from {}", table.len(), vehicle.target());
+//! let plan = wpl::parse(&std::fs::read_to_string("survey.waypoints")?)?;
+//! vehicle.upload_mission(MavMissionType::MISSION, plan).await?;
+//! let mut attitude = vehicle.subscribe::<Attitude>().await;
+//! while let Some(a) = attitude.recv().await {
+//!     println!("roll {:.2} rad", a.message.roll);
 //! }
 //! # Ok(()) }
 //! ```
 //!
-//! [`Node::send`] sends the node's own messages (each link frames them in its version and
-//! signs them where it signs); [`NodeBuilder::heartbeat`] announces the node. With the
-//! `sim` feature, [`sim`] is the simulated vehicle and `sim_vehicle::SimVehicle` runs it on
-//! a node of its own, in-process, for a ground station's tests (the `ground_station`
-//! example).
+//! Every operation runs the `mavstack-services` state machine for it (retries, timeouts,
+//! IN_PROGRESS) and ends when its future resolves; dropping the future cancels it.
+//! [`system::Discovery`] reports systems appearing, changing and lost; [`Node::subscribe`]
+//! gives every frame for the node, [`NodeHandle::events`] what happens on its links.
 //!
-//! A router between a MAVLink 1-only peripheral, a ground station and a signed link:
+//! ## A vehicle or a companion computer
+//!
+//! Links in the vehicle role answer the handshake and SETUP_SIGNING themselves, each by its
+//! own rules; your component's services run with [`serve::Served`]:
+//!
+//! ```no_run
+//! # async fn run() -> Result<(), Box<dyn core::error::Error>> {
+//! use mavstack::router::LinkRole;
+//! use mavstack::serve::Served;
+//! use mavstack::services::Address;
+//! use mavstack::services::param::{Encoding, Name, ParamServer, Value};
+//! use mavstack::{LinkSpec, Node};
+//! let none = |_: &str| None;
+//! let node = Node::builder()
+//!     .identity(1, 100) // a camera
+//!     .role(LinkRole::Vehicle { protocol_version: true })
+//!     .link(LinkSpec::parse("serial:/dev/ttyAMA0:921600?name=fc", &none)?)
+//!     .link(LinkSpec::parse("udpin:0.0.0.0:14550?name=gcs", &none)?)
+//!     .start()
+//!     .await?;
+//! let mut params = ParamServer::new(Address::new(1, 100), Encoding::Bytewise);
+//! params.insert(Name::new("CAM_EXPOSURE")?, Value::F32(0.01))?;
+//! let served = Served::start(&node.handle(), params).await;
+//! # Ok(()) }
+//! ```
+//!
+//! ## Several links, each its own version
+//!
+//! A router between a MAVLink 1-only peripheral, a ground station and a signed link: frames
+//! are forwarded by the MAVLink routing rules and converted where the links differ (the
+//! `companion` example; `mavstack router` on the command line):
 //!
 //! ```no_run
 //! # async fn run() -> Result<(), Box<dyn core::error::Error>> {
@@ -51,9 +100,12 @@
 //! # Ok(()) }
 //! ```
 //!
-//! The layers are re-exported for direct use: [`core`] (frames, CRC, signing), [`dialects`]
-//! (generated messages), [`channel`] (one link's version, handshake and signing), [`router`]
-//! (the sans-IO routing core), [`transport`] (connections).
+//! ## The layers
+//!
+//! Re-exported for direct use: [`core`] (frames, CRC, signing), [`dialects`] (generated
+//! messages), [`channel`] (one link's version, handshake and signing), [`router`] (the
+//! sans-IO routing core), [`transport`] (connections), [`services`] (the microservices'
+//! state machines), [`sim`] (the vehicle model).
 //!
 //! MSRV: Rust 1.95.
 #![forbid(unsafe_code)]
