@@ -294,6 +294,28 @@ fn print_lines(lines: &[String]) -> Result<(), Failure> {
     Ok(())
 }
 
+/// Whether progress is shown: on a terminal, not when piped.
+fn showing_progress() -> bool {
+    std::io::IsTerminal::is_terminal(&std::io::stderr())
+}
+
+/// Prints `done/total what` over itself on stderr, on a terminal only.
+fn progress(what: &'static str) -> impl FnMut(usize, usize) {
+    let show = showing_progress();
+    move |done, total| {
+        if show {
+            eprint!("\r{done}/{total} {what}");
+        }
+    }
+}
+
+/// Clears the progress line.
+fn end_progress() {
+    if showing_progress() {
+        eprint!("\r\x1b[K");
+    }
+}
+
 /// Sets one parameter to `value` (converted to `current`'s type) and returns the value in
 /// force.
 pub(crate) async fn set_param(
@@ -334,20 +356,12 @@ pub(crate) fn param(action: ParamAction) -> Result<(), Failure> {
             ParamAction::List { remote: args, save } => {
                 let mut remote = Remote::connect(&args).await?;
                 let began = remote.elapsed();
-                // Progress on a terminal, not when piped.
-                let tty = std::io::IsTerminal::is_terminal(&std::io::stderr());
                 let table = remote
                     .system
-                    .params_with_progress(|got, of| {
-                        if tty {
-                            eprint!("\r{got}/{of} parameters");
-                        }
-                    })
+                    .params_with_progress(progress("parameters"))
                     .await
                     .map_err(other)?;
-                if tty {
-                    eprint!("\r");
-                }
+                end_progress();
                 let seconds = remote.since(began);
                 let target = remote.target();
                 remote.close().await?;
@@ -453,7 +467,11 @@ pub(crate) fn mission(action: MissionAction) -> Result<(), Failure> {
                 let mut remote = Remote::connect(&args).await?;
                 let target = remote.target();
                 let began = remote.elapsed();
-                let result = remote.system.download_mission(plan.mav()).await;
+                let result = remote
+                    .system
+                    .download_mission_with_progress(plan.mav(), progress("items"))
+                    .await;
+                end_progress();
                 let seconds = remote.since(began);
                 remote.close().await?;
                 let items = result.map_err(|e| other(format!("download from {target}: {e}")))?;
@@ -489,7 +507,11 @@ pub(crate) fn mission(action: MissionAction) -> Result<(), Failure> {
                 let target = remote.target();
                 let began = remote.elapsed();
                 let count = items.len();
-                let result = remote.system.upload_mission(plan.mav(), items).await;
+                let result = remote
+                    .system
+                    .upload_mission_with_progress(plan.mav(), items, progress("items"))
+                    .await;
+                end_progress();
                 let seconds = remote.since(began);
                 remote.close().await?;
                 result.map_err(|e| other(format!("upload to {target}: {e}")))?;

@@ -237,6 +237,10 @@ pub struct RouterConfig {
     /// Frames for the router itself ([`crate::Event::Local`]): none, the ones addressed to
     /// it or broadcast, or every frame (a sniffer).
     pub local: LocalDelivery,
+    /// Whether frames are forwarded between links (default on). Off, the links only carry
+    /// the router's own component's traffic: a ground station with two radios to the same
+    /// vehicle, which must not loop them into each other.
+    pub forward: bool,
 }
 
 /// Which frames the router hands to its own component.
@@ -261,6 +265,7 @@ impl Default for RouterConfig {
             dedup: None,
             dedup_capacity: 8192,
             local: LocalDelivery::None,
+            forward: true,
         }
     }
 }

@@ -501,6 +501,9 @@ impl<D: Dialect> Router<D> {
                 l.counters.dropped.count(DropReason::UnknownTarget);
             }
         }
+        if !self.config.forward {
+            dests.clear();
+        }
         if msg_id == SetupSigning::ID && (!secure || tsys == 0) {
             // Never broadcast, and only from a link marked secure.
             for &d in &dests {

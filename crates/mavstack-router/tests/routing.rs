@@ -753,3 +753,27 @@ fn a_ground_station_link_runs_the_handshake_with_a_vehicle_link() {
     let f = Frame::new_checked(&buf[..t.len]).unwrap();
     assert!(verify(&f, &k).is_ok());
 }
+
+#[test]
+fn with_forwarding_off_links_carry_only_the_routers_own_traffic() {
+    use mavstack_router::{Event, LocalDelivery};
+    let mut config = RouterConfig::default();
+    config.forward = false;
+    config.local = LocalDelivery::All;
+    let mut r = Router::new(config, DialectInfo::<MavMessage>::new());
+    let a = link(&mut r, "a", |_| {});
+    let b = link(&mut r, "b", |_| {});
+    r.handle_datagram(T0, a, &frame(&hb(), Version::V2, (1, 1), 0, None));
+    let mut buf = [0u8; MAX_FRAME_LEN];
+    assert!(r.poll_transmit(&mut buf).is_none(), "nothing forwarded");
+    assert!(matches!(r.poll_event(), Some(Event::Local { link, .. }) if link == a));
+    // Its own messages still go out, routed: the command for 1/1 only where 1/1 was heard.
+    let mut payload = [0u8; 255];
+    let len = command((1, 1)).encode(&mut payload);
+    assert_eq!(
+        r.send(T0, SendTo::Target, CommandLong::ID, &payload[..len]),
+        1
+    );
+    assert_eq!(r.poll_transmit(&mut buf).map(|t| t.link), Some(a));
+    assert!(r.link_status(b).is_some());
+}

@@ -192,6 +192,20 @@ pub mod transfer {
         pub fn count(&self) -> usize {
             self.items.len()
         }
+
+        /// How many items have gone out (the vehicle asked for them).
+        #[must_use]
+        pub fn sent(&self) -> usize {
+            self.last.map_or(0, |l| usize::from(l) + 1)
+        }
+    }
+
+    impl AwaitingAck {
+        /// How many items the upload has (all sent).
+        #[must_use]
+        pub fn count(&self) -> usize {
+            self.items.len()
+        }
     }
 
     impl AwaitingItem {

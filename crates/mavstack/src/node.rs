@@ -314,6 +314,15 @@ impl NodeBuilder {
         self
     }
 
+    /// Whether frames are forwarded between the node's links (default on; see
+    /// `RouterConfig::forward`). Router settings given with [`router`](Self::router)
+    /// afterwards replace this.
+    #[must_use]
+    pub const fn forwarding(mut self, on: bool) -> Self {
+        self.router.forward = on;
+        self
+    }
+
     /// Whose links they are, for every link (default [`LinkRole::Relay`], or what each
     /// [`LinkSpec`] says): [`LinkRole::Vehicle`] makes the node's component answer the
     /// MAVLink 2 handshake and SETUP_SIGNING on each link by that link's rules.

@@ -41,6 +41,7 @@ use mavstack_services::command::{
     Command, CommandClient, CommandConfig, CommandError, CommandEvent,
 };
 use mavstack_services::heartbeat::{HeartbeatConfig, HeartbeatEvent, Heartbeats, Peer};
+use mavstack_services::mission::transfer::{Download, Upload};
 use mavstack_services::mission::{MissionClient, MissionConfig, MissionError, MissionEvent};
 use mavstack_services::param::list::ListFetch;
 use mavstack_services::param::{
@@ -407,11 +408,41 @@ impl System {
         kind: MavMissionType,
         items: Vec<MissionItemInt>,
     ) -> Result<(), SystemError> {
+        self.upload_mission_with_progress(kind, items, |_, _| {})
+            .await
+    }
+
+    /// Like [`upload_mission`](Self::upload_mission), telling `progress` (items sent,
+    /// count) each time the system has asked for more.
+    ///
+    /// # Errors
+    /// As [`upload_mission`](Self::upload_mission).
+    pub async fn upload_mission_with_progress(
+        &mut self,
+        kind: MavMissionType,
+        items: Vec<MissionItemInt>,
+        mut progress: impl FnMut(usize, usize),
+    ) -> Result<(), SystemError> {
         let mut client = self.mission_client();
         client
             .upload(clock::now(), self.target, kind, items)
             .map_err(|e| SystemError::Busy(e.to_string()))?;
-        match self.mission_op(&mut client).await? {
+        let mut told = (0, 0);
+        let event = self
+            .run(&mut client, Duration::from_secs(3600), |c| {
+                let now = match c.upload_state() {
+                    Some(Upload::AwaitingRequest(u)) => (u.sent(), u.count()),
+                    Some(Upload::AwaitingAck(u)) => (u.count(), u.count()),
+                    None => told,
+                };
+                if now != told {
+                    told = now;
+                    progress(now.0, now.1);
+                }
+                c.poll_event()
+            })
+            .await?;
+        match event {
             MissionEvent::Uploaded { result, .. } => {
                 result.map_err(|source| SystemError::Mission {
                     what: "upload",
@@ -430,12 +461,43 @@ impl System {
         &mut self,
         kind: MavMissionType,
     ) -> Result<Vec<MissionItemInt>, SystemError> {
+        self.download_mission_with_progress(kind, |_, _| {}).await
+    }
+
+    /// Like [`download_mission`](Self::download_mission), telling `progress` (items
+    /// received, count) as they come.
+    ///
+    /// # Errors
+    /// As [`download_mission`](Self::download_mission).
+    pub async fn download_mission_with_progress(
+        &mut self,
+        kind: MavMissionType,
+        mut progress: impl FnMut(usize, usize),
+    ) -> Result<Vec<MissionItemInt>, SystemError> {
         let mut client = self.mission_client();
         client
             .download(clock::now(), self.target, kind)
             .map_err(|e| SystemError::Busy(e.to_string()))?;
-        match self.mission_op(&mut client).await? {
+        let mut told = (0, 0);
+        let event = self
+            .run(&mut client, Duration::from_secs(3600), |c| {
+                if let Some(Download::AwaitingItem(d)) = c.download_state() {
+                    let now = (usize::from(d.seq), usize::from(d.count()));
+                    if now != told {
+                        told = now;
+                        progress(now.0, now.1);
+                    }
+                }
+                c.poll_event()
+            })
+            .await?;
+        match event {
             MissionEvent::Downloaded { result, .. } => {
+                if let Ok(items) = &result
+                    && told != (items.len(), items.len())
+                {
+                    progress(items.len(), items.len());
+                }
                 result.map_err(|source| SystemError::Mission {
                     what: "download",
                     source,

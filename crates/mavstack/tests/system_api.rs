@@ -221,14 +221,21 @@ async fn parameters_and_a_mission_go_through_a_link_that_drops_a_fifth_of_the_da
     let table = v.params().await.expect("every parameter despite the loss");
     assert_eq!(table.len(), params::defaults(Autopilot::Px4).len());
     let items = plan(40);
-    v.upload_mission(MavMissionType::MISSION, items.clone())
-        .await
-        .expect("upload despite the loss");
+    let mut sent = Vec::new();
+    v.upload_mission_with_progress(MavMissionType::MISSION, items.clone(), |n, of| {
+        sent.push((n, of));
+    })
+    .await
+    .expect("upload despite the loss");
+    assert_eq!(sent.last(), Some(&(40, 40)), "{sent:?}");
+    let mut got = Vec::new();
     let back = v
-        .download_mission(MavMissionType::MISSION)
+        .download_mission_with_progress(MavMissionType::MISSION, |n, of| got.push((n, of)))
         .await
         .expect("download despite the loss");
     assert!(same_plan(&back, &items));
+    assert_eq!(got.last(), Some(&(40, 40)), "{got:?}");
+    assert!(got.windows(2).all(|w| w[0].0 <= w[1].0), "{got:?}");
 
     drop(v);
     vehicle.shutdown().await.expect("vehicle stops");
