@@ -122,8 +122,8 @@ pub mod system;
 
 pub use link_spec::{LinkSpec, LinkSpecError, redacted};
 pub use node::{
-    EventSubscription, Incoming, LinkEvent, LinkReport, Node, NodeBuilder, NodeError, NodeEvent,
-    NodeHandle, NodeReport, RequestError, Subscription,
+    EventSubscription, Incoming, InputModeration, LinkEvent, LinkReport, Node, NodeBuilder,
+    NodeError, NodeEvent, NodeHandle, NodeReport, RequestError, Subscription,
 };
 
 pub use mavstack_channel as channel;

@@ -267,6 +267,7 @@ pub struct NodeBuilder {
     options: Options,
     heartbeat: Option<(Vec<u8>, Duration)>,
     role: Option<LinkRole>,
+    moderation: InputModeration,
 }
 
 impl NodeBuilder {
@@ -311,6 +312,16 @@ impl NodeBuilder {
             payload[..len].to_vec(),
             period.max(Duration::from_millis(10)),
         ));
+        self
+    }
+
+    /// Input moderation (default [`InputModeration::Timer`]): under more than 5,000
+    /// datagrams a second the node reads in bursts, a millisecond apart, instead of waking
+    /// for each datagram (a router's CPU per frame drops several times; a frame waits at
+    /// most that millisecond more). Below 2,500 a second every datagram is read as it comes.
+    #[must_use]
+    pub const fn input_moderation(mut self, mode: InputModeration) -> Self {
+        self.moderation = mode;
         self
     }
 
@@ -423,6 +434,7 @@ impl NodeBuilder {
             subscriber_drops: 0,
             watchers: Vec::new(),
             pending: Vec::new(),
+            moderation: Moderation::new(self.moderation, clock::now()),
             heartbeat: self.heartbeat.map(|(payload, period)| Heartbeat {
                 payload,
                 period,
@@ -476,6 +488,7 @@ impl Node {
             options: Options::default(),
             heartbeat: None,
             role: None,
+            moderation: InputModeration::Timer,
         }
     }
 
@@ -730,6 +743,78 @@ struct Driver {
     /// Peer events of the last dispatch, for the watchers.
     pending: Vec<NodeEvent>,
     heartbeat: Option<Heartbeat>,
+    moderation: Moderation,
+}
+
+/// How a node reads under a steady stream of input (see [`NodeBuilder::input_moderation`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum InputModeration {
+    /// Every datagram is read as it comes.
+    Off,
+    /// Woken by a datagram, the node waits a millisecond on a tokio timer for the next ones,
+    /// then reads and forwards them all at once. Friendly to other tasks on the runtime; the
+    /// thread still wakes for each datagram's readiness during the wait.
+    #[default]
+    Timer,
+    /// After reading a burst, the node's thread sleeps a millisecond (blocking it: no
+    /// wake-ups at all while datagrams pile up in the socket buffer), then reads them all.
+    /// For a node on a runtime of its own (the `mavstack router` daemon): other tasks on that
+    /// thread wait for the millisecond too.
+    Sleep,
+}
+
+/// Input moderation, as network cards do it: under a steady stream of input (more than
+/// [`Moderation::BUSY_ABOVE`] datagrams a second) the node reads in bursts, one wake-up for
+/// many frames instead of one each, at the price of at most [`Moderation::PAUSE`] of added
+/// latency while the stream lasts. Below [`Moderation::CALM_BELOW`] a second it reads each
+/// datagram as it comes.
+#[derive(Debug)]
+struct Moderation {
+    mode: InputModeration,
+    /// Since when `inputs` counts.
+    since: Instant,
+    inputs: u64,
+    busy: bool,
+}
+
+impl Moderation {
+    /// Inputs per second from which the node moderates.
+    const BUSY_ABOVE: u64 = 5_000;
+    /// Inputs per second under which it stops.
+    const CALM_BELOW: u64 = 2_500;
+    /// How often the rate is measured (a stream that stops is seen within this).
+    const MEASURE: Duration = Duration::from_millis(10);
+    /// The wait (tokio's timers tick in milliseconds).
+    const PAUSE: Duration = Duration::from_millis(1);
+    /// Inputs in one turn from which the node reads on without sleeping (the stream brings
+    /// more than this in a pause).
+    const BIG_BURST: u64 = 128;
+
+    const fn new(mode: InputModeration, now: Instant) -> Self {
+        Self {
+            mode,
+            since: now,
+            inputs: 0,
+            busy: false,
+        }
+    }
+
+    /// Updates the rate; whether the stream is steady enough to read in bursts.
+    fn busy(&mut self, now: Instant) -> bool {
+        let elapsed = now.saturating_duration_since(self.since);
+        if elapsed >= Self::MEASURE {
+            let per_s = self.inputs.saturating_mul(1_000_000) / (elapsed.as_micros().max(1) as u64);
+            self.busy = if self.busy {
+                per_s >= Self::CALM_BELOW
+            } else {
+                per_s > Self::BUSY_ABOVE
+            };
+            self.since = now;
+            self.inputs = 0;
+        }
+        self.mode != InputModeration::Off && self.busy
+    }
 }
 
 /// The node's own HEARTBEAT: its encoded payload, period and next time.
@@ -748,6 +833,8 @@ struct Feed<'a> {
     owners: &'a mut Vec<Option<(usize, PeerId)>>,
     /// Peer events, when someone watches.
     pending: Option<&'a mut Vec<NodeEvent>>,
+    /// Inputs (datagrams, stream reads) fed, for [`Moderation`].
+    inputs: &'a mut u64,
 }
 
 impl Input for Feed<'_> {
@@ -793,6 +880,7 @@ impl Input for Feed<'_> {
     }
 
     fn handle_input(&mut self, now: Instant, peer: PeerId, data: &[u8]) {
+        *self.inputs += 1;
         if let Some(&(id, framing, _)) = self.peers.get(&peer) {
             match framing {
                 Framing::Datagram => self.router.handle_datagram(now, id, data),
@@ -814,6 +902,7 @@ impl Driver {
                 peers: &mut slot.peers,
                 owners: &mut self.owners,
                 pending: (!self.watchers.is_empty()).then_some(&mut self.pending),
+                inputs: &mut self.moderation.inputs,
             },
         )
     }
@@ -866,6 +955,13 @@ impl Driver {
                 }
             })
             .await;
+            // Woken from idle under a steady stream: let the next datagrams arrive first.
+            let input = ready.iter().any(|&r| r);
+            let busy = input && self.moderation.busy(clock::now());
+            let inputs_before = self.moderation.inputs;
+            if busy && waited && self.moderation.mode == InputModeration::Timer {
+                tokio::time::sleep(Moderation::PAUSE).await;
+            }
             let mut worked = command.is_some() || timer;
             for (i, r) in ready.iter_mut().enumerate() {
                 if core::mem::take(r) {
@@ -948,7 +1044,18 @@ impl Driver {
                 Some(Some(Command::Shutdown) | None) => break,
                 None => {}
             }
-            if !waited && worked {
+            // A burst this big means the stream outruns a millisecond's sleep: read on.
+            let burst = self.moderation.inputs.saturating_sub(inputs_before);
+            if busy
+                && worked
+                && burst < Moderation::BIG_BURST
+                && self.moderation.mode == InputModeration::Sleep
+            {
+                // Sleep through the next millisecond of the stream, then let the runtime
+                // look at the sockets (the yield below) and read it all in one turn.
+                std::thread::sleep(Moderation::PAUSE);
+                tokio::task::yield_now().await;
+            } else if !waited && worked {
                 // Busy (a link always has input): let the runtime poll its I/O driver, so
                 // the other sockets' readiness is seen, and run its other tasks (signals,
                 // statistics). One flooding link cannot starve the rest. (A turn that found
@@ -1217,4 +1324,32 @@ const fn conversions(c: &mavstack_router::Conversions) -> [(&'static str, u64); 
         ("signature_removed", c.signature_removed),
         ("signed", c.signed),
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn moderation_starts_above_5000_inputs_a_second_and_stops_below_2500() {
+        let t0 = Instant::from_secs(1);
+        let ms = Duration::from_millis;
+        let mut m = Moderation::new(InputModeration::Timer, t0);
+        m.inputs = 40; // 4,000/s: not yet
+        assert!(!m.busy(t0 + ms(10)));
+        m.inputs = 60; // 6,000/s
+        assert!(m.busy(t0 + ms(20)));
+        m.inputs = 30; // 3,000/s: still, by hysteresis
+        assert!(m.busy(t0 + ms(30)));
+        m.inputs = 20; // 2,000/s
+        assert!(!m.busy(t0 + ms(40)));
+        // A stream that stopped is seen as soon as the next input comes.
+        m.inputs = 60;
+        assert!(m.busy(t0 + ms(50)));
+        m.inputs = 1;
+        assert!(!m.busy(t0 + ms(1050)));
+        let mut off = Moderation::new(InputModeration::Off, t0);
+        off.inputs = 1_000;
+        assert!(!off.busy(t0 + ms(10)));
+    }
 }
