@@ -45,7 +45,7 @@ use mavstack_transport::{ConnSpec, clock};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
-use crate::gcs_cmd::{ground_station, set_param, value_text};
+use crate::gcs_cmd::{set_param, value_text};
 use crate::link_cmd::runtime;
 use crate::radio_cmd::{open_radio_side, run_radio};
 use crate::vehicle_cmd::{Log, version_name};
@@ -323,7 +323,7 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
         timeline.log(),
         stopped(stop_rx.clone()),
     ));
-    let gcs = ground_station(255, 190)
+    let gcs = Node::ground_station(255, 190)
         .link(LinkSpec::parse(&format!("udpout:{radio_a_addr}"), &|_| None).map_err(other)?)
         .start()
         .await

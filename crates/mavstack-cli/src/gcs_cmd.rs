@@ -6,14 +6,12 @@
 //! it still speaks MAVLink 1), runs one operation and prints its result for people, or as
 //! JSON with `--json`.
 
-use core::time::Duration;
 use std::io::Write as _;
 
 use anyhow::anyhow;
 use clap::{Args, Subcommand, ValueEnum};
-use mavstack::router::LinkRole;
 use mavstack::system::{System, SystemError, Wanted};
-use mavstack::{LinkSpec, Node, NodeBuilder};
+use mavstack::{LinkSpec, Node};
 use mavstack_channel::SigningConfig;
 use mavstack_dialects::common::{
     CommandInt, CommandLong, MavAutopilot, MavCmd, MavFrame, MavMissionType, MavModeFlag,
@@ -21,7 +19,6 @@ use mavstack_dialects::common::{
 };
 use mavstack_services::Address;
 use mavstack_services::command::{Command, CommandError};
-use mavstack_services::heartbeat::HeartbeatConfig;
 use mavstack_services::param::{Name, Param, Value};
 use serde_json::json;
 use tokio::time::Instant;
@@ -187,7 +184,7 @@ impl Remote {
         }
         let wait = crate::link_cmd::seconds(args.timeout, "--timeout")?;
         let start = Instant::now();
-        let node = ground_station(args.sysid, args.compid)
+        let node = Node::ground_station(args.sysid, args.compid)
             .link(spec)
             .start()
             .await
@@ -242,16 +239,6 @@ impl Remote {
         drop(self.system);
         self.node.shutdown().await.map(drop).map_err(other)
     }
-}
-
-/// A ground station's node: `sysid/compid`, a GCS HEARTBEAT every second, ground-station
-/// links (they run the MAVLink 2 handshake).
-pub(crate) fn ground_station(sysid: u8, compid: u8) -> NodeBuilder {
-    let heartbeat = HeartbeatConfig::ground_station().own.unwrap_or_default();
-    Node::builder()
-        .identity(sysid, compid)
-        .role(LinkRole::GroundStation)
-        .heartbeat(&heartbeat, Duration::from_secs(1))
 }
 
 fn type_name(ty: MavParamType) -> &'static str {

@@ -19,7 +19,6 @@ use mavstack_dialects::common::{
 };
 use tokio::time::Instant;
 
-use crate::gcs_cmd::ground_station;
 use crate::link_cmd::{runtime, seconds};
 use crate::vehicle_cmd::secret_key;
 use crate::{Failure, other};
@@ -205,7 +204,7 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
             mavlink_version: 3,
             ..Heartbeat::default()
         };
-        let node = ground_station(args.sysid, args.compid)
+        let node = mavstack::Node::ground_station(args.sysid, args.compid)
             .heartbeat(&gcs, Duration::from_millis(500))
             .link(spec)
             .start()

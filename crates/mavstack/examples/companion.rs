@@ -14,7 +14,6 @@
 use core::time::Duration;
 
 use mavstack::dialects::common::{Attitude, Heartbeat, MavAutopilot, MavType};
-use mavstack::router::LinkRole;
 use mavstack::services::param::Name;
 use mavstack::sim::{Autopilot, params};
 use mavstack::sim_vehicle::SimVehicle;
@@ -83,18 +82,7 @@ async fn main() -> Result<(), Box<dyn core::error::Error>> {
 
     if simulated.is_some() {
         // A ground station on the companion's UDP port reaches the vehicle through it.
-        let gcs = Node::builder()
-            .identity(255, 190)
-            .role(LinkRole::GroundStation)
-            .heartbeat(
-                &Heartbeat {
-                    r#type: MavType::GCS,
-                    autopilot: MavAutopilot::INVALID,
-                    mavlink_version: 3,
-                    ..Heartbeat::default()
-                },
-                Duration::from_secs(1),
-            )
+        let gcs = Node::ground_station(255, 190)
             .link(LinkSpec::parse(
                 &format!("udpout:127.0.0.1:{gcs_port}"),
                 &none,

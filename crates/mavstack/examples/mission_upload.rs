@@ -11,7 +11,6 @@
 use core::time::Duration;
 
 use mavstack::dialects::common::MavMissionType;
-use mavstack::router::LinkRole;
 use mavstack::services::wpl;
 use mavstack::sim::{Autopilot, params};
 use mavstack::sim_vehicle::SimVehicle;
@@ -50,15 +49,7 @@ async fn main() -> Result<(), Box<dyn core::error::Error>> {
 
     // A ground station: its HEARTBEAT once a second, a link that runs the MAVLink 2
     // handshake when the vehicle still speaks MAVLink 1.
-    let gcs = Node::builder()
-        .identity(255, 190)
-        .role(LinkRole::GroundStation)
-        .heartbeat(
-            &mavstack::services::heartbeat::HeartbeatConfig::ground_station()
-                .own
-                .unwrap_or_default(),
-            Duration::from_secs(1),
-        )
+    let gcs = Node::ground_station(255, 190)
         .link(LinkSpec::parse(&format!("udpout:127.0.0.1:{port}"), &none)?)
         .start()
         .await?;

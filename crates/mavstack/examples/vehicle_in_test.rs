@@ -6,7 +6,6 @@
 use core::time::Duration;
 
 use mavstack::dialects::common::{CommandLong, MavCmd, MavResult};
-use mavstack::router::LinkRole;
 use mavstack::services::command::Command;
 use mavstack::services::param::{Name, Value};
 use mavstack::sim::{Autopilot, params};
@@ -25,10 +24,7 @@ async fn check_the_vehicle() -> Result<String, Error> {
     )
     .await?;
     let port = vehicle.node().local_addrs()[0].ok_or("no port")?.port();
-    let gcs = Node::builder()
-        .identity(255, 190)
-        .role(LinkRole::GroundStation)
-        .heartbeat(&Default::default(), Duration::from_secs(1))
+    let gcs = Node::ground_station(255, 190)
         .link(LinkSpec::parse(
             &format!("udpout:127.0.0.1:{port}?version=2"),
             &none,

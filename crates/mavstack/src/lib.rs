@@ -14,8 +14,8 @@
 //!
 //! ## A ground station
 //!
-//! System 255, a HEARTBEAT every second, a link that runs the MAVLink 2 handshake when the
-//! vehicle still speaks MAVLink 1; then the first autopilot heard, its parameters, a
+//! System 255 ([`Node::ground_station`]: a GCS HEARTBEAT every second, links that run the
+//! MAVLink 2 handshake when the vehicle still speaks MAVLink 1); then the first autopilot heard, its parameters, a
 //! mission, and its attitude as it streams (the `ground_station` and `mission_upload`
 //! examples run this against the simulated vehicle):
 //!
@@ -23,16 +23,11 @@
 //! # async fn run() -> Result<(), Box<dyn core::error::Error>> {
 //! use core::time::Duration;
 //! use mavstack::dialects::common::{Attitude, MavMissionType};
-//! use mavstack::router::LinkRole;
-//! use mavstack::services::heartbeat::HeartbeatConfig;
 //! use mavstack::services::wpl;
 //! use mavstack::system::{System, Wanted};
 //! use mavstack::{LinkSpec, Node};
 //! let none = |_: &str| None;
-//! let gcs = Node::builder()
-//!     .identity(255, 190)
-//!     .role(LinkRole::GroundStation)
-//!     .heartbeat(&HeartbeatConfig::ground_station().own.unwrap_or_default(), Duration::from_secs(1))
+//! let gcs = Node::ground_station(255, 190)
 //!     .link(LinkSpec::parse("udpin:0.0.0.0:14550", &none)?)
 //!     .start()
 //!     .await?;

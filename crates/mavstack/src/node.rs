@@ -492,6 +492,26 @@ impl Node {
         }
     }
 
+    /// How to build a ground station's node: system `system_id`, component `component_id`,
+    /// ground-station links (they run the MAVLink 2 handshake; [`LinkRole::GroundStation`]),
+    /// and a ground station's HEARTBEAT (MAV_TYPE_GCS, MAV_AUTOPILOT_INVALID, ACTIVE) every
+    /// second. Add links and start it.
+    #[must_use]
+    pub fn ground_station(system_id: u8, component_id: u8) -> NodeBuilder {
+        use mavstack_dialects::common::{Heartbeat, MavAutopilot, MavState, MavType};
+        let heartbeat = Heartbeat {
+            r#type: MavType::GCS,
+            autopilot: MavAutopilot::INVALID,
+            system_status: MavState::ACTIVE,
+            mavlink_version: 3,
+            ..Heartbeat::default()
+        };
+        Self::builder()
+            .identity(system_id, component_id)
+            .role(LinkRole::GroundStation)
+            .heartbeat(&heartbeat, Duration::from_secs(1))
+    }
+
     /// The local address of each link, in the order they were added (UDP sockets and TCP
     /// listeners; useful after binding port 0).
     #[must_use]

@@ -5,13 +5,10 @@
 //! ```no_run
 //! # async fn run() -> Result<(), Box<dyn core::error::Error>> {
 //! use core::time::Duration;
-//! use mavstack::router::LinkRole;
 //! use mavstack::system::{System, Wanted};
 //! use mavstack::{LinkSpec, Node};
 //! let none = |_: &str| None;
-//! let gcs = Node::builder()
-//!     .identity(255, 190)
-//!     .role(LinkRole::GroundStation)
+//! let gcs = Node::ground_station(255, 190)
 //!     .link(LinkSpec::parse("udpin:0.0.0.0:14550", &none)?)
 //!     .start()
 //!     .await?;
@@ -854,7 +851,8 @@ pub struct Sample<T> {
 }
 
 /// Messages of type `T` from one system (from [`System::subscribe`]): a bounded queue like
-/// the node's subscriptions; dropping it unsubscribes.
+/// the node's subscriptions, read with [`recv`](Self::recv) or as a
+/// [`Stream`](futures_core::Stream) of [`Sample`]s; dropping it unsubscribes.
 #[derive(Debug)]
 pub struct Telemetry<T> {
     frames: Subscription,
@@ -865,17 +863,40 @@ pub struct Telemetry<T> {
 impl<T: Message> Telemetry<T> {
     /// The next one; `None` once the node has stopped.
     pub async fn recv(&mut self) -> Option<Sample<T>> {
-        while let Some(incoming) = self.frames.recv().await {
+        core::future::poll_fn(|cx| self.poll_sample(cx)).await
+    }
+
+    fn poll_sample(
+        &mut self,
+        cx: &mut core::task::Context<'_>,
+    ) -> core::task::Poll<Option<Sample<T>>> {
+        use core::task::Poll;
+        loop {
+            let incoming = match self.frames.poll_recv(cx) {
+                Poll::Ready(Some(incoming)) => incoming,
+                Poll::Ready(None) => return Poll::Ready(None),
+                Poll::Pending => return Poll::Pending,
+            };
             let f = incoming.frame.frame.view();
             if f.msg_id() == T::ID && f.sysid() == self.system {
-                return Some(Sample {
+                return Poll::Ready(Some(Sample {
                     from: Address::new(f.sysid(), f.compid()),
                     version: f.version(),
                     seq: f.seq(),
                     message: T::decode(f.payload()),
-                });
+                }));
             }
         }
-        None
+    }
+}
+
+impl<T: Message> futures_core::Stream for Telemetry<T> {
+    type Item = Sample<T>;
+
+    fn poll_next(
+        self: core::pin::Pin<&mut Self>,
+        cx: &mut core::task::Context<'_>,
+    ) -> core::task::Poll<Option<Sample<T>>> {
+        self.get_mut().poll_sample(cx)
     }
 }

@@ -85,10 +85,7 @@ async fn a_ground_station_uses_a_companions_own_parameters_missions_and_commands
     );
     let served = Served::start(&node.handle(), companion).await;
 
-    let gcs = Node::builder()
-        .identity(255, 190)
-        .role(LinkRole::GroundStation)
-        .heartbeat(&Heartbeat::default(), Duration::from_secs(1))
+    let gcs = Node::ground_station(255, 190)
         .link(LinkSpec::parse(&format!("udpout:127.0.0.1:{port}?version=2"), &none).expect("spec"))
         .start()
         .await

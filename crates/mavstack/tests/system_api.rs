@@ -12,7 +12,6 @@ use mavstack::channel::HandshakeResult;
 use mavstack::dialects::common::{
     Attitude, CommandLong, MavCmd, MavFrame, MavMissionType, MavResult, MissionItemInt,
 };
-use mavstack::router::LinkRole;
 use mavstack::services::command::Command;
 use mavstack::services::heartbeat::HeartbeatEvent;
 use mavstack::services::param::{Name, Value};
@@ -26,18 +25,7 @@ fn none(_: &str) -> Option<u32> {
 }
 
 fn ground_station() -> mavstack::NodeBuilder {
-    Node::builder()
-        .identity(255, 190)
-        .role(LinkRole::GroundStation)
-        .heartbeat(
-            &mavstack::dialects::common::Heartbeat {
-                r#type: mavstack::dialects::common::MavType::GCS,
-                autopilot: mavstack::dialects::common::MavAutopilot::INVALID,
-                mavlink_version: 3,
-                ..Default::default()
-            },
-            Duration::from_secs(1),
-        )
+    Node::ground_station(255, 190)
 }
 
 /// `n` waypoints around the simulator's home.
@@ -136,6 +124,15 @@ async fn a_ground_station_finds_handshakes_and_operates_the_simulated_vehicle() 
         .expect("a sample");
     assert_eq!(sample.from, v.target());
     assert!(sample.message.roll.is_finite());
+    // The same subscription read as a `Stream`.
+    let next = core::future::poll_fn(|cx| {
+        futures_core::Stream::poll_next(core::pin::Pin::new(&mut attitude), cx)
+    });
+    let sample = tokio::time::timeout(Duration::from_secs(3), next)
+        .await
+        .expect("ATTITUDE streams")
+        .expect("a sample");
+    assert_eq!(sample.from, v.target());
 
     // The vehicle goes away: discovery says so within its 3 s timeout.
     vehicle.shutdown().await.expect("vehicle stops");
