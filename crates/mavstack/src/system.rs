@@ -513,13 +513,11 @@ impl System {
         client
             .clear(clock::now(), self.target, kind)
             .map_err(|e| SystemError::Busy(e.to_string()))?;
-        match self.mission_op(&mut client).await? {
-            MissionEvent::Cleared { result, .. } => result.map_err(|source| SystemError::Mission {
-                what: "clear",
-                source,
-            }),
-            _ => Err(unexpected("clear")),
-        }
+        self.mission_result(&mut client, "clear", |e| match e {
+            MissionEvent::Cleared { result, .. } => Some(result),
+            _ => None,
+        })
+        .await
     }
 
     /// Makes mission item `seq` the current one.
@@ -531,23 +529,26 @@ impl System {
         client
             .set_current(clock::now(), self.target, seq)
             .map_err(|e| SystemError::Busy(e.to_string()))?;
-        match self.mission_op(&mut client).await? {
-            MissionEvent::CurrentSet { result, .. } => {
-                result.map_err(|source| SystemError::Mission {
-                    what: "set current",
-                    source,
-                })
-            }
-            _ => Err(unexpected("set current")),
-        }
+        self.mission_result(&mut client, "set current", |e| match e {
+            MissionEvent::CurrentSet { result, .. } => Some(result),
+            _ => None,
+        })
+        .await
     }
 
-    async fn mission_op(
+    /// Runs the started operation `what` of `client` to its event; `pick` takes its result.
+    async fn mission_result(
         &mut self,
         client: &mut MissionClient,
-    ) -> Result<MissionEvent, SystemError> {
-        self.run(client, Duration::from_secs(3600), MissionClient::poll_event)
-            .await
+        what: &'static str,
+        pick: impl FnOnce(MissionEvent) -> Option<Result<(), MissionError>>,
+    ) -> Result<(), SystemError> {
+        let event = self
+            .run(client, Duration::from_secs(3600), MissionClient::poll_event)
+            .await?;
+        pick(event)
+            .ok_or_else(|| unexpected(what))?
+            .map_err(|source| SystemError::Mission { what, source })
     }
 
     // ----- commands ------------------------------------------------------------------------
