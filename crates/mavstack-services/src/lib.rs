@@ -41,7 +41,7 @@
 //! | [`command`] | COMMAND_LONG, COMMAND_INT, COMMAND_ACK | [`command::CommandClient`] | [`command::CommandServer`] |
 //! | [`param`] | PARAM_REQUEST_LIST/READ, PARAM_SET, PARAM_VALUE | [`param::ParamClient`] | [`param::ParamServer`] |
 //! | [`mission`] | MISSION_COUNT, MISSION_REQUEST_INT, MISSION_ITEM_INT, MISSION_ACK, ... | [`mission::MissionClient`] | [`mission::MissionServer`] |
-//! | [`stream`] | SET_MESSAGE_INTERVAL, REQUEST_MESSAGE, MESSAGE_INTERVAL | [`stream::Subscriptions`], [`stream::set_message_interval`], [`stream::request_message`] | [`stream::StreamScheduler`] |
+//! | [`stream`] | SET_MESSAGE_INTERVAL, REQUEST_MESSAGE, MESSAGE_INTERVAL | [`stream::Subscriptions`], [`stream::set_message_interval`], [`stream::request_message`] | [`stream::StreamScheduler`], [`stream::StreamServer`] (a whole service) |
 //! | [`timesync`] | TIMESYNC | [`timesync::Timesync`] (estimates the offset) | the same type answers requests |
 //!
 //! # Limitations

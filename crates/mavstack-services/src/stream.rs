@@ -8,6 +8,9 @@
 //! since only it knows the values. REQUEST_MESSAGE(MESSAGE_INTERVAL 244, id) is answered by
 //! the scheduler directly ([`StreamScheduler::poll_transmit`]).
 //!
+//! [`StreamServer`] puts a scheduler, its commands and a [`MessageSource`] together into one
+//! [`Service`](crate::Service), ready to run on a node.
+//!
 //! **Client**: [`set_message_interval`] and [`request_message`] build the commands to send
 //! with a [`CommandClient`](crate::command::CommandClient), and [`Subscriptions`] hands out
 //! the messages of the types subscribed to, with a measured rate per source.
@@ -32,8 +35,11 @@ use core::time::Duration;
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::{CommandLong, MavCmd, MavMessage, MavResult, MessageInterval};
 
-use crate::command::{Command, Request, Response};
-use crate::{Address, Outgoing};
+use crate::command::{
+    Command, CommandHandler, CommandServer, CommandServerConfig, CommandServerEvent, Request,
+    Response,
+};
+use crate::{Address, Outgoing, Service};
 
 /// The id of MESSAGE_INTERVAL, which REQUEST_MESSAGE uses to query a rate.
 const MESSAGE_INTERVAL_ID: u32 = 244;
@@ -270,6 +276,193 @@ impl StreamScheduler {
     #[must_use]
     pub fn poll_transmit(&mut self) -> Option<Outgoing> {
         self.out.pop_front()
+    }
+}
+
+/// Builds the messages a [`StreamServer`] sends: the one `due` asks for, from the
+/// component's current state, or `None` when there is nothing to say yet (no fix, say).
+///
+/// Closures `FnMut(Instant, &Due) -> Option<MavMessage>` are sources.
+pub trait MessageSource {
+    /// The message for `due` at `now`.
+    fn message(&mut self, now: Instant, due: &Due) -> Option<MavMessage>;
+}
+
+impl<F: FnMut(Instant, &Due) -> Option<MavMessage>> MessageSource for F {
+    fn message(&mut self, now: Instant, due: &Due) -> Option<MavMessage> {
+        self(now, due)
+    }
+}
+
+/// A [`CommandHandler`] that supports nothing (every command is answered UNSUPPORTED): the
+/// default for the other commands of a [`StreamServer`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct NoCommands;
+
+impl CommandHandler for NoCommands {
+    fn handle_command(&mut self, _now: Instant, _request: &Request) -> Response {
+        Response::done(MavResult::UNSUPPORTED)
+    }
+}
+
+/// The scheduler answering its two commands first, every other one handed to `H`.
+#[derive(Debug)]
+struct StreamCommands<H> {
+    scheduler: StreamScheduler,
+    others: H,
+}
+
+impl<H: CommandHandler> CommandHandler for StreamCommands<H> {
+    fn handle_command(&mut self, now: Instant, request: &Request) -> Response {
+        self.scheduler
+            .handle_command(now, request)
+            .unwrap_or_else(|| self.others.handle_command(now, request))
+    }
+}
+
+/// Message-interval streams as a whole [`Service`], for a component that publishes
+/// telemetry (a companion computer, a peripheral, a vehicle): a [`StreamScheduler`] behind a
+/// [`CommandServer`] (SET_MESSAGE_INTERVAL and REQUEST_MESSAGE answered, every other
+/// command handed to `H`, [`NoCommands`] by default, so one component has one command
+/// server), and a [`MessageSource`] that builds each message when it is due.
+///
+/// ```
+/// use mavstack_core::Message as _;
+/// use mavstack_core::time::Instant;
+/// use mavstack_dialects::common::{CommandLong, DistanceSensor, MavCmd, MavMessage};
+/// use mavstack_services::stream::{Due, StreamServer};
+/// use mavstack_services::{Address, Service};
+///
+/// let own = Address::new(1, 158);
+/// let mut range = StreamServer::new(own, |_now: Instant, _due: &Due| {
+///     Some(MavMessage::DistanceSensor(DistanceSensor { current_distance: 412, ..Default::default() }))
+/// });
+/// range.support(DistanceSensor::ID, None); // off until a ground station asks
+/// let ask = MavMessage::CommandLong(CommandLong {
+///     target_system: 1,
+///     target_component: 158,
+///     command: MavCmd::SET_MESSAGE_INTERVAL,
+///     param1: DistanceSensor::ID as f32,
+///     param2: 200_000.0, // every 200 ms
+///     ..Default::default()
+/// });
+/// range.handle_message(Instant::ZERO, Address::new(255, 190), &ask);
+/// let sent: Vec<_> = core::iter::from_fn(|| range.poll_transmit()).map(|o| o.message).collect();
+/// assert!(matches!(&sent[..], [MavMessage::CommandAck(_), MavMessage::DistanceSensor(_)]));
+/// assert_eq!(range.poll_timeout(), Some(Instant::from_millis(200)));
+/// ```
+#[derive(Debug)]
+pub struct StreamServer<S, H = NoCommands> {
+    commands: CommandServer<StreamCommands<H>>,
+    source: S,
+    out: VecDeque<Outgoing>,
+}
+
+impl<S: MessageSource> StreamServer<S> {
+    /// A server for component `own` whose messages `source` builds; no stream supported
+    /// yet ([`StreamServer::support`]), no other command.
+    #[must_use]
+    pub fn new(own: Address, source: S) -> Self {
+        Self::with_commands(own, source, NoCommands)
+    }
+}
+
+impl<S: MessageSource, H: CommandHandler> StreamServer<S, H> {
+    /// A server whose commands other than SET_MESSAGE_INTERVAL and REQUEST_MESSAGE go to
+    /// `others`.
+    #[must_use]
+    pub fn with_commands(own: Address, source: S, others: H) -> Self {
+        let handler = StreamCommands {
+            scheduler: StreamScheduler::new(),
+            others,
+        };
+        Self {
+            commands: CommandServer::new(own, CommandServerConfig::default(), handler),
+            source,
+            out: VecDeque::new(),
+        }
+    }
+
+    /// Declares that the component produces `msg_id`, streamed at `default` (`None`: off
+    /// until asked for).
+    pub fn support(&mut self, msg_id: u32, default: Option<Duration>) {
+        self.commands
+            .handler_mut()
+            .scheduler
+            .support(msg_id, default);
+    }
+
+    /// The scheduler (intervals in force).
+    pub fn scheduler(&self) -> &StreamScheduler {
+        &self.commands.handler().scheduler
+    }
+
+    /// The scheduler, mutably (to set intervals locally).
+    pub fn scheduler_mut(&mut self) -> &mut StreamScheduler {
+        &mut self.commands.handler_mut().scheduler
+    }
+
+    /// The source.
+    pub fn source(&self) -> &S {
+        &self.source
+    }
+
+    /// The source, to update the state it builds messages from.
+    pub fn source_mut(&mut self) -> &mut S {
+        &mut self.source
+    }
+
+    /// The handler of the other commands.
+    pub fn commands_mut(&mut self) -> &mut H {
+        &mut self.commands.handler_mut().others
+    }
+
+    /// The command server's next event (commands run, duplicates answered).
+    #[must_use]
+    pub fn poll_event(&mut self) -> Option<CommandServerEvent> {
+        self.commands.poll_event()
+    }
+
+    /// Builds every message due at `now` and queues the scheduler's own replies.
+    fn produce(&mut self, now: Instant) {
+        let handler = self.commands.handler_mut();
+        while let Some(o) = handler.scheduler.poll_transmit() {
+            self.out.push_back(o);
+        }
+        while let Some(due) = handler.scheduler.poll_due(now) {
+            if let Some(message) = self.source.message(now, &due) {
+                self.out.push_back(Outgoing {
+                    target: due.target,
+                    message,
+                });
+            }
+        }
+    }
+}
+
+impl<S: MessageSource, H: CommandHandler> Service for StreamServer<S, H> {
+    fn handle_message(&mut self, now: Instant, from: Address, message: &MavMessage) -> bool {
+        let used = self.commands.handle_message(now, from, message);
+        if used {
+            self.produce(now);
+        }
+        used
+    }
+
+    fn handle_timeout(&mut self, now: Instant) {
+        self.commands.handle_timeout(now);
+        self.produce(now);
+    }
+
+    fn poll_transmit(&mut self) -> Option<Outgoing> {
+        // The ACK goes before what it started.
+        self.commands
+            .poll_transmit()
+            .or_else(|| self.out.pop_front())
+    }
+
+    fn poll_timeout(&self) -> Option<Instant> {
+        self.commands.handler().scheduler.poll_timeout()
     }
 }
 

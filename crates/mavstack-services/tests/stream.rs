@@ -10,10 +10,11 @@ use mavstack_dialects::common::{
     Attitude, AutopilotVersion, Heartbeat, MavMessage, MavResult, MessageInterval,
 };
 use mavstack_services::command::{
-    CommandClient, CommandError, CommandEvent, CommandHandler, CommandServer, Request, Response,
+    CommandClient, CommandError, CommandEvent, CommandHandler, Request, Response,
 };
 use mavstack_services::stream::{
-    Interval, StreamScheduler, Subscriptions, request_message, set_message_interval,
+    Due, Interval, MessageSource, StreamServer, Subscriptions, request_message,
+    set_message_interval,
 };
 use mavstack_services::{Address, Outgoing, Service};
 use util::{Knobs, Pair};
@@ -23,64 +24,16 @@ const VEHICLE: Address = Address::new(1, 1);
 const ATTITUDE: u32 = 30;
 const AUTOPILOT_VERSION: u32 = 148;
 
-struct Streams(StreamScheduler);
-
-impl CommandHandler for Streams {
-    fn handle_command(&mut self, now: Instant, request: &Request) -> Response {
-        self.0
-            .handle_command(now, request)
-            .unwrap_or(Response::done(MavResult::UNSUPPORTED))
-    }
-}
-
-/// A vehicle: a command server whose handler is the stream scheduler, and telemetry built
-/// when due.
-struct Vehicle {
-    commands: CommandServer<Streams>,
-    now: Instant,
+/// What the vehicle streams, and a record of every message it built.
+#[derive(Default)]
+struct Telemetry {
     sent: Vec<u32>,
 }
 
-impl Vehicle {
-    fn new() -> Self {
-        let mut s = StreamScheduler::new();
-        s.support(0, Some(Duration::from_secs(1)));
-        s.support(ATTITUDE, None);
-        s.support(AUTOPILOT_VERSION, None);
-        Self {
-            commands: CommandServer::new(VEHICLE, Default::default(), Streams(s)),
-            now: util::T0,
-            sent: vec![],
-        }
-    }
-
-    fn streams(&mut self) -> &mut StreamScheduler {
-        &mut self.commands.handler_mut().0
-    }
-}
-
-impl Service for Vehicle {
-    fn handle_message(&mut self, now: Instant, from: Address, message: &MavMessage) -> bool {
-        self.now = now;
-        self.commands.handle_message(now, from, message)
-    }
-
-    fn handle_timeout(&mut self, now: Instant) {
-        self.now = now;
-        self.commands.handle_timeout(now);
-    }
-
-    fn poll_transmit(&mut self) -> Option<Outgoing> {
-        if let Some(o) = self.commands.poll_transmit() {
-            return Some(o);
-        }
-        if let Some(o) = self.streams().poll_transmit() {
-            return Some(o);
-        }
-        let now = self.now;
-        let due = self.streams().poll_due(now)?;
+impl MessageSource for Telemetry {
+    fn message(&mut self, now: Instant, due: &Due) -> Option<MavMessage> {
         self.sent.push(due.msg_id);
-        let message = match due.msg_id {
+        Some(match due.msg_id {
             0 => MavMessage::Heartbeat(Heartbeat::default()),
             ATTITUDE => MavMessage::Attitude(Attitude {
                 time_boot_ms: (now.as_micros() / 1000) as u32,
@@ -91,25 +44,19 @@ impl Service for Vehicle {
                 ..Default::default()
             }),
             other => panic!("not supported: {other}"),
-        };
-        Some(Outgoing {
-            target: due.target,
-            message,
         })
     }
+}
 
-    fn poll_timeout(&self) -> Option<Instant> {
-        let s = self
-            .commands
-            .handler()
-            .0
-            .poll_timeout()
-            .map(|t| t.max(self.now));
-        [self.commands.poll_timeout(), s]
-            .into_iter()
-            .flatten()
-            .min()
-    }
+/// A vehicle: a stream server (scheduler, its commands, telemetry built when due).
+type Vehicle = StreamServer<Telemetry>;
+
+fn vehicle() -> Vehicle {
+    let mut v = StreamServer::new(VEHICLE, Telemetry::default());
+    v.support(0, Some(Duration::from_secs(1)));
+    v.support(ATTITUDE, None);
+    v.support(AUTOPILOT_VERSION, None);
+    v
 }
 
 /// A ground station: a command client and subscriptions.
@@ -141,7 +88,7 @@ fn sim(knobs: Knobs, seed: u64) -> Sim {
         commands: CommandClient::new(GCS, Default::default()),
         subs: Subscriptions::new(),
     };
-    Pair::new(gcs, GCS, Vehicle::new(), VEHICLE, knobs, seed)
+    Pair::new(gcs, GCS, vehicle(), VEHICLE, knobs, seed)
 }
 
 fn command(p: &mut Sim, cmd: mavstack_services::command::Command) -> Result<(), CommandError> {
@@ -212,7 +159,7 @@ fn sim_set_interval_request_message_and_query_on_a_clean_link() {
     let _ = count(&mut p, att);
     p.drive_for(Duration::from_secs(2));
     assert_eq!(count(&mut p, att), 0);
-    assert_eq!(p.b.commands.handler().0.interval(ATTITUDE), None);
+    assert_eq!(p.b.scheduler().interval(ATTITUDE), None);
     assert!(matches!(
         command(
             &mut p,
@@ -225,10 +172,7 @@ fn sim_set_interval_request_message_and_query_on_a_clean_link() {
     ));
     // Back to the default (off for ATTITUDE, 1 Hz for HEARTBEAT).
     command(&mut p, set_message_interval(0, Interval::Default)).unwrap();
-    assert_eq!(
-        p.b.commands.handler().0.interval(0),
-        Some(Duration::from_secs(1))
-    );
+    assert_eq!(p.b.scheduler().interval(0), Some(Duration::from_secs(1)));
 }
 
 #[test]
@@ -242,7 +186,7 @@ fn sim_rates_and_one_shots_under_loss() {
         )
         .unwrap();
         assert_eq!(
-            p.b.commands.handler().0.interval(ATTITUDE),
+            p.b.scheduler().interval(ATTITUDE),
             Some(Duration::from_millis(50))
         );
         let _ = count(&mut p, att);
@@ -251,11 +195,93 @@ fn sim_rates_and_one_shots_under_loss() {
         let n = count(&mut p, att);
         assert!((150..=230).contains(&n), "seed {seed}: {n}");
         // A one-shot request whose command is retried is still answered once.
-        let before = p.b.sent.iter().filter(|&&m| m == AUTOPILOT_VERSION).count();
+        let before =
+            p.b.source()
+                .sent
+                .iter()
+                .filter(|&&m| m == AUTOPILOT_VERSION)
+                .count();
         if command(&mut p, request_message(AUTOPILOT_VERSION, [0.0; 5])).is_ok() {
             p.drive_for(Duration::from_millis(200));
-            let after = p.b.sent.iter().filter(|&&m| m == AUTOPILOT_VERSION).count();
+            let after =
+                p.b.source()
+                    .sent
+                    .iter()
+                    .filter(|&&m| m == AUTOPILOT_VERSION)
+                    .count();
             assert_eq!(after - before, 1, "seed {seed}");
         }
     }
+}
+
+/// The vehicle's other commands: it arms, and knows nothing else.
+#[derive(Default)]
+struct Arming {
+    armed: bool,
+}
+
+impl CommandHandler for Arming {
+    fn handle_command(&mut self, _now: Instant, request: &Request) -> Response {
+        if request.command.id() == mavstack_dialects::common::MavCmd::COMPONENT_ARM_DISARM {
+            self.armed = true;
+            Response::done(MavResult::ACCEPTED)
+        } else {
+            Response::done(MavResult::UNSUPPORTED)
+        }
+    }
+}
+
+#[test]
+fn a_stream_server_hands_its_other_commands_to_the_handler_and_answers_each_once() {
+    use mavstack_dialects::common::{CommandLong, MavCmd};
+    let mut v = StreamServer::with_commands(VEHICLE, Telemetry::default(), Arming::default());
+    v.support(ATTITUDE, None);
+    let from = GCS;
+    let ask = |command: MavCmd, param1: f32| {
+        MavMessage::CommandLong(CommandLong {
+            target_system: 1,
+            target_component: 1,
+            command,
+            param1,
+            param7: 1.0,
+            ..Default::default()
+        })
+    };
+    let acks = |v: &mut StreamServer<Telemetry, Arming>| {
+        core::iter::from_fn(|| v.poll_transmit())
+            .map(|o| match o.message {
+                MavMessage::CommandAck(a) => (a.command, a.result),
+                other => panic!("not an ACK: {other:?}"),
+            })
+            .collect::<Vec<_>>()
+    };
+    assert!(v.handle_message(util::T0, from, &ask(MavCmd::COMPONENT_ARM_DISARM, 1.0)));
+    assert_eq!(
+        acks(&mut v),
+        [(MavCmd::COMPONENT_ARM_DISARM, MavResult::ACCEPTED)]
+    );
+    assert!(v.commands_mut().armed);
+    assert!(v.handle_message(util::T0, from, &ask(MavCmd::DO_SET_MODE, 1.0)));
+    assert_eq!(
+        acks(&mut v),
+        [(MavCmd::DO_SET_MODE, MavResult::UNSUPPORTED)]
+    );
+    // A one-shot for a message the vehicle does not produce: DENIED, nothing built.
+    assert!(v.handle_message(util::T0, from, &ask(MavCmd::REQUEST_MESSAGE, 148.0)));
+    assert_eq!(acks(&mut v), [(MavCmd::REQUEST_MESSAGE, MavResult::DENIED)]);
+    // One it does produce: the ACK, then the message, to the requester (param7 = 1).
+    assert!(v.handle_message(
+        util::T0,
+        from,
+        &ask(MavCmd::REQUEST_MESSAGE, ATTITUDE as f32)
+    ));
+    let out: Vec<_> = core::iter::from_fn(|| v.poll_transmit()).collect();
+    assert!(matches!(out[0].message, MavMessage::CommandAck(a) if a.result == MavResult::ACCEPTED));
+    assert!(matches!(out[1].message, MavMessage::Attitude(_)));
+    assert_eq!((out.len(), out[1].target), (2, GCS));
+    assert_eq!(v.source().sent, [ATTITUDE]);
+    // Nothing streams: no timer.
+    assert_eq!(v.poll_timeout(), None);
+    // Messages that are not commands are not the server's.
+    assert!(!v.handle_message(util::T0, from, &MavMessage::Heartbeat(Heartbeat::default())));
 }

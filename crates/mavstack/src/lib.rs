@@ -8,7 +8,8 @@
 //! - [`system::System`] is a remote system as a ground station sees it: its parameters,
 //!   missions, commands and telemetry (feature `services`);
 //! - [`serve::Served`] runs your own component's services — a parameter table, a mission
-//!   store, command handlers — for vehicles and companion computers;
+//!   store, command handlers, telemetry streamed at the rates ground stations ask for — for
+//!   vehicles, companion computers and peripherals;
 //! - [`sim_vehicle::SimVehicle`] is a simulated ArduPilot or PX4 vehicle, in-process, for a
 //!   ground station's tests (feature `sim`).
 //!

@@ -1,6 +1,8 @@
 //! [`Served`]: a `mavstack-services` server (a parameter table, a mission store, a command
-//! handler, message-interval streams, or your own [`Service`]) running as a node's own
-//! component, for vehicles and companion computers (feature `services`).
+//! handler, message-interval streams with
+//! [`StreamServer`](mavstack_services::stream::StreamServer), or your own [`Service`])
+//! running as a node's own component, for vehicles, companion computers and peripherals
+//! (feature `services`).
 //!
 //! ```no_run
 //! # async fn run() -> Result<(), Box<dyn core::error::Error>> {

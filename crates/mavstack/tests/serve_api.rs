@@ -1,14 +1,16 @@
 //! Serving from a `Node`: a companion computer's own parameter table, mission store and
 //! command handler (`mavstack::serve::Served` over `mavstack-services` servers), operated by
 //! a ground station through the `System` API; a dropped operation's future cancels it
-//! cleanly, and a stopped node frees its socket.
+//! cleanly, and a stopped node frees its socket. A peripheral's telemetry streams at the
+//! rate a ground station sets (`StreamServer`).
 #![cfg(feature = "services")]
 
 use core::time::Duration;
 
+use mavstack::core::Message as _;
 use mavstack::dialects::common::{
-    CommandLong, Heartbeat, MavAutopilot, MavCmd, MavFrame, MavMissionType, MavResult, MavType,
-    MissionItemInt,
+    CommandLong, DistanceSensor, Heartbeat, MavAutopilot, MavCmd, MavFrame, MavMessage,
+    MavMissionType, MavResult, MavType, MissionItemInt,
 };
 use mavstack::router::LinkRole;
 use mavstack::serve::Served;
@@ -18,6 +20,7 @@ use mavstack::services::command::{
 };
 use mavstack::services::mission::{MissionConfig, MissionServer};
 use mavstack::services::param::{Encoding, Name, ParamServer, Value};
+use mavstack::services::stream::{Due, MessageSource, StreamServer};
 use mavstack::system::{System, SystemError, Wanted};
 use mavstack::{LinkSpec, Node};
 
@@ -178,4 +181,124 @@ async fn a_ground_station_uses_a_companions_own_parameters_missions_and_commands
     node.shutdown().await.expect("companion stops");
     // Its socket is closed: the port can be bound again.
     std::net::UdpSocket::bind(("127.0.0.1", port)).expect("the port is free again");
+}
+
+/// A rangefinder's telemetry: the last distance measured.
+#[derive(Debug)]
+struct Rangefinder {
+    distance_cm: u16,
+}
+
+impl MessageSource for Rangefinder {
+    fn message(&mut self, now: mavstack::core::time::Instant, _due: &Due) -> Option<MavMessage> {
+        Some(MavMessage::DistanceSensor(DistanceSensor {
+            time_boot_ms: (now.as_micros() / 1000) as u32,
+            current_distance: self.distance_cm,
+            max_distance: 4000,
+            ..DistanceSensor::default()
+        }))
+    }
+}
+
+/// Counts the DISTANCE_SENSOR samples of `within` and returns them with the last distance.
+async fn samples(
+    telemetry: &mut mavstack::system::Telemetry<DistanceSensor>,
+    within: Duration,
+) -> (usize, Option<u16>) {
+    let mut n = 0;
+    let mut last = None;
+    let _ = tokio::time::timeout(within, async {
+        while let Some(s) = telemetry.recv().await {
+            n += 1;
+            last = Some(s.message.current_distance);
+        }
+    })
+    .await;
+    (n, last)
+}
+
+#[tokio::test]
+async fn a_peripheral_streams_at_the_rate_a_ground_station_sets() {
+    let own = Address::new(1, 158);
+    let node = Node::builder()
+        .identity(1, 158)
+        .heartbeat(
+            &Heartbeat {
+                r#type: MavType::GENERIC,
+                autopilot: MavAutopilot::INVALID,
+                mavlink_version: 3,
+                ..Heartbeat::default()
+            },
+            Duration::from_secs(1),
+        )
+        .link(LinkSpec::parse("udpin:127.0.0.1:0", &none).expect("spec"))
+        .start()
+        .await
+        .expect("peripheral starts");
+    let port = node.local_addrs()[0].expect("bound").port();
+    let mut streams = StreamServer::new(own, Rangefinder { distance_cm: 412 });
+    streams.support(DistanceSensor::ID, None);
+    let served = Served::start(&node.handle(), streams).await;
+
+    let gcs = Node::ground_station(255, 190)
+        .link(LinkSpec::parse(&format!("udpout:127.0.0.1:{port}?version=2"), &none).expect("spec"))
+        .start()
+        .await
+        .expect("ground station starts");
+    let mut p = System::wait(
+        &gcs.handle(),
+        Wanted::System(1, Some(158)),
+        Duration::from_secs(5),
+    )
+    .await
+    .expect("the peripheral is found");
+    let mut range = p.subscribe::<DistanceSensor>().await;
+    assert_eq!(
+        samples(&mut range, Duration::from_millis(300)).await.0,
+        0,
+        "off until asked for"
+    );
+    let ack = p
+        .set_message_interval(DistanceSensor::ID, Some(Duration::from_millis(50)))
+        .await
+        .expect("accepted");
+    assert_eq!(ack.result, MavResult::ACCEPTED);
+    let (n, last) = samples(&mut range, Duration::from_secs(1)).await;
+    assert!((15..=22).contains(&n), "20 Hz for a second: {n} samples");
+    assert_eq!(last, Some(412));
+    // The state the messages are built from, changed from outside.
+    served
+        .with(|s| s.source_mut().distance_cm = 97)
+        .await
+        .expect("served");
+    let (_, last) = samples(&mut range, Duration::from_millis(200)).await;
+    assert_eq!(last, Some(97));
+    // Off again, and a message the peripheral does not produce is refused.
+    p.set_message_interval(DistanceSensor::ID, None)
+        .await
+        .expect("accepted");
+    let _ = samples(&mut range, Duration::from_millis(100)).await;
+    assert_eq!(
+        samples(&mut range, Duration::from_millis(300)).await.0,
+        0,
+        "stopped"
+    );
+    let refused = p
+        .set_message_interval(30, Some(Duration::from_millis(100)))
+        .await;
+    assert!(matches!(
+        refused,
+        Err(SystemError::Command {
+            source: CommandError::Rejected {
+                result: MavResult::DENIED,
+                ..
+            },
+            ..
+        })
+    ));
+    drop(p);
+    gcs.shutdown().await.expect("ground station stops");
+    let back = served.stop().await.expect("the service comes back");
+    assert_eq!(back.scheduler().interval(DistanceSensor::ID), None);
+    node.shutdown().await.expect("peripheral stops");
 }
