@@ -8,6 +8,7 @@
 //!        ▲                                                  │
 //!        └──────────────── frames, RADIO_STATUS ◄───────────┘
 //!   attacker ──udp──► radio side A   (replayed and forged frames)
+//!                                                  vehicle ◄──udp, version=1──► rangefinder
 //! ```
 //!
 //! The ground station finds the vehicle, runs the MAVLink 2 handshake (both sides switch to
@@ -16,14 +17,20 @@
 //! captured signed command and sends a forged one with a timestamp far in the future; the
 //! vehicle rejects both and still accepts the genuine stream. Then, over the signed link, the
 //! configuration services: the whole parameter table, a parameter set and confirmed, a
-//! mission uploaded and read back identical. Every step is printed as a timeline; any step
-//! that does not happen fails the demo (exit 1).
+//! mission uploaded and read back identical. The vehicle also has a legacy peripheral, a
+//! rangefinder that speaks only MAVLink 1, on a link of its own (`version=1`): its traffic
+//! reaches the ground station in signed MAVLink 2 and the ground station's commands reach it
+//! in MAVLink 1, converted by the vehicle's router, each link keeping its own version. Every
+//! step is printed as a timeline; any step that does not happen fails the demo (exit 1).
 
 use core::time::Duration;
 use std::net::UdpSocket;
 
 use clap::Args;
 use mavstack::router::LinkId;
+use mavstack::serve::Served;
+use mavstack::services::Address;
+use mavstack::services::stream::{Due, MessageSource, StreamServer};
 use mavstack::sim_vehicle::SimVehicle;
 use mavstack::system::{System, Wanted};
 use mavstack::{
@@ -37,18 +44,19 @@ use mavstack_core::Message;
 use mavstack_core::signing::{self, SecretKey};
 use mavstack_core::wire::{FrameHeader, MAX_FRAME_LEN, Version, emit_message};
 use mavstack_dialects::common::{
-    AutopilotVersion, CommandLong, Heartbeat, MavCmd, MavFrame, MavMessage, MavMissionType,
-    MavProtocolCapability, MissionItemInt, ProtocolVersion, RadioStatus, SetupSigning,
+    AutopilotVersion, CommandLong, DistanceSensor, Heartbeat, MavAutopilot, MavCmd,
+    MavDistanceSensor, MavFrame, MavMessage, MavMissionType, MavProtocolCapability, MavType,
+    MissionItemInt, ProtocolVersion, RadioStatus, SetupSigning,
 };
 use mavstack_services::param::Name;
 use mavstack_transport::{ConnSpec, clock};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
-use crate::gcs_cmd::{set_param, value_text};
+use crate::gcs_cmd::{command_name, result_name, set_param, value_text};
 use crate::link_cmd::runtime;
 use crate::radio_cmd::{open_radio_side, run_radio};
-use crate::vehicle_cmd::{Log, version_name};
+use crate::vehicle_cmd::{Log, message_name, version_name};
 use crate::{Failure, other};
 use mavstack_sim::Autopilot;
 use mavstack_sim::flight;
@@ -58,6 +66,10 @@ pub(crate) struct DemoArgs {}
 
 /// The demo's signing key (a real deployment generates one per vehicle and keeps it secret).
 const KEY: [u8; 32] = *b"mavstack demo key: not a secret!";
+
+/// The vehicle's legacy peripheral: a rangefinder, system 1 component 158
+/// (MAV_COMP_ID_PERIPHERAL), MAVLink 1 only.
+const PERIPHERAL: (u8, u8) = (1, 158);
 
 /// The timeline: lines from every actor, stamped with the time since the start.
 struct Timeline {
@@ -114,6 +126,8 @@ struct Ground {
     seen_v2_status: bool,
     seen_hb: Option<Version>,
     seen_signed_hb: bool,
+    /// The framing and signing of the rangefinder's HEARTBEATs, as last narrated.
+    seen_peripheral: Option<(Version, bool)>,
 }
 
 impl Ground {
@@ -169,6 +183,24 @@ impl Ground {
                         ));
                     }
                 }
+                if f.msg_id() == Heartbeat::ID && (f.sysid(), f.compid()) == PERIPHERAL {
+                    let now = (
+                        f.version(),
+                        matches!(rf.auth, Authentication::Verified { .. }),
+                    );
+                    if self.seen_peripheral.replace(now) != Some(now) {
+                        timeline.say(format!(
+                            "ground station ← HEARTBEAT from the rangefinder 1/158 ({}{}){}",
+                            version_name(now.0),
+                            if now.1 { ", signed" } else { "" },
+                            if now.0 == Version::V2 {
+                                ": it speaks MAVLink 1, the vehicle converted it"
+                            } else {
+                                ""
+                            }
+                        ));
+                    }
+                }
                 if f.msg_id() == Heartbeat::ID && (f.sysid(), f.compid()) == (1, 1) {
                     self.link.get_or_insert(incoming.link_id);
                     let signed = matches!(rf.auth, Authentication::Verified { .. });
@@ -194,7 +226,7 @@ impl Ground {
                 LinkEvent::Rejected(r) => {
                     timeline.say(format!(
                         "ground station ✗ rejected {}: {}",
-                        crate::vehicle_cmd::message_name(r.msg_id),
+                        message_name(r.msg_id),
                         r.reason
                     ));
                 }
@@ -279,8 +311,15 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
     };
     let radio_link =
         LinkSpec::parse("udpin:127.0.0.1:0?secure=true&name=radio", &|_| None).map_err(other)?;
+    // Its legacy rangefinder's link: MAVLink 1 only; trusted (wired to the vehicle), so the
+    // rangefinder's frames may be signed onto the signed radio link.
+    let peripheral_link = LinkSpec::parse(
+        "udpin:127.0.0.1:0?version=1&trusted=true&name=peripheral",
+        &|_| None,
+    )
+    .map_err(other)?;
     let vehicle = SimVehicle::start_logged(
-        Node::builder().link(radio_link),
+        Node::builder().link(radio_link).link(peripheral_link),
         SimVehicle::config(
             Autopilot::Ardupilot,
             mavstack_sim::params::defaults(Autopilot::Ardupilot),
@@ -289,13 +328,17 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
     )
     .await
     .map_err(other)?;
-    let vehicle_addr = vehicle
-        .node()
-        .local_addrs()
-        .first()
-        .copied()
-        .flatten()
-        .ok_or_else(|| other("the vehicle's socket has no address"))?;
+    let bound = |i: usize| {
+        vehicle
+            .node()
+            .local_addrs()
+            .get(i)
+            .copied()
+            .flatten()
+            .ok_or_else(|| other("the vehicle's socket has no address"))
+    };
+    let vehicle_addr = bound(0)?;
+    let peripheral = Peripheral::start(timeline, bound(1)?).await?;
     let radio_a = open_radio_side(&any_port("udpin")?).await?;
     let radio_a_addr = radio_a
         .local_addr()
@@ -304,6 +347,10 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
         open_radio_side(&format!("udpout:{vehicle_addr}").parse().map_err(other)?).await?;
     timeline.say(format!(
         "setup: vehicle 1/1 on udp {vehicle_addr} (starts in MAVLink 1), radio {radio_a_addr} ⇄ vehicle, ground station 255/190 → radio"
+    ));
+    timeline.say(format!(
+        "setup: rangefinder 1/158 (MAVLink 1 only) → the vehicle's link {} (version=1)",
+        bound(1)?
     ));
     // A copy of every signed COMMAND_LONG the vehicle accepts: the attacker replays one.
     let (tap_tx, mut tap_rx) = mpsc::unbounded_channel();
@@ -341,17 +388,54 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
         seen_v2_status: false,
         seen_hb: None,
         seen_signed_hb: false,
+        seen_peripheral: None,
     };
     let mut outcome = script(timeline, &mut ground, &mut tap_rx, radio_a_addr).await;
     if outcome.is_ok() {
         outcome = services(timeline, &ground.handle).await;
     }
+    if outcome.is_ok() {
+        outcome = peripheral_stream(timeline, &mut ground).await;
+    }
     let _ = ground.node.shutdown().await;
     let _ = stop_tx.send(true);
     let report = vehicle.shutdown().await.map_err(other)?;
+    let peripheral_report = peripheral.shutdown().await?;
     tap.abort();
     radio.await.map_err(other)??;
     outcome?;
+    for link in &report.links {
+        timeline.say(link_summary(link));
+    }
+    let converted_for = |name: &str, kind: &str| -> u64 {
+        report
+            .links
+            .iter()
+            .filter(|l| l.name == name)
+            .flat_map(|l| l.conversions)
+            .filter(|(k, _)| *k == kind)
+            .map(|(_, n)| n)
+            .sum()
+    };
+    if converted_for("peripheral", "to_mavlink1") == 0 || converted_for("radio", "to_mavlink2") == 0
+    {
+        return Err(other(
+            "the vehicle did not convert between its MAVLink 1 and MAVLink 2 links",
+        ));
+    }
+    let peripheral_rx: u64 = peripheral_report.links.iter().map(|l| l.rx_frames).sum();
+    let peripheral_dropped: u64 = peripheral_report
+        .links
+        .iter()
+        .flat_map(|l| &l.dropped)
+        .map(|(_, n)| n)
+        .sum();
+    timeline.say(format!(
+        "rangefinder's link: {peripheral_rx} frames received, every one MAVLink 1 ({peripheral_dropped} refused)"
+    ));
+    if peripheral_dropped != 0 {
+        return Err(other("the rangefinder received frames it cannot read"));
+    }
     let dropped = |reason: &str| -> u64 {
         report
             .links
@@ -363,14 +447,186 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
     };
     let replayed = dropped("replay");
     let forged = dropped("bad_signature");
-    let accepted: u64 = report.links.iter().map(|l| l.rx_frames).sum();
     timeline.say(format!(
-        "vehicle's link: {accepted} frames accepted, {replayed} replay and {forged} forgery rejected"
+        "vehicle's radio link: {replayed} replay and {forged} forgery rejected"
     ));
     if replayed == 0 || forged == 0 {
         return Err(other(
             "the vehicle did not reject the replayed and forged frames",
         ));
+    }
+    Ok(())
+}
+
+/// One line on a vehicle link: what it carries, what went through, what was converted for it.
+fn link_summary(link: &mavstack::LinkReport) -> String {
+    let carries = match link.version {
+        "1" => "MAVLink 1",
+        "2" => "MAVLink 2",
+        "signed" => "signed MAVLink 2",
+        _ => "MAVLink 1 until a MAVLink 2 frame",
+    };
+    let conversions: Vec<String> = link
+        .conversions
+        .iter()
+        .filter(|(_, n)| *n > 0)
+        .map(|(kind, n)| {
+            let kind = match *kind {
+                "to_mavlink1" => "to MAVLink 1",
+                "to_mavlink2" => "to MAVLink 2",
+                "signature_removed" => "signature removed",
+                _ => "signed",
+            };
+            format!("{n} {kind}")
+        })
+        .collect();
+    format!(
+        "vehicle's {} link ({carries}): {} frames in, {} out; converted on the way out: {}",
+        link.name,
+        link.rx_frames,
+        link.tx_frames,
+        if conversions.is_empty() {
+            "none".to_owned()
+        } else {
+            conversions.join(", ")
+        }
+    )
+}
+
+/// The rangefinder's telemetry: a distance that drifts slowly.
+struct Rangefinder {
+    distance_cm: u16,
+}
+
+impl MessageSource for Rangefinder {
+    fn message(&mut self, now: mavstack_core::time::Instant, _due: &Due) -> Option<MavMessage> {
+        self.distance_cm = 380 + ((now.as_micros() / 100_000) % 40) as u16;
+        Some(MavMessage::DistanceSensor(DistanceSensor {
+            time_boot_ms: (now.as_micros() / 1000) as u32,
+            min_distance: 20,
+            max_distance: 4000,
+            current_distance: self.distance_cm,
+            r#type: MavDistanceSensor::LASER,
+            ..DistanceSensor::default()
+        }))
+    }
+}
+
+/// The vehicle's legacy peripheral: a node of its own on the vehicle's `version=1` link,
+/// its DISTANCE_SENSOR stream served at the rate a ground station asks for.
+struct Peripheral {
+    node: Node,
+    served: Served<StreamServer<Rangefinder>>,
+    narrator: tokio::task::JoinHandle<()>,
+}
+
+impl Peripheral {
+    async fn start(timeline: &Timeline, vehicle: core::net::SocketAddr) -> Result<Self, Failure> {
+        let node = Node::builder()
+            .identity(PERIPHERAL.0, PERIPHERAL.1)
+            .heartbeat(
+                &Heartbeat {
+                    r#type: MavType::GENERIC,
+                    autopilot: MavAutopilot::INVALID,
+                    mavlink_version: 3,
+                    ..Heartbeat::default()
+                },
+                Duration::from_secs(1),
+            )
+            .link(
+                LinkSpec::parse(&format!("udpout:{vehicle}?version=1"), &|_| None)
+                    .map_err(other)?,
+            )
+            .start()
+            .await
+            .map_err(other)?;
+        let own = Address::new(PERIPHERAL.0, PERIPHERAL.1);
+        let mut streams = StreamServer::new(own, Rangefinder { distance_cm: 400 });
+        streams.support(DistanceSensor::ID, None);
+        let served = Served::start(&node.handle(), streams).await;
+        // What reaches it from the ground station, in the framing it arrives in.
+        let mut frames = node.subscribe().await;
+        let log = timeline.tx.clone();
+        let narrator = tokio::spawn(async move {
+            while let Some(incoming) = frames.recv().await {
+                let f = &incoming.frame.frame;
+                if f.msg_id() == CommandLong::ID && f.sysid() == 255 {
+                    let c = CommandLong::decode(f.payload());
+                    let _ = log.send(format!(
+                        "rangefinder ← COMMAND_LONG {} from 255/190 in {}{}",
+                        command_name(c.command),
+                        version_name(f.version()),
+                        if f.version() == Version::V1 && !f.is_signed() {
+                            ": the vehicle converted it, signature removed"
+                        } else {
+                            ""
+                        }
+                    ));
+                }
+            }
+        });
+        Ok(Self {
+            node,
+            served,
+            narrator,
+        })
+    }
+
+    async fn shutdown(self) -> Result<mavstack::NodeReport, Failure> {
+        self.narrator.abort();
+        let _ = self.served.stop().await;
+        self.node.shutdown().await.map_err(other)
+    }
+}
+
+/// Step 9: the rangefinder's telemetry, asked for in signed MAVLink 2, sent in MAVLink 1, seen
+/// signed: the vehicle converts both ways.
+async fn peripheral_stream(timeline: &Timeline, ground: &mut Ground) -> Result<(), Failure> {
+    let mut rangefinder = System::wait(
+        &ground.handle,
+        Wanted::System(PERIPHERAL.0, Some(PERIPHERAL.1)),
+        Duration::from_secs(3),
+    )
+    .await
+    .map_err(other)?;
+    timeline.say(
+        "ground station → SET_MESSAGE_INTERVAL(DISTANCE_SENSOR, 100 ms) to the rangefinder 1/158, signed MAVLink 2",
+    );
+    let ack = rangefinder
+        .set_message_interval(DistanceSensor::ID, Some(Duration::from_millis(100)))
+        .await
+        .map_err(|e| other(format!("demo step failed: the rangefinder's stream: {e}")))?;
+    timeline.say(format!(
+        "ground station ← COMMAND_ACK {} from the rangefinder",
+        result_name(ack.result)
+    ));
+    let mut signed = 0;
+    let mut other_framing = 0;
+    let mut last_cm = None;
+    let _ = ground
+        .wait(timeline, Duration::from_secs(1), |seen| {
+            if let Some(rf) = frame_of(seen, DistanceSensor::ID) {
+                if rf.frame.version() == Version::V2
+                    && matches!(rf.auth, Authentication::Verified { .. })
+                {
+                    signed += 1;
+                } else {
+                    other_framing += 1;
+                }
+                last_cm = Some(DistanceSensor::decode(rf.frame.payload()).current_distance);
+            }
+            false
+        })
+        .await?;
+    let last_cm = last_cm
+        .ok_or_else(|| other("demo step failed: no DISTANCE_SENSOR from the rangefinder"))?;
+    timeline.say(format!(
+        "ground station ← {signed} DISTANCE_SENSOR in 1 s from the rangefinder, every one signed MAVLink 2 (last {last_cm} cm); it sent them in MAVLink 1"
+    ));
+    if signed < 5 || other_framing > 0 {
+        return Err(other(format!(
+            "demo step failed: {signed} signed DISTANCE_SENSOR and {other_framing} in another framing"
+        )));
     }
     Ok(())
 }
@@ -490,7 +746,8 @@ async fn script(
     // 1. Discovery, in MAVLink 1.
     let hb = ground
         .wait(timeline, Duration::from_secs(4), |e| {
-            frame_of(e, Heartbeat::ID).is_some_and(|rf| rf.frame.sysid() == 1)
+            frame_of(e, Heartbeat::ID)
+                .is_some_and(|rf| (rf.frame.sysid(), rf.frame.compid()) == (1, 1))
         })
         .await?;
     need(hb, "no HEARTBEAT from the vehicle")?;

@@ -549,13 +549,13 @@ fn command_id(name: &str) -> Result<MavCmd, Failure> {
         })
 }
 
-fn result_name(r: MavResult) -> &'static str {
+pub(crate) fn result_name(r: MavResult) -> &'static str {
     r.name()
         .and_then(|n| n.strip_prefix("MAV_RESULT_"))
         .unwrap_or("UNKNOWN")
 }
 
-fn command_name(c: MavCmd) -> String {
+pub(crate) fn command_name(c: MavCmd) -> String {
     c.name().map_or_else(
         || c.0.to_string(),
         |n| n.strip_prefix("MAV_CMD_").unwrap_or(n).to_owned(),

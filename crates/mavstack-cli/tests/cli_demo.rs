@@ -1,6 +1,7 @@
 //! `mavstack demo`, the README's first command: it must run the whole story on loopback and
 //! exit 0 well under 15 seconds, and its timeline must show each step, the parameter and
-//! mission exchange included.
+//! mission exchange included, and the MAVLink 1-only peripheral on a link of its own with
+//! frames converted both ways.
 
 use core::time::Duration;
 use std::process::Command;
@@ -40,6 +41,14 @@ fn demo_runs_the_handshake_signing_and_attacks_in_under_15_seconds() {
         "vehicle: mission plan stored: 6 items",
         "mission read back: 6 items, identical",
         "1 replay and 1 forgery rejected",
+        "HEARTBEAT from the rangefinder 1/158 (MAVLink 1)",
+        "HEARTBEAT from the rangefinder 1/158 (MAVLink 2, signed): it speaks MAVLink 1",
+        "rangefinder ← COMMAND_LONG SET_MESSAGE_INTERVAL from 255/190 in MAVLink 1",
+        "COMMAND_ACK ACCEPTED from the rangefinder",
+        "every one signed MAVLink 2",
+        "vehicle's radio link (signed MAVLink 2)",
+        "vehicle's peripheral link (MAVLink 1)",
+        "every one MAVLink 1 (0 refused)",
     ] {
         assert!(text.contains(step), "the timeline lacks {step:?}:\n{text}");
     }
