@@ -161,7 +161,7 @@ pub use handshake::{
     Handshake, HandshakeConfig, HandshakeMethod, HandshakeOutcome, HandshakeRequest,
     HandshakeResult, Target,
 };
-pub use radio::{Radio, RadioConfig, RadioEvent, RadioTransmit, Side};
+pub use radio::{Radio, RadioConfig, RadioEvent, RadioStats, RadioTransmit, Side};
 pub use seq::SourceStats;
 pub use signing::{CapacityError, SigningConfig, SigningStream, WallClock};
 pub use stats::{LinkStats, RejectionCounts};

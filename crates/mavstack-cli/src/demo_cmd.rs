@@ -27,6 +27,7 @@ use core::time::Duration;
 use std::net::UdpSocket;
 
 use clap::Args;
+use mavstack::radio::{RadioBridge, RadioNotice};
 use mavstack::router::LinkId;
 use mavstack::serve::Served;
 use mavstack::services::Address;
@@ -37,7 +38,7 @@ use mavstack::{
     EventSubscription, Incoming, LinkEvent, LinkSpec, Node, NodeEvent, NodeHandle, Subscription,
 };
 use mavstack_channel::{
-    Authentication, CommandEncoding, HandshakeMethod, HandshakeResult, ReceivedFrame,
+    Authentication, CommandEncoding, HandshakeMethod, HandshakeResult, RadioConfig, ReceivedFrame,
     SigningConfig, Target,
 };
 use mavstack_core::Message;
@@ -50,13 +51,12 @@ use mavstack_dialects::common::{
 };
 use mavstack_services::param::Name;
 use mavstack_transport::{ConnSpec, clock};
-use tokio::sync::{mpsc, watch};
+use tokio::sync::mpsc;
 use tokio::time::Instant;
 
 use crate::gcs_cmd::{command_name, result_name, set_param, value_text};
 use crate::link_cmd::runtime;
-use crate::radio_cmd::{open_radio_side, run_radio};
-use crate::vehicle_cmd::{Log, message_name, version_name};
+use crate::vehicle_cmd::{Log, message_name, say, version_name};
 use crate::{Failure, other};
 use mavstack_sim::Autopilot;
 use mavstack_sim::flight;
@@ -300,10 +300,6 @@ pub(crate) fn demo(_args: &DemoArgs) -> Result<(), Failure> {
 }
 
 async fn run(timeline: &Timeline) -> Result<(), Failure> {
-    let (stop_tx, stop_rx) = watch::channel(false);
-    let stopped = |mut rx: watch::Receiver<bool>| async move {
-        let _ = rx.wait_for(|&s| s).await;
-    };
     // The vehicle: MAVLink 1 until a MAVLink 2 frame, MAVLink 2 capable, a secure link
     // (think USB) so it accepts SETUP_SIGNING.
     let any_port = |scheme: &str| -> Result<ConnSpec, Failure> {
@@ -339,12 +335,19 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
     };
     let vehicle_addr = bound(0)?;
     let peripheral = Peripheral::start(timeline, bound(1)?).await?;
-    let radio_a = open_radio_side(&any_port("udpin")?).await?;
-    let radio_a_addr = radio_a
-        .local_addr()
-        .ok_or_else(|| other("the radio's socket has no address"))?;
-    let radio_b =
-        open_radio_side(&format!("udpout:{vehicle_addr}").parse().map_err(other)?).await?;
+    let mut radio_config = RadioConfig::default();
+    radio_config.interval = Duration::from_millis(700);
+    let radio_log = timeline.log();
+    let radio = RadioBridge::start(
+        &any_port("udpin")?,
+        &format!("udpout:{vehicle_addr}").parse().map_err(other)?,
+        radio_config,
+        move |n: &RadioNotice| say(&radio_log, || n.to_string()),
+    )
+    .await
+    .map_err(other)?;
+    let radio_a_addr =
+        radio.local_addrs()[0].ok_or_else(|| other("the radio's socket has no address"))?;
     timeline.say(format!(
         "setup: vehicle 1/1 on udp {vehicle_addr} (starts in MAVLink 1), radio {radio_a_addr} ⇄ vehicle, ground station 255/190 → radio"
     ));
@@ -363,13 +366,6 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
             }
         }
     });
-    let radio = tokio::spawn(run_radio(
-        radio_a,
-        radio_b,
-        Duration::from_millis(700),
-        timeline.log(),
-        stopped(stop_rx.clone()),
-    ));
     let gcs = Node::ground_station(255, 190)
         .link(LinkSpec::parse(&format!("udpout:{radio_a_addr}"), &|_| None).map_err(other)?)
         .start()
@@ -398,11 +394,10 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
         outcome = peripheral_stream(timeline, &mut ground).await;
     }
     let _ = ground.node.shutdown().await;
-    let _ = stop_tx.send(true);
+    radio.stop().await.map_err(other)?;
     let report = vehicle.shutdown().await.map_err(other)?;
     let peripheral_report = peripheral.shutdown().await?;
     tap.abort();
-    radio.await.map_err(other)??;
     outcome?;
     for link in &report.links {
         timeline.say(link_summary(link));

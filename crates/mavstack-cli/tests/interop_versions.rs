@@ -14,7 +14,10 @@
 //!   SIGINT/SIGTERM; and one vehicle on three links (`version=1`, `auto`, `key=`), each with
 //!   its own version, handshake answer, capability bit and signing, parameters shared;
 //! - `mavstack probe` against a pymavlink vehicle that answers the handshake, NACKs it, stays
-//!   silent, or signs everything: the JSON report and the frames the probe sent.
+//!   silent, or signs everything: the JSON report and the frames the probe sent;
+//! - `mavstack radio` between a pymavlink ground station and a pymavlink vehicle: RADIO_STATUS
+//!   in MAVLink 1 until the first MAVLink 2 frame passes, in MAVLink 2 after it; MAVLink 1, 2
+//!   and signed frames forwarded byte for byte both ways; exit 0 on SIGINT.
 //!
 //! Framing, signatures and field values are pymavlink's decoding. Never skipped: without
 //! pymavlink 2.4.50 they fail.
@@ -104,4 +107,9 @@ fn probe_sees_a_signing_vehicle() {
 #[test]
 fn vehicle_with_three_links_keeps_each_links_version_and_signing_and_shares_its_parameters() {
     scenario("vehicle_multilink");
+}
+
+#[test]
+fn radio_switches_its_radio_status_after_the_first_mavlink2_frame_and_forwards_unchanged() {
+    scenario("radio_semi_transparent");
 }

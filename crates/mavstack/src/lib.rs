@@ -11,7 +11,8 @@
 //!   store, command handlers, telemetry streamed at the rates ground stations ask for — for
 //!   vehicles, companion computers and peripherals;
 //! - [`sim_vehicle::SimVehicle`] is a simulated ArduPilot or PX4 vehicle, in-process, for a
-//!   ground station's tests (feature `sim`).
+//!   ground station's tests (feature `sim`), and [`radio::RadioBridge`] a semi-transparent
+//!   radio to put between them.
 //!
 //! ## A ground station
 //!
@@ -108,6 +109,7 @@
 
 pub mod link_spec;
 pub mod node;
+pub mod radio;
 pub mod router_conf;
 #[cfg(feature = "services")]
 pub mod serve;
