@@ -56,7 +56,7 @@ use tokio::time::Instant;
 
 use crate::gcs_cmd::{command_name, result_name, set_param, value_text};
 use crate::link_cmd::runtime;
-use crate::vehicle_cmd::{Log, message_name, say, version_name};
+use crate::vehicle_cmd::{Log, say, version_name};
 use crate::{Failure, other};
 use mavstack_sim::Autopilot;
 use mavstack_sim::flight;
@@ -226,7 +226,7 @@ impl Ground {
                 LinkEvent::Rejected(r) => {
                     timeline.say(format!(
                         "ground station ✗ rejected {}: {}",
-                        message_name(r.msg_id),
+                        mavstack::message_name(r.msg_id),
                         r.reason
                     ));
                 }

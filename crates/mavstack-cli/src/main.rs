@@ -4,6 +4,7 @@
 //! failure and 2 on bad usage or bad input (shared/DESIGN.md, "Command line").
 
 mod codec_cmd;
+mod conform_cmd;
 mod demo_cmd;
 mod dialect_cmd;
 mod fast_count;
@@ -57,6 +58,9 @@ enum Command {
     Probe(probe_cmd::ProbeArgs),
     /// A semi-transparent radio between a ground station (A) and a vehicle (B).
     Radio(radio_cmd::RadioArgs),
+    /// Grade a remote vehicle (or, with `--role gcs`, a ground station) against the rules of
+    /// the MAVLink versions documents: a table, or one JSON object with `--json`.
+    Conform(conform_cmd::ConformArgs),
     /// Parameters of a remote system: list (and save), get, set.
     Param {
         #[command(subcommand)]
@@ -118,6 +122,7 @@ fn main() -> ExitCode {
         Command::Vehicle(args) => vehicle_cmd::vehicle(&args),
         Command::Probe(args) => probe_cmd::probe(&args),
         Command::Radio(args) => radio_cmd::radio(&args),
+        Command::Conform(args) => conform_cmd::conform(&args),
         Command::Param { action } => gcs_cmd::param(action),
         Command::Mission { action } => gcs_cmd::mission(action),
         Command::Cmd(args) => gcs_cmd::command(&args),

@@ -11,21 +11,14 @@ use mavstack::router::{LinkRole, VersionMode};
 use mavstack::sim_vehicle::SimVehicle;
 use mavstack::{LinkSpec, Node, NodeBuilder};
 use mavstack_channel::SigningConfig;
-use mavstack_core::MessageSet;
 use mavstack_core::signing::SecretKey;
 use mavstack_core::wire::Version;
-use mavstack_dialects::common::MavMessage;
 use mavstack_services::Address;
 use tokio::sync::mpsc;
 
 use crate::link_cmd::{interrupted, runtime};
 use crate::{Failure, other};
 use mavstack_sim::{Autopilot, SimConfig, params};
-
-/// A message's name in the common dialect, or its number when the dialect has none.
-pub(crate) fn message_name(id: u32) -> String {
-    MavMessage::info(id).map_or_else(|| format!("message {id}"), |m| m.name.to_owned())
-}
 
 /// `--autopilot NAME` (the names [`Autopilot`]'s `FromStr` takes).
 fn autopilot_arg(name: &str) -> Result<Autopilot, String> {

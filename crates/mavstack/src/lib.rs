@@ -107,6 +107,8 @@
 //! MSRV: Rust 1.95.
 #![forbid(unsafe_code)]
 
+#[cfg(feature = "sim")]
+pub mod conform;
 pub mod link_spec;
 pub mod node;
 pub mod radio;
@@ -121,8 +123,23 @@ pub mod system;
 pub use link_spec::{LinkSpec, LinkSpecError, redacted};
 pub use node::{
     EventSubscription, Incoming, InputModeration, LinkEvent, LinkReport, Node, NodeBuilder,
-    NodeError, NodeEvent, NodeHandle, NodeReport, RequestError, Subscription,
+    NodeError, NodeEvent, NodeHandle, NodeReport, RequestError, Subscription, TapSubscription,
+    Tapped,
 };
+
+/// A message's name in the common dialect (`"HEARTBEAT"`), or `"message N"` for an id it
+/// does not define: for logs and reports.
+///
+/// ```
+/// assert_eq!(mavstack::message_name(0), "HEARTBEAT");
+/// assert_eq!(mavstack::message_name(60_000), "message 60000");
+/// ```
+#[must_use]
+pub fn message_name(id: u32) -> String {
+    use mavstack_core::MessageSet as _;
+    mavstack_dialects::common::MavMessage::info(id)
+        .map_or_else(|| format!("message {id}"), |m| m.name.to_owned())
+}
 
 pub use mavstack_channel as channel;
 pub use mavstack_core as core;

@@ -218,6 +218,22 @@ pub type EventSubscription = mpsc::Receiver<NodeEvent>;
 /// How many frames a subscriber may fall behind.
 const SUBSCRIPTION_DEPTH: usize = 1024;
 
+/// Bytes as they arrived on a link, before any parsing (from [`NodeHandle::tap`]): a whole
+/// datagram, or what one read of a stream returned.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Tapped {
+    /// The router link of the peer they came from.
+    pub link_id: LinkId,
+    /// When they were read.
+    pub at: Instant,
+    /// The bytes.
+    pub bytes: Vec<u8>,
+}
+
+/// What a [`NodeHandle::tap`] receives: a bounded queue like [`Subscription`] (a tap that
+/// falls behind misses input rather than slowing the node).
+pub type TapSubscription = mpsc::Receiver<Tapped>;
+
 enum Command {
     Report(oneshot::Sender<NodeReport>),
     Send {
@@ -228,6 +244,12 @@ enum Command {
     },
     Subscribe(mpsc::Sender<Incoming>, oneshot::Sender<()>),
     Events(mpsc::Sender<NodeEvent>, oneshot::Sender<()>),
+    Tap(mpsc::Sender<Tapped>, oneshot::Sender<()>),
+    SendBytes {
+        link: LinkId,
+        bytes: Vec<u8>,
+        done: oneshot::Sender<bool>,
+    },
     Handshake {
         link: LinkId,
         target: Target,
@@ -434,6 +456,7 @@ impl NodeBuilder {
             subscriber_drops: 0,
             watchers: Vec::new(),
             pending: Vec::new(),
+            taps: Vec::new(),
             moderation: Moderation::new(self.moderation, clock::now()),
             heartbeat: self.heartbeat.map(|(payload, period)| Heartbeat {
                 payload,
@@ -659,6 +682,35 @@ impl NodeHandle {
         rx
     }
 
+    /// A copy of every input from now on, as it arrived on its link, before any parsing:
+    /// for tools that judge the wire itself (checksums, framing, sequence numbers), such as
+    /// `mavstack conform`. Dropping the receiver ends the tap.
+    pub async fn tap(&self) -> TapSubscription {
+        let (tx, rx) = mpsc::channel(SUBSCRIPTION_DEPTH);
+        let (done, registered) = oneshot::channel();
+        if self.commands.send(Command::Tap(tx, done)).await.is_ok() {
+            let _ = registered.await;
+        }
+        rx
+    }
+
+    /// Writes `bytes` on `link` exactly as given: no framing by the link's version, no
+    /// signing, no sequence number. For test tools that craft frames (a MAVLink 2 frame on a
+    /// link still in MAVLink 1, a deliberately bad one); everything else goes through
+    /// [`send_on`](Self::send_on). Returns whether the link exists.
+    pub async fn send_bytes(&self, link: LinkId, bytes: &[u8]) -> bool {
+        let (done, rx) = oneshot::channel();
+        let command = Command::SendBytes {
+            link,
+            bytes: bytes.to_vec(),
+            done,
+        };
+        if self.commands.send(command).await.is_err() {
+            return false;
+        }
+        rx.await.unwrap_or(false)
+    }
+
     /// Runs the MAVLink 2 handshake with `target` on `link` (a
     /// [`LinkRole::GroundStation`] link) and waits for its outcome: PROTOCOL_VERSION (the
     /// link is MAVLink 2 now), a NACK, or no answer after the retries.
@@ -762,6 +814,7 @@ struct Driver {
     watchers: Vec<mpsc::Sender<NodeEvent>>,
     /// Peer events of the last dispatch, for the watchers.
     pending: Vec<NodeEvent>,
+    taps: Vec<mpsc::Sender<Tapped>>,
     heartbeat: Option<Heartbeat>,
     moderation: Moderation,
 }
@@ -855,6 +908,8 @@ struct Feed<'a> {
     pending: Option<&'a mut Vec<NodeEvent>>,
     /// Inputs (datagrams, stream reads) fed, for [`Moderation`].
     inputs: &'a mut u64,
+    /// Who gets a copy of every input.
+    taps: &'a mut Vec<mpsc::Sender<Tapped>>,
 }
 
 impl Input for Feed<'_> {
@@ -902,6 +957,16 @@ impl Input for Feed<'_> {
     fn handle_input(&mut self, now: Instant, peer: PeerId, data: &[u8]) {
         *self.inputs += 1;
         if let Some(&(id, framing, _)) = self.peers.get(&peer) {
+            if !self.taps.is_empty() {
+                self.taps.retain(|t| !t.is_closed());
+                for t in self.taps.iter() {
+                    let _ = t.try_send(Tapped {
+                        link_id: id,
+                        at: now,
+                        bytes: data.to_vec(),
+                    });
+                }
+            }
             match framing {
                 Framing::Datagram => self.router.handle_datagram(now, id, data),
                 Framing::Stream => self.router.handle_input(now, id, data),
@@ -923,6 +988,7 @@ impl Driver {
                 owners: &mut self.owners,
                 pending: (!self.watchers.is_empty()).then_some(&mut self.pending),
                 inputs: &mut self.moderation.inputs,
+                taps: &mut self.taps,
             },
         )
     }
@@ -1038,6 +1104,22 @@ impl Driver {
                 Some(Some(Command::Events(tx, done))) => {
                     self.watchers.push(tx);
                     let _ = done.send(());
+                }
+                Some(Some(Command::Tap(tx, done))) => {
+                    self.taps.push(tx);
+                    let _ = done.send(());
+                }
+                Some(Some(Command::SendBytes { link, bytes, done })) => {
+                    let sent = match self.owners.get(link.index()) {
+                        Some(Some((slot, peer))) => {
+                            let io = &mut self.slots[*slot].io;
+                            io.send(Dest::Peer(*peer), &bytes);
+                            io.flush();
+                            true
+                        }
+                        _ => false,
+                    };
+                    let _ = done.send(sent);
                 }
                 Some(Some(Command::Handshake {
                     link,

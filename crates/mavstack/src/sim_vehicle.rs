@@ -18,8 +18,8 @@
 //! ```
 
 use mavstack_channel::SigningSetup;
+use mavstack_core::Message as _;
 use mavstack_core::time::Instant;
-use mavstack_core::{Message as _, MessageSet as _};
 use mavstack_dialects::common::{AutopilotVersion, CommandLong, MavCmd, MavMessage};
 use mavstack_router::LinkRole;
 use mavstack_services::param::{Name, Value};
@@ -200,11 +200,6 @@ fn say(log: &Option<LogLines>, line: impl FnOnce() -> String) {
     }
 }
 
-/// A message's name in the common dialect, or its number.
-fn message_name(id: u32) -> String {
-    MavMessage::info(id).map_or_else(|| format!("message {id}"), |m| m.name.to_owned())
-}
-
 /// What the vehicle does about its links' events: greets a new peer, says the rest.
 async fn link_events(
     node: NodeHandle,
@@ -234,7 +229,7 @@ async fn link_events(
             LinkEvent::Rejected(r) => say(&log, || {
                 format!(
                     "vehicle ✗ rejected {}: {} [{link}]",
-                    message_name(r.msg_id),
+                    crate::message_name(r.msg_id),
                     r.reason
                 )
             }),

@@ -1,0 +1,1128 @@
+//! The vehicle role: conform plays a ground station and grades the vehicle it finds.
+
+use core::time::Duration;
+use std::collections::BTreeMap;
+
+use mavstack_core::Message;
+use mavstack_core::signing::{self, SecretKey};
+use mavstack_core::wire::{FrameHeader, MAX_FRAME_LEN, Version, emit_message};
+use mavstack_dialects::common::{
+    AutopilotVersion, CommandAck, CommandInt, CommandLong, Heartbeat, MavAutopilot, MavCmd,
+    MavFrame, MavMessage, MavModeFlag, MavProtocolCapability, MavResult, MavState, MavType,
+    ProtocolVersion, RadioStatus,
+};
+use mavstack_transport::clock;
+
+use super::wire::{CrcLookup, Seen, Wire, protocol_version};
+use super::{Report, Role, Rule, Verdict, secs, version_name};
+use crate::router::LinkId;
+use crate::{NodeHandle, TapSubscription, message_name};
+
+/// Settings of [`grade_vehicle`].
+#[derive(Clone, Debug)]
+pub struct VehicleOptions {
+    /// How long to wait for the first HEARTBEAT (default 10 s).
+    pub timeout: Duration,
+    /// Sign every frame with this key, and require every frame of the vehicle to verify
+    /// with it from the first (for systems that accept only signed frames).
+    pub key: Option<SecretKey>,
+    /// The signing link id (default 0).
+    pub link_id: u8,
+    /// The dialect whose CRC_EXTRA the checksums are checked with (default `common`).
+    pub crc_extra: CrcLookup,
+    /// The ground station's own (sysid, compid) (default 255/190).
+    pub own: (u8, u8),
+}
+
+impl Default for VehicleOptions {
+    fn default() -> Self {
+        Self {
+            timeout: Duration::from_secs(10),
+            key: None,
+            link_id: 0,
+            crc_extra: mavstack_transport::frame::crc_extra_of::<MavMessage>,
+            own: (255, 190),
+        }
+    }
+}
+
+/// How long the start version is watched.
+const WATCH_START: f64 = 2.0;
+/// How long the switch is waited for after our MAVLink 2 frame.
+const WATCH_SWITCH: f64 = 2.0;
+/// How long one handshake request waits for its answer before it is sent again, once.
+const WAIT_ANSWER: f64 = 1.2;
+/// How long AUTOPILOT_VERSION is waited for.
+const WAIT_AUTOPILOT_VERSION: f64 = 1.5;
+/// RADIO_STATUS frames within this of our first MAVLink 2 frame may have been on their way.
+const RADIO_GRACE: f64 = 0.3;
+
+/// One handshake request sent, with the window its answers are looked for in.
+#[derive(Clone, Copy, Debug)]
+struct Request {
+    what: &'static str,
+    command: MavCmd,
+    sent: f64,
+    attempts: u8,
+}
+
+/// The ground station's side of the link: crafts and sends frames, reads the tap.
+struct Session<'a> {
+    node: &'a NodeHandle,
+    tap: TapSubscription,
+    wire: Wire,
+    options: &'a VehicleOptions,
+    links: Vec<LinkId>,
+    next_link_scan: f64,
+    seq: u8,
+    timestamp: u64,
+    /// Our HEARTBEAT's framing.
+    heartbeat_version: Version,
+    next_heartbeat: f64,
+    /// When our first MAVLink 2 frame went out.
+    first_v2_sent: Option<f64>,
+}
+
+impl Session<'_> {
+    fn now(&self) -> f64 {
+        self.wire.secs(clock::now())
+    }
+
+    /// Frames `message` in `version` (signed MAVLink 2 with a key) and writes it on every
+    /// link to the vehicle. Returns when it went out.
+    async fn send<M: Message>(&mut self, version: Version, message: &M) -> f64 {
+        let version = if self.options.key.is_some() {
+            Version::V2
+        } else {
+            version
+        };
+        let header = FrameHeader {
+            version,
+            seq: self.seq,
+            sysid: self.options.own.0,
+            compid: self.options.own.1,
+            signed: self.options.key.is_some(),
+        };
+        self.seq = self.seq.wrapping_add(1);
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        let Ok(mut len) = emit_message(&header, message, &mut buf) else {
+            return self.now();
+        };
+        if let Some(key) = &self.options.key {
+            let now = signing::timestamp_from_unix_micros(clock::now().as_micros());
+            self.timestamp = now.max(self.timestamp + 1);
+            match signing::append_signature(
+                &mut buf,
+                len,
+                self.options.link_id,
+                self.timestamp,
+                key,
+            ) {
+                Ok(n) => len = n,
+                Err(_) => return self.now(),
+            }
+        }
+        // Stamped before it goes: the answer may be read before this task runs again.
+        let t = self.now();
+        for &link in &self.links {
+            let _ = self.node.send_bytes(link, &buf[..len]).await;
+        }
+        if version == Version::V2 {
+            self.first_v2_sent.get_or_insert(t);
+        }
+        t
+    }
+
+    async fn heartbeat(&mut self) {
+        let hb = Heartbeat {
+            r#type: MavType::GCS,
+            autopilot: MavAutopilot::INVALID,
+            base_mode: MavModeFlag(0),
+            system_status: MavState::ACTIVE,
+            mavlink_version: 3,
+            ..Heartbeat::default()
+        };
+        let version = self.heartbeat_version;
+        self.send(version, &hb).await;
+    }
+
+    /// Reads the wire until `until` (seconds since the start) or until `done` says so,
+    /// sending our HEARTBEAT each second. Returns whether `done` said so.
+    async fn pump(&mut self, until: f64, mut done: impl FnMut(&Wire) -> bool) -> bool {
+        loop {
+            let now = self.now();
+            if now >= self.next_link_scan {
+                self.next_link_scan = now + 0.5;
+                if let Some(report) = self.node.report().await {
+                    for id in report.links.iter().filter_map(|l| l.link_id) {
+                        if !self.links.contains(&id) {
+                            self.links.push(id);
+                        }
+                    }
+                }
+            }
+            if now >= self.next_heartbeat {
+                self.next_heartbeat = now + 1.0;
+                self.heartbeat().await;
+            }
+            if done(&self.wire) {
+                return true;
+            }
+            if now >= until {
+                return false;
+            }
+            let wake = until.min(self.next_heartbeat).min(self.next_link_scan);
+            let wait = Duration::from_secs_f64((wake - now).max(0.0));
+            if let Ok(Some(t)) = tokio::time::timeout(wait, self.tap.recv()).await {
+                if !self.links.contains(&t.link_id) {
+                    self.links.push(t.link_id);
+                }
+                self.wire.feed(t.link_id, t.at, &t.bytes);
+            }
+        }
+    }
+}
+
+/// Runs the vehicle role on `node` (a node with the link to the vehicle; its own identity
+/// and HEARTBEAT are not used: conform writes its frames itself) and grades what it sees.
+pub async fn grade_vehicle(node: &NodeHandle, options: &VehicleOptions) -> Report {
+    let started = clock::now();
+    let tap = node.tap().await;
+    let mut s = Session {
+        node,
+        tap,
+        wire: Wire::new(started, options.crc_extra, options.key.clone()),
+        options,
+        links: Vec::new(),
+        next_link_scan: 0.0,
+        seq: 0,
+        timestamp: 0,
+        heartbeat_version: if options.key.is_some() {
+            Version::V2
+        } else {
+            Version::V1
+        },
+        next_heartbeat: 0.0,
+        first_v2_sent: None,
+    };
+    let own = options.own;
+    let found = |w: &Wire| first_vehicle(w, own).is_some();
+    s.pump(options.timeout.as_secs_f64(), found).await;
+    let Some(target) = first_vehicle(&s.wire, own) else {
+        return Report {
+            role: Role::Vehicle,
+            target: None,
+            verdicts: nobody_heard(options.timeout),
+            seconds: s.now(),
+        };
+    };
+    let t_found = s.now();
+    // 1. The version it starts in.
+    s.pump(t_found + WATCH_START, |_| false).await;
+    // 2. Our first MAVLink 2 frame (a HEARTBEAT), and the switch.
+    s.heartbeat_version = Version::V2;
+    let t_v2 = s.send(Version::V2, &gcs_heartbeat()).await;
+    let t_v2 = s.first_v2_sent.unwrap_or(t_v2);
+    s.next_heartbeat = s.now() + 1.0;
+    let mut switched_at = None;
+    s.pump(t_v2 + WATCH_SWITCH, |w| {
+        if switched_at.is_none() {
+            switched_at = w
+                .frames
+                .iter()
+                .find(|f| f.from(target) && f.t > t_v2 && f.version == Version::V2)
+                .map(|f| f.t);
+        }
+        // Watch a second past the switch for frames that fall back.
+        switched_at.is_some_and(|t| w.secs(clock::now()) > t + 1.0)
+    })
+    .await;
+    // 3. The handshake in each form.
+    let forms = [
+        (
+            "REQUEST_MESSAGE(300) as COMMAND_LONG",
+            MavCmd::REQUEST_MESSAGE,
+            false,
+        ),
+        (
+            "REQUEST_PROTOCOL_VERSION (519) as COMMAND_LONG",
+            MavCmd::REQUEST_PROTOCOL_VERSION,
+            false,
+        ),
+        (
+            "REQUEST_MESSAGE(300) as COMMAND_INT",
+            MavCmd::REQUEST_MESSAGE,
+            true,
+        ),
+    ];
+    let mut requests = Vec::new();
+    for (what, command, int) in forms {
+        let mut request = Request {
+            what,
+            command,
+            sent: 0.0,
+            attempts: 0,
+        };
+        for confirmation in 0..2u8 {
+            let t = send_request(&mut s, target, command, int, confirmation).await;
+            if confirmation == 0 {
+                request.sent = t;
+            }
+            request.attempts += 1;
+            let since = request.sent;
+            let answered = s
+                .pump(t + WAIT_ANSWER, |w| answered(w, target, command, since))
+                .await;
+            if answered {
+                // A PROTOCOL_VERSION may follow its ACK.
+                let t = s.now();
+                s.pump(t + 0.3, |w| {
+                    w.frames
+                        .iter()
+                        .any(|f| f.from(target) && f.t > since && is_protocol_version(f))
+                })
+                .await;
+                break;
+            }
+        }
+        requests.push(request);
+    }
+    // 4. AUTOPILOT_VERSION, in MAVLink 1 too when the system showed no MAVLink 2.
+    let t_av = send_av_request(&mut s, target, Version::V2).await;
+    let got_av = |w: &Wire| {
+        w.frames
+            .iter()
+            .any(|f| f.from(target) && f.t > t_av && f.is::<AutopilotVersion>())
+    };
+    let mut av_requested = vec![(t_av, Version::V2)];
+    if !s.pump(t_av + WAIT_AUTOPILOT_VERSION, got_av).await && !shows_v2(&s.wire, target) {
+        let t_v1 = send_av_request(&mut s, target, Version::V1).await;
+        av_requested.push((t_v1, Version::V1));
+        s.pump(t_v1 + WAIT_AUTOPILOT_VERSION, |w| {
+            w.frames
+                .iter()
+                .any(|f| f.from(target) && f.t > t_v1 && f.is::<AutopilotVersion>())
+        })
+        .await;
+    }
+    let facts = Facts {
+        wire: &s.wire,
+        target,
+        keyed: options.key.is_some(),
+        t_v2,
+        requests,
+        av_requested,
+    };
+    Report {
+        role: Role::Vehicle,
+        target: Some(target),
+        verdicts: facts.grade(),
+        seconds: s.now(),
+    }
+}
+
+fn gcs_heartbeat() -> Heartbeat {
+    Heartbeat {
+        r#type: MavType::GCS,
+        autopilot: MavAutopilot::INVALID,
+        system_status: MavState::ACTIVE,
+        mavlink_version: 3,
+        ..Heartbeat::default()
+    }
+}
+
+async fn send_request(
+    s: &mut Session<'_>,
+    target: (u8, u8),
+    command: MavCmd,
+    int: bool,
+    confirmation: u8,
+) -> f64 {
+    let param1 = if command == MavCmd::REQUEST_MESSAGE {
+        ProtocolVersion::ID as f32
+    } else {
+        1.0
+    };
+    if int {
+        let c = CommandInt {
+            target_system: target.0,
+            target_component: target.1,
+            frame: MavFrame::GLOBAL,
+            command,
+            param1,
+            ..CommandInt::default()
+        };
+        s.send(Version::V2, &c).await
+    } else {
+        let c = CommandLong {
+            target_system: target.0,
+            target_component: target.1,
+            command,
+            confirmation,
+            param1,
+            ..CommandLong::default()
+        };
+        s.send(Version::V2, &c).await
+    }
+}
+
+async fn send_av_request(s: &mut Session<'_>, target: (u8, u8), version: Version) -> f64 {
+    let c = CommandLong {
+        target_system: target.0,
+        target_component: target.1,
+        command: MavCmd::REQUEST_MESSAGE,
+        param1: AutopilotVersion::ID as f32,
+        ..CommandLong::default()
+    };
+    s.send(version, &c).await
+}
+
+/// The first system heard sending a HEARTBEAT that is not a ground station's (nor ours).
+fn first_vehicle(w: &Wire, own: (u8, u8)) -> Option<(u8, u8)> {
+    w.frames
+        .iter()
+        .filter(|f| f.is::<Heartbeat>() && (f.sysid, f.compid) != own)
+        .find(|f| f.decode::<Heartbeat>().r#type != MavType::GCS)
+        .map(|f| (f.sysid, f.compid))
+}
+
+fn is_protocol_version(f: &Seen) -> bool {
+    f.is::<ProtocolVersion>() || f.v1_protocol_version
+}
+
+/// Whether `target` answered a `command` sent at `since` (an ACK, or PROTOCOL_VERSION).
+fn answered(w: &Wire, target: (u8, u8), command: MavCmd, since: f64) -> bool {
+    w.frames.iter().any(|f| {
+        f.from(target)
+            && f.t > since
+            && (is_protocol_version(f)
+                || (f.is::<CommandAck>() && f.decode::<CommandAck>().command == command))
+    })
+}
+
+/// Whether `target` sent a MAVLink 2 frame that is not part of a handshake answer, or
+/// answered the handshake in MAVLink 2.
+fn shows_v2(w: &Wire, target: (u8, u8)) -> bool {
+    w.frames
+        .iter()
+        .any(|f| f.from(target) && f.version == Version::V2)
+}
+
+/// A handshake answer in MAVLink 2 on a MAVLink 1 link is the documented exception.
+fn is_handshake_answer(f: &Seen) -> bool {
+    if f.is::<ProtocolVersion>() {
+        return true;
+    }
+    f.is::<CommandAck>()
+        && matches!(
+            f.decode::<CommandAck>().command,
+            MavCmd::REQUEST_MESSAGE | MavCmd::REQUEST_PROTOCOL_VERSION
+        )
+}
+
+/// The verdicts when no system was heard: `heartbeat` fails, the rest are n/a.
+fn nobody_heard(timeout: Duration) -> Vec<Verdict> {
+    VEHICLE_RULES
+        .iter()
+        .map(|&rule| {
+            if rule == Rule::Heartbeat {
+                Verdict::fail(
+                    rule,
+                    format!(
+                        "no HEARTBEAT from any vehicle within {:.1} s",
+                        timeout.as_secs_f64()
+                    ),
+                )
+            } else {
+                Verdict::na(rule, "no system heard")
+            }
+        })
+        .collect()
+}
+
+/// The vehicle role's rules, in the table's order.
+const VEHICLE_RULES: [Rule; 15] = [
+    Rule::Heartbeat,
+    Rule::Crc,
+    Rule::Sequence,
+    Rule::Truncation,
+    Rule::CapabilityFlag,
+    Rule::SwitchOnV2,
+    Rule::HandshakeAnswer,
+    Rule::HandshakeV2Framing,
+    Rule::Handshake519,
+    Rule::HandshakeCommandInt,
+    Rule::NackWithoutV2,
+    Rule::ProtocolVersionValues,
+    Rule::NoMixing,
+    Rule::SignedFromStart,
+    Rule::RadioV2AfterFirstV2,
+];
+
+/// What the run saw, for grading.
+struct Facts<'a> {
+    wire: &'a Wire,
+    target: (u8, u8),
+    keyed: bool,
+    /// Our first MAVLink 2 frame.
+    t_v2: f64,
+    requests: Vec<Request>,
+    av_requested: Vec<(f64, Version)>,
+}
+
+/// What one handshake request got back.
+#[derive(Debug, Default)]
+struct Answer<'a> {
+    ack: Option<(&'a Seen, CommandAck)>,
+    protocol_version: Option<&'a Seen>,
+}
+
+impl Answer<'_> {
+    fn genuine(&self) -> bool {
+        self.protocol_version
+            .is_some_and(|f| !f.v1_protocol_version && f.version == Version::V2)
+    }
+
+    fn nack(&self) -> bool {
+        self.ack
+            .is_some_and(|(_, a)| !matches!(a.result, MavResult::ACCEPTED | MavResult::IN_PROGRESS))
+    }
+
+    fn describe(&self) -> String {
+        let mut parts = Vec::new();
+        if let Some((f, a)) = &self.ack {
+            parts.push(format!(
+                "COMMAND_ACK {} in {} at {}",
+                result_name(a.result),
+                version_name(f.version),
+                secs(f.t)
+            ));
+        }
+        if let Some(f) = self.protocol_version {
+            parts.push(if f.v1_protocol_version {
+                format!(
+                    "PROTOCOL_VERSION in a MAVLink 1 frame (msgid 44, CRC_EXTRA 217) at {}",
+                    secs(f.t)
+                )
+            } else {
+                format!(
+                    "PROTOCOL_VERSION {} in {} at {}",
+                    protocol_version(f).version,
+                    version_name(f.version),
+                    secs(f.t)
+                )
+            });
+        }
+        if parts.is_empty() {
+            "nothing".to_owned()
+        } else {
+            parts.join(", ")
+        }
+    }
+}
+
+fn result_name(r: MavResult) -> &'static str {
+    r.name()
+        .and_then(|n| n.strip_prefix("MAV_RESULT_"))
+        .unwrap_or("UNKNOWN")
+}
+
+impl Facts<'_> {
+    fn mine(&self) -> impl Iterator<Item = &Seen> {
+        let target = self.target;
+        self.wire.frames.iter().filter(move |f| f.from(target))
+    }
+
+    /// The answers to request `i`, in its window (until the next request).
+    fn answer(&self, i: usize) -> Answer<'_> {
+        let Some(r) = self.requests.get(i) else {
+            return Answer::default();
+        };
+        let end = self.requests.get(i + 1).map_or_else(
+            || self.av_requested.first().map_or(f64::INFINITY, |a| a.0),
+            |n| n.sent,
+        );
+        let mut a = Answer::default();
+        for f in self.mine().filter(|f| f.t > r.sent && f.t <= end) {
+            if is_protocol_version(f) {
+                a.protocol_version.get_or_insert(f);
+            } else if f.is::<CommandAck>() {
+                let ack = f.decode::<CommandAck>();
+                if ack.command == r.command && a.ack.is_none() {
+                    a.ack = Some((f, ack));
+                }
+            }
+        }
+        a
+    }
+
+    /// When the link became MAVLink 2: the system's first MAVLink 2 frame that is not a
+    /// handshake answer.
+    fn link_v2_at(&self) -> Option<f64> {
+        self.mine()
+            .find(|f| f.version == Version::V2 && !is_handshake_answer(f))
+            .map(|f| f.t)
+    }
+
+    /// Whether the system has MAVLink 2, by behaviour.
+    fn has_v2(&self) -> bool {
+        self.link_v2_at().is_some() || (0..self.requests.len()).any(|i| self.answer(i).genuine())
+    }
+
+    fn autopilot_version(&self) -> Option<(&Seen, AutopilotVersion)> {
+        let first = self.av_requested.first()?.0;
+        self.mine()
+            .find(|f| f.t > first && f.is::<AutopilotVersion>())
+            .map(|f| (f, f.decode::<AutopilotVersion>()))
+    }
+
+    fn flag(&self) -> Option<bool> {
+        self.autopilot_version()
+            .map(|(_, av)| av.capabilities.0 & MavProtocolCapability::MAVLINK2.0 != 0)
+    }
+
+    fn grade(&self) -> Vec<Verdict> {
+        VEHICLE_RULES
+            .iter()
+            .map(|&rule| match rule {
+                Rule::Heartbeat => self.heartbeat(),
+                Rule::Crc => self.crc(),
+                Rule::Sequence => self.sequence(),
+                Rule::Truncation => self.truncation(),
+                Rule::CapabilityFlag => self.capability_flag(),
+                Rule::SwitchOnV2 => self.switch_on_v2(),
+                Rule::HandshakeAnswer => self.handshake_answer(),
+                Rule::HandshakeV2Framing => self.handshake_v2_framing(),
+                Rule::Handshake519 => self.same_way(Rule::Handshake519, 1),
+                Rule::HandshakeCommandInt => self.same_way(Rule::HandshakeCommandInt, 2),
+                Rule::NackWithoutV2 => self.nack_without_v2(),
+                Rule::ProtocolVersionValues => self.protocol_version_values(),
+                Rule::NoMixing => self.no_mixing(),
+                Rule::SignedFromStart => self.signed_from_start(),
+                _ => self.radio(),
+            })
+            .collect()
+    }
+
+    fn heartbeat(&self) -> Verdict {
+        let hbs: Vec<&Seen> = self.mine().filter(|f| f.is::<Heartbeat>()).collect();
+        let rule = Rule::Heartbeat;
+        let (Some(first), Some(last)) = (hbs.first(), hbs.last()) else {
+            return Verdict::fail(rule, "no HEARTBEAT");
+        };
+        if hbs.len() < 2 {
+            return Verdict::fail(
+                rule,
+                format!(
+                    "only 1 HEARTBEAT in {} of watching",
+                    secs(self.end() - first.t)
+                ),
+            );
+        }
+        let mean = (last.t - first.t) / (hbs.len() - 1) as f64;
+        let wrong: Vec<u8> = hbs
+            .iter()
+            .map(|f| f.decode::<Heartbeat>().mavlink_version)
+            .filter(|&v| v != 3)
+            .collect();
+        let ok = (0.5..=2.0).contains(&mean) && wrong.is_empty();
+        let mut evidence = format!("{} HEARTBEATs, mean interval {mean:.2} s", hbs.len());
+        if let Some(v) = wrong.first() {
+            evidence.push_str(&format!(
+                ", {} with mavlink_version {v} (expected 3)",
+                wrong.len()
+            ));
+        } else {
+            evidence.push_str(", mavlink_version 3");
+        }
+        if !(0.5..=2.0).contains(&mean) {
+            evidence.push_str(" (expected 0.5–2 s)");
+        }
+        Verdict::check(rule, ok, evidence)
+    }
+
+    fn end(&self) -> f64 {
+        self.wire.frames.last().map_or(0.0, |f| f.t)
+    }
+
+    fn crc(&self) -> Verdict {
+        let n = self.wire.frames.len();
+        let unchecked = self.wire.frames.iter().filter(|f| f.unchecked).count();
+        let rule = Rule::Crc;
+        if self.wire.bad_crc == 0 {
+            let mut e = format!("{n} frames, every checksum good");
+            if unchecked > 0 {
+                e.push_str(&format!(
+                    " ({unchecked} of ids the dialect does not define, unchecked)"
+                ));
+            }
+            Verdict::pass(rule, e)
+        } else {
+            Verdict::fail(
+                rule,
+                format!(
+                    "{} frames failed their checksum (the first at {}), {n} passed",
+                    self.wire.bad_crc,
+                    secs(self.wire.first_bad_crc.unwrap_or(0.0))
+                ),
+            )
+        }
+    }
+
+    fn sequence(&self) -> Verdict {
+        let mut last: BTreeMap<(u8, u8), u8> = BTreeMap::new();
+        let (mut steps, mut gaps) = (0usize, 0usize);
+        let mut first_gap = None;
+        for f in self.wire.frames.iter().filter(|f| f.sysid == self.target.0) {
+            if let Some(prev) = last.insert((f.sysid, f.compid), f.seq) {
+                steps += 1;
+                if f.seq != prev.wrapping_add(1) {
+                    gaps += 1;
+                    first_gap.get_or_insert((f.sysid, f.compid, prev, f.seq, f.t));
+                }
+            }
+        }
+        let rule = Rule::Sequence;
+        if steps == 0 {
+            return Verdict::na(rule, "fewer than two frames from any component");
+        }
+        match first_gap {
+            None => Verdict::pass(rule, format!("seq rose by one in {steps} of {steps} steps")),
+            Some((sys, comp, a, b, t)) => Verdict::fail(
+                rule,
+                format!(
+                    "{gaps} of {steps} steps skip or repeat (first: {sys}/{comp} seq {a} → {b} at {})",
+                    secs(t)
+                ),
+            ),
+        }
+    }
+
+    fn truncation(&self) -> Verdict {
+        let v2: Vec<&Seen> = self
+            .wire
+            .frames
+            .iter()
+            .filter(|f| f.sysid == self.target.0 && f.version == Version::V2)
+            .collect();
+        let rule = Rule::Truncation;
+        if v2.is_empty() {
+            return Verdict::na(rule, "no MAVLink 2 frame");
+        }
+        let bad: Vec<&&Seen> = v2
+            .iter()
+            .filter(|f| {
+                f.payload.is_empty() || (f.payload.len() > 1 && f.payload.last() == Some(&0))
+            })
+            .collect();
+        match bad.first() {
+            None => Verdict::pass(
+                rule,
+                format!(
+                    "{} MAVLink 2 frames, none with a trailing zero byte",
+                    v2.len()
+                ),
+            ),
+            Some(f) => Verdict::fail(
+                rule,
+                format!(
+                    "{} of {} MAVLink 2 frames end in a zero byte (first: {} seq {} at {}, {} payload bytes)",
+                    bad.len(),
+                    v2.len(),
+                    message_name(f.msg_id),
+                    f.seq,
+                    secs(f.t),
+                    f.payload.len()
+                ),
+            ),
+        }
+    }
+
+    /// How the system shows MAVLink 2, in words.
+    fn v2_behaviour(&self) -> String {
+        if let Some(f) = self
+            .mine()
+            .find(|f| f.version == Version::V2 && !is_handshake_answer(f))
+        {
+            return format!(
+                "it sends MAVLink 2 ({} at {})",
+                message_name(f.msg_id),
+                secs(f.t)
+            );
+        }
+        if (0..self.requests.len()).any(|i| self.answer(i).genuine()) {
+            return "it answers the handshake in MAVLink 2".to_owned();
+        }
+        "no MAVLink 2 frame and no MAVLink 2 answer to the handshake".to_owned()
+    }
+
+    fn capability_flag(&self) -> Verdict {
+        let rule = Rule::CapabilityFlag;
+        let Some((f, _)) = self.autopilot_version() else {
+            let asked: Vec<String> = self
+                .av_requested
+                .iter()
+                .map(|(t, v)| format!("{} at {}", version_name(*v), secs(*t)))
+                .collect();
+            return Verdict::fail(
+                rule,
+                format!(
+                    "no AUTOPILOT_VERSION for REQUEST_MESSAGE(148) (asked in {})",
+                    asked.join(" and ")
+                ),
+            );
+        };
+        let flag = self.flag().unwrap_or(false);
+        let has = self.has_v2();
+        Verdict::check(
+            rule,
+            flag == has,
+            format!(
+                "MAVLINK2 {} in AUTOPILOT_VERSION ({} at {}); {}",
+                if flag { "set" } else { "clear" },
+                version_name(f.version),
+                secs(f.t),
+                self.v2_behaviour()
+            ),
+        )
+    }
+
+    fn switch_on_v2(&self) -> Verdict {
+        let rule = Rule::SwitchOnV2;
+        let Some(first) = self.mine().next() else {
+            return Verdict::na(rule, "no frame");
+        };
+        if first.version == Version::V2 {
+            return Verdict::na(
+                rule,
+                format!(
+                    "started in MAVLink 2 ({} at {})",
+                    message_name(first.msg_id),
+                    secs(first.t)
+                ),
+            );
+        }
+        if !self.has_v2() && self.flag() != Some(true) {
+            return Verdict::na(rule, format!("no MAVLink 2: {}", self.v2_behaviour()));
+        }
+        let until = self.requests.first().map_or(f64::INFINITY, |r| r.sent);
+        let hbs_v1 = self
+            .mine()
+            .filter(|f| f.t > self.t_v2 && f.t <= until && f.is::<Heartbeat>())
+            .filter(|f| f.version == Version::V1)
+            .count();
+        match self.link_v2_at() {
+            Some(t) if t > self.t_v2 && t <= until => Verdict::pass(
+                rule,
+                format!(
+                    "MAVLink 1 until our MAVLink 2 HEARTBEAT at {}, MAVLink 2 from {} ({:.2} s later)",
+                    secs(self.t_v2),
+                    secs(t),
+                    t - self.t_v2
+                ),
+            ),
+            Some(t) if t <= self.t_v2 => Verdict::na(
+                rule,
+                format!(
+                    "MAVLink 2 from {} before any MAVLink 2 frame of ours",
+                    secs(t)
+                ),
+            ),
+            other => Verdict::fail(
+                rule,
+                format!(
+                    "still MAVLink 1 after our MAVLink 2 HEARTBEAT at {}: {hbs_v1} HEARTBEAT(s) in MAVLink 1 until the handshake at {}{}",
+                    secs(self.t_v2),
+                    secs(until),
+                    other.map_or(String::new(), |t| format!(
+                        "; MAVLink 2 only from {}",
+                        secs(t)
+                    ))
+                ),
+            ),
+        }
+    }
+
+    fn handshake_answer(&self) -> Verdict {
+        let rule = Rule::HandshakeAnswer;
+        let a = self.answer(0);
+        let Some(r) = self.requests.first() else {
+            return Verdict::na(rule, "no request sent");
+        };
+        if !self.has_v2() && a.protocol_version.is_none() && self.flag() != Some(true) {
+            return Verdict::na(rule, format!("no MAVLink 2: {}", self.v2_behaviour()));
+        }
+        Verdict::check(
+            rule,
+            a.protocol_version.is_some(),
+            format!(
+                "{} in MAVLink 2 at {} ({} sent): {}",
+                r.what,
+                secs(r.sent),
+                r.attempts,
+                a.describe()
+            ),
+        )
+    }
+
+    fn handshake_v2_framing(&self) -> Verdict {
+        let rule = Rule::HandshakeV2Framing;
+        let answers: Vec<(usize, Answer<'_>)> = (0..self.requests.len())
+            .map(|i| (i, self.answer(i)))
+            .collect();
+        if let Some((i, a)) = answers
+            .iter()
+            .find(|(_, a)| a.protocol_version.is_some_and(|f| f.v1_protocol_version))
+        {
+            return Verdict::fail(
+                rule,
+                format!("{}: {}", self.requests[*i].what, a.describe()),
+            );
+        }
+        let accepted_only = answers.iter().find(|(_, a)| {
+            a.ack
+                .is_some_and(|(_, ack)| ack.result == MavResult::ACCEPTED)
+                && !a.genuine()
+        });
+        if let Some((i, a)) = accepted_only {
+            return Verdict::fail(
+                rule,
+                format!(
+                    "{}: {} without a MAVLink 2 PROTOCOL_VERSION",
+                    self.requests[*i].what,
+                    a.describe()
+                ),
+            );
+        }
+        match answers.iter().find(|(_, a)| a.genuine()) {
+            Some((i, a)) => Verdict::pass(
+                rule,
+                format!(
+                    "{}: {} after {} request(s)",
+                    self.requests[*i].what,
+                    a.describe(),
+                    self.requests[*i].attempts
+                ),
+            ),
+            None => Verdict::na(rule, "no PROTOCOL_VERSION and no ACCEPTED answer"),
+        }
+    }
+
+    fn same_way(&self, rule: Rule, i: usize) -> Verdict {
+        let Some(r) = self.requests.get(i) else {
+            return Verdict::na(rule, "not sent");
+        };
+        let a = self.answer(i);
+        let has = self.has_v2();
+        let ok = if has { a.genuine() } else { a.nack() };
+        Verdict::check(
+            rule,
+            ok,
+            format!(
+                "{} at {}: {} (expected {}, as the system {})",
+                r.what,
+                secs(r.sent),
+                a.describe(),
+                if has {
+                    "PROTOCOL_VERSION in MAVLink 2"
+                } else {
+                    "a NACK"
+                },
+                if has {
+                    "has MAVLink 2"
+                } else {
+                    "has no MAVLink 2"
+                }
+            ),
+        )
+    }
+
+    fn nack_without_v2(&self) -> Verdict {
+        let rule = Rule::NackWithoutV2;
+        if self.has_v2() || self.answer(0).protocol_version.is_some() {
+            return Verdict::na(
+                rule,
+                format!("the system has MAVLink 2: {}", self.v2_behaviour()),
+            );
+        }
+        let answers: Vec<Answer<'_>> = (0..self.requests.len()).map(|i| self.answer(i)).collect();
+        match answers.iter().position(Answer::nack) {
+            Some(i) => Verdict::pass(
+                rule,
+                format!("{}: {}", self.requests[i].what, answers[i].describe()),
+            ),
+            None => Verdict::fail(
+                rule,
+                format!(
+                    "no NACK for any of {} handshake requests: {}",
+                    self.requests.len(),
+                    answers
+                        .iter()
+                        .zip(&self.requests)
+                        .map(|(a, r)| format!("{} → {}", r.what, a.describe()))
+                        .collect::<Vec<_>>()
+                        .join("; ")
+                ),
+            ),
+        }
+    }
+
+    fn protocol_version_values(&self) -> Verdict {
+        let rule = Rule::ProtocolVersionValues;
+        let Some(f) = (0..self.requests.len()).find_map(|i| self.answer(i).protocol_version) else {
+            return Verdict::na(rule, "no PROTOCOL_VERSION");
+        };
+        let pv = protocol_version(f);
+        let ok =
+            pv.min_version <= pv.version && pv.version <= pv.max_version && pv.max_version >= 200;
+        Verdict::check(
+            rule,
+            ok,
+            format!(
+                "version {}, min {}, max {}",
+                pv.version, pv.min_version, pv.max_version
+            ),
+        )
+    }
+
+    fn no_mixing(&self) -> Verdict {
+        let rule = Rule::NoMixing;
+        let mut problems = Vec::new();
+        if let Some(t) = self.link_v2_at() {
+            let after: Vec<&Seen> = self.mine().filter(|f| f.t > t).collect();
+            let v1: Vec<&&Seen> = after.iter().filter(|f| f.version == Version::V1).collect();
+            if let Some(f) = v1.first() {
+                problems.push(format!(
+                    "{} of {} frames in MAVLink 1 after the switch at {} (first: {} at {})",
+                    v1.len(),
+                    after.len(),
+                    secs(t),
+                    message_name(f.msg_id),
+                    secs(f.t)
+                ));
+            }
+        }
+        if let Some(s) = self.mine().find(|f| f.signed) {
+            let after: Vec<&Seen> = self.mine().filter(|f| f.t > s.t).collect();
+            let unsigned: Vec<&&Seen> = after.iter().filter(|f| !f.signed).collect();
+            if let Some(f) = unsigned.first() {
+                problems.push(format!(
+                    "{} of {} frames unsigned after the first signed one at {} (first: {} at {})",
+                    unsigned.len(),
+                    after.len(),
+                    secs(s.t),
+                    message_name(f.msg_id),
+                    secs(f.t)
+                ));
+            }
+        }
+        if !problems.is_empty() {
+            return Verdict::fail(rule, problems.join("; "));
+        }
+        match self.link_v2_at() {
+            Some(t) => {
+                let n = self.mine().filter(|f| f.t > t).count();
+                Verdict::pass(
+                    rule,
+                    format!(
+                        "all {n} frames after the switch at {} in MAVLink 2",
+                        secs(t)
+                    ),
+                )
+            }
+            None => Verdict::pass(rule, "the link stayed MAVLink 1 (handshake answers aside)"),
+        }
+    }
+
+    fn signed_from_start(&self) -> Verdict {
+        let rule = Rule::SignedFromStart;
+        let all: Vec<&Seen> = self.mine().collect();
+        if self.keyed {
+            let bad: Vec<&&Seen> = all.iter().filter(|f| f.verified != Some(true)).collect();
+            return match bad.first() {
+                None => Verdict::pass(
+                    rule,
+                    format!("all {} frames signed and verified with the key", all.len()),
+                ),
+                Some(f) => Verdict::fail(
+                    rule,
+                    format!(
+                        "{} of {} frames {} (first: {} at {}{})",
+                        bad.len(),
+                        all.len(),
+                        if f.signed {
+                            "do not verify with the key"
+                        } else {
+                            "unsigned or not verified"
+                        },
+                        message_name(f.msg_id),
+                        secs(f.t),
+                        all.iter().find(|g| g.verified == Some(true)).map_or(
+                            String::new(),
+                            |g| format!("; the first verified one at {}", secs(g.t))
+                        )
+                    ),
+                ),
+            };
+        }
+        let Some(signed) = all.iter().find(|f| f.signed) else {
+            return Verdict::na(rule, "the system does not sign");
+        };
+        let before = all.iter().filter(|f| f.t < signed.t).count();
+        Verdict::check(
+            rule,
+            before == 0,
+            format!(
+                "the first signed frame at {}, after {before} unsigned ones",
+                secs(signed.t)
+            ),
+        )
+    }
+
+    fn radio(&self) -> Verdict {
+        let rule = Rule::RadioV2AfterFirstV2;
+        let statuses: Vec<&Seen> = self
+            .wire
+            .frames
+            .iter()
+            .filter(|f| f.is::<RadioStatus>())
+            .collect();
+        let Some(source) = statuses.first().map(|f| (f.sysid, f.compid)) else {
+            return Verdict::na(
+                rule,
+                "no RADIO_STATUS: no semi-transparent radio in the path",
+            );
+        };
+        let from = |f: &&&Seen| (f.sysid, f.compid) == source;
+        let before = statuses
+            .iter()
+            .filter(from)
+            .filter(|f| f.t < self.t_v2)
+            .count();
+        let after: Vec<&&Seen> = statuses
+            .iter()
+            .filter(from)
+            .filter(|f| f.t > self.t_v2 + RADIO_GRACE)
+            .collect();
+        let v1 = after.iter().filter(|f| f.version == Version::V1).count();
+        let who = format!("RADIO_STATUS from {}/{}", source.0, source.1);
+        if after.is_empty() {
+            return Verdict::na(
+                rule,
+                format!(
+                    "{who}: none after our first MAVLink 2 frame at {}",
+                    secs(self.t_v2)
+                ),
+            );
+        }
+        Verdict::check(
+            rule,
+            v1 == 0,
+            format!(
+                "{who}: {before} before our first MAVLink 2 frame at {}, then {v1} of {} in MAVLink 1",
+                secs(self.t_v2),
+                after.len()
+            ),
+        )
+    }
+}
