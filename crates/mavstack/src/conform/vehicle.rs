@@ -1094,11 +1094,12 @@ impl Facts<'_> {
             );
         };
         let from = |f: &&&Seen| (f.sysid, f.compid) == source;
-        let before = statuses
+        let before: Vec<&&Seen> = statuses
             .iter()
             .filter(from)
             .filter(|f| f.t < self.t_v2)
-            .count();
+            .collect();
+        let before_v1 = before.iter().filter(|f| f.version == Version::V1).count();
         let after: Vec<&&Seen> = statuses
             .iter()
             .filter(from)
@@ -1119,7 +1120,8 @@ impl Facts<'_> {
             rule,
             v1 == 0,
             format!(
-                "{who}: {before} before our first MAVLink 2 frame at {}, then {v1} of {} in MAVLink 1",
+                "{who}: {} before our first MAVLink 2 frame at {} ({before_v1} in MAVLink 1), then {v1} of {} in MAVLink 1",
+                before.len(),
                 secs(self.t_v2),
                 after.len()
             ),
