@@ -1,4 +1,5 @@
-//! The seed corpora of the `router_conf` and `link_options` fuzz targets, replayed on stable.
+//! The seed corpora of the `router_conf`, `link_options` and `conform_wire` fuzz targets,
+//! replayed on stable.
 
 use std::path::Path;
 
@@ -22,4 +23,34 @@ fn router_conf_seeds() {
 #[test]
 fn link_options_seeds() {
     replay("link_options", mavstack::router::fuzz_link_options);
+}
+
+#[cfg(feature = "sim")]
+#[test]
+fn conform_wire_seeds() {
+    replay("conform_wire", mavstack::conform::fuzz_wire);
+}
+
+/// The MAVLink 1 PROTOCOL_VERSION seed (msgid 44, CRC_EXTRA 217, built with pymavlink's
+/// x25crc) is read as that bogus frame and graded as a framing failure.
+#[cfg(feature = "sim")]
+#[test]
+fn the_fake_protocol_version_seed_fails_the_framing_rule() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/conform_wire");
+    let seed = std::fs::read(dir.join("fake_protocol_version")).unwrap();
+    let verdicts = mavstack::conform::fuzz_grade_for_tests(&seed);
+    let framing = verdicts
+        .iter()
+        .find(|v| v.rule == mavstack::conform::Rule::HandshakeV2Framing)
+        .unwrap();
+    assert_eq!(
+        framing.status,
+        mavstack::conform::Status::Fail,
+        "{framing:?}"
+    );
+    assert!(
+        framing.evidence.contains("msgid 44"),
+        "{}",
+        framing.evidence
+    );
 }

@@ -279,7 +279,23 @@ impl Report {
     }
 }
 
-/// "1 of 3" style counts, and times, for evidence.
+/// Fuzzing entry: `data` as the wire of a vehicle-role run, read and graded; never panics,
+/// and every rule gets a verdict with evidence.
+#[doc(hidden)]
+pub fn fuzz_wire(data: &[u8]) {
+    let verdicts = vehicle::fuzz_grade(data);
+    assert_eq!(verdicts.len(), 15);
+    assert!(verdicts.iter().all(|v| !v.evidence.is_empty()));
+}
+
+/// The verdicts [`fuzz_wire`] checks, for tests of the graders on crafted input.
+#[doc(hidden)]
+#[must_use]
+pub fn fuzz_grade_for_tests(data: &[u8]) -> Vec<Verdict> {
+    vehicle::fuzz_grade(data)
+}
+
+/// Times, for evidence.
 fn secs(t: f64) -> String {
     format!("{t:.2} s")
 }

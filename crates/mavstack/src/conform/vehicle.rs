@@ -305,6 +305,7 @@ pub async fn grade_vehicle(node: &NodeHandle, options: &VehicleOptions) -> Repor
         })
         .await;
     }
+    s.wire.finish(clock::now());
     let facts = Facts {
         wire: &s.wire,
         target,
@@ -1127,4 +1128,48 @@ impl Facts<'_> {
             ),
         )
     }
+}
+
+/// Conform's wire reader and every vehicle-role grader fed `data` as input on two links
+/// (the first byte sets the piece size and whether they alternate links; pieces 100 ms
+/// apart), our MAVLink 2 frame and the
+/// three handshake requests after pieces 0, 1 and 2, AUTOPILOT_VERSION after piece 3.
+pub(super) fn fuzz_grade(data: &[u8]) -> Vec<Verdict> {
+    let key = SecretKey::new([7; 32]);
+    let mut wire = Wire::new(
+        mavstack_core::time::Instant::ZERO,
+        mavstack_transport::frame::crc_extra_of::<MavMessage>,
+        Some(key),
+    );
+    let (first, rest) = data.split_first().map_or((1, data), |(&p, r)| (p, r));
+    // The low 7 bits: the piece size; the top bit: pieces alternate between two links.
+    let piece = usize::from(first & 0x7f).max(1);
+    for (i, chunk) in rest.chunks(piece).enumerate() {
+        let at = mavstack_core::time::Instant::from_millis(i as u64 * 100);
+        let link = if first & 0x80 != 0 { i % 2 } else { 0 };
+        wire.feed(LinkId::new(link as u32), at, chunk);
+    }
+    wire.finish(mavstack_core::time::Instant::from_millis(
+        (rest.len() / piece) as u64 * 100,
+    ));
+    let target = wire.frames.first().map_or((1, 1), |f| (f.sysid, f.compid));
+    let request = |what, command, sent| Request {
+        what,
+        command,
+        sent,
+        attempts: 1,
+    };
+    let facts = Facts {
+        wire: &wire,
+        target,
+        keyed: true,
+        t_v2: 0.05,
+        requests: vec![
+            request("300", MavCmd::REQUEST_MESSAGE, 0.05),
+            request("519", MavCmd::REQUEST_PROTOCOL_VERSION, 0.15),
+            request("300 int", MavCmd::REQUEST_MESSAGE, 0.25),
+        ],
+        av_requested: vec![(0.35, Version::V2)],
+    };
+    facts.grade()
 }

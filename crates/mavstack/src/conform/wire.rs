@@ -125,6 +125,36 @@ impl Wire {
         }
     }
 
+    /// Ends every link's input at `at`: a frame held back (the parser waits to see whether
+    /// a checked frame starts inside one it cannot check) is taken now.
+    pub(crate) fn finish(&mut self, at: Instant) {
+        let t = self.secs(at);
+        let lookup = self.lookup;
+        let parser_lookup = move |id: u32| {
+            if id == V1_PROTOCOL_VERSION_ID {
+                None
+            } else {
+                lookup(id)
+            }
+        };
+        let mut found = Vec::new();
+        let mut bad = 0;
+        for deframer in self.deframers.values_mut() {
+            let bad_before = deframer.stats().bad_crc;
+            while let Some(item) = deframer.finish(&parser_lookup) {
+                found.push(match item {
+                    Item::Frame(f) => (f.as_bytes().to_vec(), false),
+                    Item::Unknown(f) => (f.as_bytes().to_vec(), true),
+                });
+            }
+            bad += deframer.stats().bad_crc - bad_before;
+        }
+        self.count_bad(bad, t);
+        for (bytes, unknown) in found {
+            self.take(t, &bytes, unknown);
+        }
+    }
+
     fn count_bad(&mut self, n: u64, t: f64) {
         if n > 0 {
             self.bad_crc += n;
