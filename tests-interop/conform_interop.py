@@ -37,8 +37,9 @@ thing:
                           handshake (MAV_RESULT_UNSUPPORTED, v1), capability bit SET: exit 1,
                           capability_flag fails (NACK rather than silence, so that
                           nack_without_v2 holds and the flag is the one thing wrong)
-  vehicle_v1_after_switch switches, then the 2nd, 5th, 8th... HEARTBEAT after the switch goes
-                          out in MAVLink 1 (at least 1 s after it): exit 1, no_mixing fails
+  vehicle_v1_after_switch switches; the 2nd HEARTBEAT after the switch follows the 1st (MAVLink 2)
+                          0.4 s later in MAVLink 1, and so do the 5th, 8th...: exit 1,
+                          no_mixing fails
   vehicle_untruncated     every MAVLink 2 frame keeps its payload's trailing zeros (built by
                           hand, CRC over the full payload: PROTOCOL_VERSION, AUTOPILOT_VERSION
                           end in zeros): exit 1, truncation fails
@@ -65,8 +66,8 @@ Ground-station role: `BIN conform udpin:127.0.0.1:P --role gcs --vehicle-mode MO
 the pymavlink ground station (sysid 255 compid 190) sends to P: HEARTBEAT at 1 Hz in MAVLink 1;
 on the vehicle's first HEARTBEAT, REQUEST_MESSAGE(300) as a MAVLink 2 COMMAND_LONG (1.5 s
 timeout, one retry); after PROTOCOL_VERSION, a NACK or the timeout, REQUEST_MESSAGE(148) and
-PARAM_REQUEST_LIST; it switches to MAVLink 2 for good on the vehicle's first MAVLink 2 frame or
-the MAVLINK2 capability bit:
+PARAM_REQUEST_LIST, then PARAM_REQUEST_READ every 2 s; it switches to MAVLink 2 for good on the
+vehicle's first MAVLink 2 frame or the MAVLINK2 capability bit:
   gcs_pymavlink_good      MODE answer: exit 0; gcs_handshake_v2_framing, gcs_switch,
                           gcs_no_mixing pass, gcs_fallback n/a
   gcs_pymavlink_v1_request
@@ -76,8 +77,8 @@ the MAVLINK2 capability bit:
                           MAVLink 1 again (answer): exit 1, gcs_no_mixing fails
   gcs_pymavlink_fallback  two runs, MODE nack and MODE silent: after the NACK / the timeouts it
                           goes on in MAVLink 1 (HEARTBEATs, REQUEST_MESSAGE(148),
-                          PARAM_REQUEST_LIST): exit 0, gcs_fallback and gcs_handshake_v2_framing
-                          pass
+                          PARAM_REQUEST_LIST, PARAM_REQUEST_READ): exit 0, gcs_fallback and
+                          gcs_handshake_v2_framing pass
   gcs_pymavlink_gives_up  MODE nack; it sends nothing after the NACK: exit 1, gcs_fallback fails
   gcs_mavproxy            MAVProxy 1.8.75 (`mavproxy.py --master=udpout:127.0.0.1:P`, in a pty
                           as gcs_mavproxy.py runs it) against `... --role gcs --vehicle-mode
@@ -87,7 +88,7 @@ the MAVLINK2 capability bit:
                           Native: Mavsdk(GROUND_STATION), add_any_connection udpout://127.0.0.1:P)
 
 --selftest: the same peers against a Python stand-in for conform (vehicle role: the five steps
-of conform's script with conform's timing, answers collected as soon as they come; ground
+of conform's script with its timing, the shortest run: every wait ends as soon as it can; ground
 station role: a vehicle in the mode that answers/NACKs/ignores the handshake), then checks on
 the wire that the peer does what the scenario says and only that: the msgid-44 frame verifies
 with CRC_EXTRA 217 (not with MISSION_COUNT's), the untruncated frames' CRC verifies, the gaps
@@ -403,7 +404,8 @@ class PyVehicle(Peer):
     v2: has MAVLink 2 (switches on the first MAVLink 2 frame; signed vehicles send it from the
     first frame); handshake: "answer" | "nack" | "silent"; cap: the MAVLINK2 capability bit
     (default: v2); pv_v1: PROTOCOL_VERSION as the C library's MAVLink 1 msgid-44 frame;
-    v1_after_switch: HEARTBEATs 2, 5, 8... after the switch in MAVLink 1; untruncated: MAVLink 2
+    v1_after_switch: HEARTBEATs 2 (0.4 s after 1), 5, 8... after the switch in MAVLink 1;
+    untruncated: MAVLink 2
     payloads keep their trailing zeros; seq_step: added to seq after each frame; key: verifies
     with it (unsigned frames refused) and signs, from the first frame unless sign_after = N:
     then unsigned until N frames after the first one heard.
@@ -465,6 +467,10 @@ class PyVehicle(Peer):
             v2 = None
             if self.switched_at is not None:
                 self.heartbeats_after_switch += 1
+                if self.v1_after_switch and self.heartbeats_after_switch == 1:
+                    # The MAVLink 1 one comes 0.4 s after the first MAVLink 2 HEARTBEAT, well
+                    # inside the second a ground station may watch the switch for.
+                    self.next_hb = now + 0.4
                 if self.v1_after_switch and self.heartbeats_after_switch % 3 == 2:
                     v2 = False
             self.send(vehicle_heartbeat(), v2)
@@ -564,10 +570,11 @@ class PyGcs(Peer):
     behaviour "good": HEARTBEAT at 1 Hz in the current version (MAVLink 1 at first); on the
     vehicle's first HEARTBEAT, REQUEST_MESSAGE(300) as a MAVLink 2 COMMAND_LONG, `timeout` s
     per attempt, `attempts` attempts (confirmation 0, 1); once PROTOCOL_VERSION, a NACK or the
-    last timeout came, REQUEST_MESSAGE(148) and PARAM_REQUEST_LIST; MAVLink 2 for good from the
-    vehicle's first MAVLink 2 frame or MAVLINK2 capability bit. "v1_request": the request in
-    MAVLink 1. "mixing": after two HEARTBEATs in MAVLink 2, MAVLink 1 again for everything.
-    "gives_up": nothing at all after a NACK or the timeout.
+    last timeout came, REQUEST_MESSAGE(148) and PARAM_REQUEST_LIST, then PARAM_REQUEST_READ
+    every 2 s; MAVLink 2 for good from the vehicle's first MAVLink 2 frame or MAVLINK2
+    capability bit. "v1_request": the request in MAVLink 1. "mixing": after two HEARTBEATs in
+    MAVLink 2, MAVLink 1 again for everything. "gives_up": nothing at all after a NACK or the
+    timeout.
     """
 
     name = "pymavlink ground station"
@@ -591,6 +598,7 @@ class PyGcs(Peer):
         self.outcome = None
         self.quiet = False
         self.next_hb = 0.0
+        self.next_read = None
         self.sent = []  # (t, version, type)
 
     def out_v2(self):
@@ -619,6 +627,9 @@ class PyGcs(Peer):
                 self.request()
             else:
                 self.resolve("timeout")
+        if self.next_read is not None and now >= self.next_read:
+            self.next_read = now + 2.0
+            self.send(M.MAVLink_param_request_read_message(*self.vehicle, b"SYSID_THISMAV", -1))
 
     def request(self):
         self.attempt += 1
@@ -635,6 +646,7 @@ class PyGcs(Peer):
             return
         self.send(cmd_long(self.vehicle, REQUEST_MESSAGE, AUTOPILOT_VERSION_ID))
         self.send(M.MAVLink_param_request_list_message(*self.vehicle))
+        self.next_read = time.monotonic() + 2.0
 
     def switch(self):
         if not self.v2:
@@ -827,8 +839,9 @@ class StandIn:
 class VehicleStandIn(StandIn):
     """conform's vehicle-role script, crudely, as a ground station 255/190: GCS HEARTBEATs each
     second (MAVLink 1, or signed MAVLink 2 with a key); the first HEARTBEAT of a non-GCS is
-    the target; 2.5 s watch; a MAVLink 2 HEARTBEAT, 2.5 s watch; REQUEST_MESSAGE(300) as
-    COMMAND_LONG, REQUEST_PROTOCOL_VERSION, REQUEST_MESSAGE(300) as COMMAND_INT, each up to
+    the target; 2 s watch; a MAVLink 2 HEARTBEAT, then a watch that ends 1 s after the
+    target's first MAVLink 2 frame (2 s at most; conform's own timing); REQUEST_MESSAGE(300)
+    as COMMAND_LONG, REQUEST_PROTOCOL_VERSION, REQUEST_MESSAGE(300) as COMMAND_INT, each up to
     1.5 s but no longer than it takes to be answered (the shortest run conform may make);
     REQUEST_MESSAGE(148) in MAVLink 2 (and MAVLink 1 when no MAVLink 2 frame came)."""
 
@@ -853,11 +866,13 @@ class VehicleStandIn(StandIn):
             return
         self.target, self.t_first = first.src, first.t
         tgt = self.target
-        self.pump(2.5)
+        self.pump(2.0)
         self.t_v2_sent = time.monotonic()
         self.send(gcs_heartbeat(), v2=True)
         self.out_v2 = True
-        self.pump(2.5)
+        got = self.pump(2.0, lambda f: f.src == tgt and f.version == 2)
+        if got is not None:
+            self.pump(min(1.0, self.t_v2_sent + 2.0 - time.monotonic()))
         for what, command, msg in (
                 ("REQUEST_MESSAGE(300) as COMMAND_LONG", REQUEST_MESSAGE, cmd_long(tgt, REQUEST_MESSAGE, PROTOCOL_VERSION_ID)),
                 ("REQUEST_PROTOCOL_VERSION", REQUEST_PROTOCOL_VERSION, cmd_long(tgt, REQUEST_PROTOCOL_VERSION, 1)),
@@ -1164,7 +1179,7 @@ def vehicle_facts(st):
         firsts = [t for t in (st.t_v2_sent, next((f.t for f in tgt if f.version == 2), None)) if t is not None]
         t_pass = min(firsts) if firsts else float("inf")
         before = {f.version for f in statuses if f.t < t_pass}
-        after = {f.version for f in statuses if f.t > t_pass + 1.0}
+        after = {f.version for f in statuses if f.t > t_pass + 0.6}  # one interval, and slack
         if before <= {1} and after == {2}:
             radio = "v1-then-v2"
         elif {f.version for f in statuses} == {1}:
@@ -1381,6 +1396,9 @@ def vehicle_scenario(name, bin_, selftest):
         check_facts(facts, expected, "%s self-test" % name)
         return "self-test against the stand-in: " + facts_text(facts)
     by_id, _ = conform_report(conform, "vehicle", name, spec["rc"], spec["rules"], vehicle_target=True)
+    # What the vehicle saw of conform's script (step 4), to tell a silent conform from a deaf peer.
+    check(veh.handshakes, "%s: the vehicle received no handshake request from conform (pymavlink refused %d of "
+          "its frames%s)" % (name, veh.refused, ": unsigned, or signatures that do not verify with the key" if key else ""))
     if by_id is None:
         return None
     return "%s -> exit %s; %s" % (conform.command(), conform.rc, summarise(by_id))
@@ -1464,6 +1482,7 @@ def gcs_scenario(name, bin_, selftest):
             lines.append("mode %s: %s (handshake outcome %s)" % (mode, facts_text(facts), gcs.outcome))
             continue
         by_id, _ = conform_report(conform, "gcs", what, spec["rc"], spec["rules"])
+        check(gcs.vehicle is not None, "%s: the ground station never heard a HEARTBEAT from conform's vehicle" % what)
         if by_id is None:
             return None
         lines.append("%s -> exit %s; %s" % (conform.command(), conform.rc, summarise(by_id)))

@@ -228,6 +228,9 @@ pub struct Tapped {
     pub at: Instant,
     /// The bytes.
     pub bytes: Vec<u8>,
+    /// Whether they are a whole datagram (UDP: no frame continues in the next one) rather
+    /// than a piece of a stream (TCP, serial).
+    pub datagram: bool,
 }
 
 /// What a [`NodeHandle::tap`] receives: a bounded queue like [`Subscription`] (a tap that
@@ -964,6 +967,7 @@ impl Input for Feed<'_> {
                         link_id: id,
                         at: now,
                         bytes: data.to_vec(),
+                        datagram: framing == Framing::Datagram,
                     });
                 }
             }

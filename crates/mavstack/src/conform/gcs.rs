@@ -3,7 +3,7 @@
 
 use core::time::Duration;
 
-use mavstack_channel::LinkVersion;
+use mavstack_channel::{LinkVersion, ProtocolVersionAnswer};
 use mavstack_core::Message as _;
 use mavstack_core::wire::Version;
 use mavstack_dialects::common::{CommandInt, CommandLong, Heartbeat, MavCmd, ProtocolVersion};
@@ -123,7 +123,7 @@ pub async fn grade_ground_station(
             () = tokio::time::sleep(wait) => {}
             t = tap.recv() => {
                 let Some(t) = t else { break };
-                wire.feed(t.link_id, t.at, &t.bytes);
+                wire.feed(t.link_id, t.at, &t.bytes, t.datagram);
             }
             e = events.recv() => {
                 let Some(e) = e else { break };
@@ -132,7 +132,10 @@ pub async fn grade_ground_station(
                     LinkEvent::VersionChanged { to, .. } if to != LinkVersion::Mavlink1 => {
                         facts.vehicle_v2_at.get_or_insert(t);
                     }
-                    LinkEvent::ProtocolVersionRequested { .. } => {
+                    // Silence is no answer: the ground station has nothing to switch on.
+                    LinkEvent::ProtocolVersionRequested { answer, .. }
+                        if answer != ProtocolVersionAnswer::Ignored =>
+                    {
                         facts.answered_at.get_or_insert(t);
                     }
                     _ => {}
@@ -414,9 +417,10 @@ impl GcsFacts {
                 "the vehicle neither answered a handshake nor sent MAVLink 2",
             );
         };
+        // A handshake request in MAVLink 2 is the documented exception, not a switch.
         let Some(switch) = frames
             .iter()
-            .find(|f| f.t > reference && f.version == Version::V2)
+            .find(|f| f.t > reference && f.version == Version::V2 && !is_request(f))
         else {
             return Verdict::na(rule, "the ground station never switched to MAVLink 2");
         };

@@ -177,7 +177,7 @@ impl Session<'_> {
                 if !self.links.contains(&t.link_id) {
                     self.links.push(t.link_id);
                 }
-                self.wire.feed(t.link_id, t.at, &t.bytes);
+                self.wire.feed(t.link_id, t.at, &t.bytes, t.datagram);
             }
         }
     }
@@ -990,7 +990,11 @@ impl Facts<'_> {
         let rule = Rule::NoMixing;
         let mut problems = Vec::new();
         if let Some(t) = self.link_v2_at() {
-            let after: Vec<&Seen> = self.mine().filter(|f| f.t > t).collect();
+            // The C library's MAVLink 1 PROTOCOL_VERSION is handshake_v2_framing's failure.
+            let after: Vec<&Seen> = self
+                .mine()
+                .filter(|f| f.t > t && !f.v1_protocol_version)
+                .collect();
             let v1: Vec<&&Seen> = after.iter().filter(|f| f.version == Version::V1).collect();
             if let Some(f) = v1.first() {
                 problems.push(format!(
@@ -1147,7 +1151,7 @@ pub(super) fn fuzz_grade(data: &[u8]) -> Vec<Verdict> {
     for (i, chunk) in rest.chunks(piece).enumerate() {
         let at = mavstack_core::time::Instant::from_millis(i as u64 * 100);
         let link = if first & 0x80 != 0 { i % 2 } else { 0 };
-        wire.feed(LinkId::new(link as u32), at, chunk);
+        wire.feed(LinkId::new(link as u32), at, chunk, false);
     }
     wire.finish(mavstack_core::time::Instant::from_millis(
         (rest.len() / piece) as u64 * 100,

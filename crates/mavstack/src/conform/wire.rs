@@ -89,8 +89,16 @@ impl Wire {
         now.saturating_duration_since(self.started).as_secs_f64()
     }
 
-    /// Takes one input of `link` (a datagram or a stream read).
-    pub(crate) fn feed(&mut self, link: LinkId, at: Instant, mut data: &[u8]) {
+    /// Takes one input of `link`: a whole datagram (`datagram`: nothing of it waits for the
+    /// next one) or a stream read.
+    pub(crate) fn feed(&mut self, link: LinkId, at: Instant, data: &[u8], datagram: bool) {
+        self.push(link, at, data);
+        if datagram {
+            self.finish_link(link, at);
+        }
+    }
+
+    fn push(&mut self, link: LinkId, at: Instant, mut data: &[u8]) {
         let t = self.secs(at);
         let lookup = self.lookup;
         // Id 44 is looked at here: it is both MISSION_COUNT and the bogus MAVLink 1
@@ -128,6 +136,13 @@ impl Wire {
     /// Ends every link's input at `at`: a frame held back (the parser waits to see whether
     /// a checked frame starts inside one it cannot check) is taken now.
     pub(crate) fn finish(&mut self, at: Instant) {
+        let links: Vec<LinkId> = self.deframers.keys().copied().collect();
+        for link in links {
+            self.finish_link(link, at);
+        }
+    }
+
+    fn finish_link(&mut self, link: LinkId, at: Instant) {
         let t = self.secs(at);
         let lookup = self.lookup;
         let parser_lookup = move |id: u32| {
@@ -138,17 +153,17 @@ impl Wire {
             }
         };
         let mut found = Vec::new();
-        let mut bad = 0;
-        for deframer in self.deframers.values_mut() {
-            let bad_before = deframer.stats().bad_crc;
-            while let Some(item) = deframer.finish(&parser_lookup) {
-                found.push(match item {
-                    Item::Frame(f) => (f.as_bytes().to_vec(), false),
-                    Item::Unknown(f) => (f.as_bytes().to_vec(), true),
-                });
-            }
-            bad += deframer.stats().bad_crc - bad_before;
+        let Some(deframer) = self.deframers.get_mut(&link) else {
+            return;
+        };
+        let bad_before = deframer.stats().bad_crc;
+        while let Some(item) = deframer.finish(&parser_lookup) {
+            found.push(match item {
+                Item::Frame(f) => (f.as_bytes().to_vec(), false),
+                Item::Unknown(f) => (f.as_bytes().to_vec(), true),
+            });
         }
+        let bad = deframer.stats().bad_crc - bad_before;
         self.count_bad(bad, t);
         for (bytes, unknown) in found {
             self.take(t, &bytes, unknown);
