@@ -212,3 +212,46 @@ fn each_link_of_a_multilink_vehicle_is_graded_by_its_own_version_and_signing() {
     assert_eq!(status(&v1.1, "handshake_answer"), "n/a");
     assert_eq!(status(&signed.1, "signed_from_start"), "pass");
 }
+
+#[test]
+fn bad_usage_exits_2_naming_what() {
+    for (args, what) in [
+        (vec!["udpin:127.0.0.1:0", "--key", "zz"], "--key"),
+        (vec!["nonsense:1", "--json"], "nonsense"),
+        (vec!["udpin:127.0.0.1:0", "--role", "pilot"], "pilot"),
+        (
+            vec!["udpin:127.0.0.1:0", "--role", "gcs", "--key", KEY],
+            "--role gcs",
+        ),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_mavstack"))
+            .arg("conform")
+            .args(&args)
+            .output()
+            .expect("conform runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(what), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn nobody_heard_exits_1_with_heartbeat_failed() {
+    let port = free_port();
+    let out = Command::new(env!("CARGO_BIN_EXE_mavstack"))
+        .args([
+            "conform",
+            &format!("udpin:127.0.0.1:{port}"),
+            "--timeout",
+            "0.5",
+            "--json",
+        ])
+        .output()
+        .expect("conform runs");
+    assert_eq!(out.status.code(), Some(1));
+    let report: Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert_eq!(report["target"], Value::Null);
+    assert_eq!(status(&report, "heartbeat"), "fail");
+    assert_eq!(report["summary"]["fail"], 1);
+    assert_eq!(report["summary"]["n/a"], 14);
+}
