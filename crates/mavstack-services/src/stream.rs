@@ -3,13 +3,13 @@
 //! **Server** ([`StreamScheduler`]): the vehicle's table of which messages it streams at
 //! which interval. It answers MAV_CMD_SET_MESSAGE_INTERVAL (511) and
 //! MAV_CMD_REQUEST_MESSAGE (512) when its [`StreamScheduler::handle_command`] is called from
-//! the vehicle's [`CommandHandler`](crate::command::CommandHandler), and says when each
+//! the vehicle's [`CommandHandler`], and says when each
 //! message is due ([`StreamScheduler::poll_due`]); the vehicle builds the message itself,
 //! since only it knows the values. REQUEST_MESSAGE(MESSAGE_INTERVAL 244, id) is answered by
 //! the scheduler directly ([`StreamScheduler::poll_transmit`]).
 //!
 //! [`StreamServer`] puts a scheduler, its commands and a [`MessageSource`] together into one
-//! [`Service`](crate::Service), ready to run on a node.
+//! [`Service`], ready to run on a node.
 //!
 //! **Client**: [`set_message_interval`] and [`request_message`] build the commands to send
 //! with a [`CommandClient`](crate::command::CommandClient), and [`Subscriptions`] hands out
