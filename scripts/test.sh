@@ -5,6 +5,10 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 step() { printf '\n== %s\n' "$*"; }
+# A clean CI checkout builds everything once: incremental compilation would only add work.
+if [ "${CI:-}" = "true" ]; then
+    export CARGO_INCREMENTAL=0
+fi
 
 step "peers (pymavlink 2.4.50 in .venv)"
 MAVSTACK_PYTHON="$(scripts/setup-peers.sh)"
