@@ -6,7 +6,9 @@ use core::time::Duration;
 use mavstack_channel::{LinkVersion, ProtocolVersionAnswer};
 use mavstack_core::Message as _;
 use mavstack_core::wire::Version;
-use mavstack_dialects::common::{CommandInt, CommandLong, Heartbeat, MavCmd, ProtocolVersion};
+use mavstack_dialects::common::{
+    AutopilotVersion, CommandInt, CommandLong, Heartbeat, MavCmd, ProtocolVersion,
+};
 use mavstack_router::{LinkRole, VersionMode};
 use mavstack_sim::Autopilot;
 use mavstack_transport::clock;
@@ -195,43 +197,37 @@ pub async fn grade_ground_station(
     })
 }
 
-/// A handshake request: REQUEST_MESSAGE(300) or REQUEST_PROTOCOL_VERSION, long or int.
-fn is_request(f: &Seen) -> bool {
-    let (command, param1) = if f.is::<CommandLong>() {
+/// The command and param1 of a COMMAND_LONG or COMMAND_INT, and whether it was an INT.
+fn command_of(f: &Seen) -> Option<(MavCmd, f32, bool)> {
+    if f.is::<CommandLong>() {
         let c = f.decode::<CommandLong>();
-        (c.command, c.param1)
+        Some((c.command, c.param1, false))
     } else if f.is::<CommandInt>() {
         let c = f.decode::<CommandInt>();
-        (c.command, c.param1)
+        Some((c.command, c.param1, true))
     } else {
-        return false;
-    };
-    command == MavCmd::REQUEST_PROTOCOL_VERSION
-        || (command == MavCmd::REQUEST_MESSAGE && param1 == ProtocolVersion::ID as f32)
+        None
+    }
+}
+
+/// A handshake request: REQUEST_MESSAGE(300) or REQUEST_PROTOCOL_VERSION, long or int.
+fn is_request(f: &Seen) -> bool {
+    command_of(f).is_some_and(|(command, param1, _)| {
+        command == MavCmd::REQUEST_PROTOCOL_VERSION
+            || (command == MavCmd::REQUEST_MESSAGE && param1 == ProtocolVersion::ID as f32)
+    })
 }
 
 /// A request for AUTOPILOT_VERSION (REQUEST_MESSAGE(148) or REQUEST_AUTOPILOT_CAPABILITIES).
 fn asks_capabilities(f: &Seen) -> bool {
-    let (command, param1) = if f.is::<CommandLong>() {
-        let c = f.decode::<CommandLong>();
-        (c.command, c.param1)
-    } else if f.is::<CommandInt>() {
-        let c = f.decode::<CommandInt>();
-        (c.command, c.param1)
-    } else {
-        return false;
-    };
-    command == MavCmd::REQUEST_AUTOPILOT_CAPABILITIES
-        || (command == MavCmd::REQUEST_MESSAGE && param1 == 148.0)
+    command_of(f).is_some_and(|(command, param1, _)| {
+        command == MavCmd::REQUEST_AUTOPILOT_CAPABILITIES
+            || (command == MavCmd::REQUEST_MESSAGE && param1 == AutopilotVersion::ID as f32)
+    })
 }
 
 fn request_name(f: &Seen) -> String {
-    let int = f.is::<CommandInt>();
-    let command = if int {
-        f.decode::<CommandInt>().command
-    } else {
-        f.decode::<CommandLong>().command
-    };
+    let (command, _, int) = command_of(f).unwrap_or((MavCmd::REQUEST_MESSAGE, 0.0, false));
     format!(
         "{} as {}",
         if command == MavCmd::REQUEST_PROTOCOL_VERSION {

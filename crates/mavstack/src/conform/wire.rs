@@ -89,19 +89,22 @@ impl Wire {
         now.saturating_duration_since(self.started).as_secs_f64()
     }
 
-    /// Takes one input of `link`: a whole datagram (`datagram`: nothing of it waits for the
-    /// next one) or a stream read.
-    pub(crate) fn feed(&mut self, link: LinkId, at: Instant, data: &[u8], datagram: bool) {
-        self.push(link, at, data);
-        if datagram {
-            self.finish_link(link, at);
+    /// Ends every link's input at `at`: a frame held back (the parser waits to see whether
+    /// a checked frame starts inside one it cannot check) is taken now.
+    pub(crate) fn finish(&mut self, at: Instant) {
+        let links: Vec<LinkId> = self.deframers.keys().copied().collect();
+        for link in links {
+            self.feed(link, at, &[], true);
         }
     }
 
-    fn push(&mut self, link: LinkId, at: Instant, mut data: &[u8]) {
+    /// Takes one input of `link` and every frame found in it: a whole datagram (`end`:
+    /// nothing of it waits for the next one, so what the parser holds back is taken too) or a
+    /// stream read.
+    pub(crate) fn feed(&mut self, link: LinkId, at: Instant, mut data: &[u8], end: bool) {
         let t = self.secs(at);
         let lookup = self.lookup;
-        // Id 44 is looked at here: it is both MISSION_COUNT and the bogus MAVLink 1
+        // Id 44 is looked at in `take`: it is both MISSION_COUNT and the bogus MAVLink 1
         // PROTOCOL_VERSION.
         let parser_lookup = move |id: u32| {
             if id == V1_PROTOCOL_VERSION_ID {
@@ -110,58 +113,27 @@ impl Wire {
                 lookup(id)
             }
         };
+        let owned = |item: Item<'_>| match item {
+            Item::Frame(f) => (f.as_bytes().to_vec(), false),
+            Item::Unknown(f) => (f.as_bytes().to_vec(), true),
+        };
         let deframer = self.deframers.entry(link).or_default();
         let bad_before = deframer.stats().bad_crc;
         let mut found = Vec::new();
-        while !data.is_empty() {
+        loop {
             let n = deframer.push(data);
             data = &data[n..];
             while let Some(item) = deframer.next_item(&parser_lookup) {
-                found.push(match item {
-                    Item::Frame(f) => (f.as_bytes().to_vec(), false),
-                    Item::Unknown(f) => (f.as_bytes().to_vec(), true),
-                });
+                found.push(owned(item));
             }
-            if n == 0 {
+            if n == 0 || data.is_empty() {
                 break;
             }
         }
-        let bad = deframer.stats().bad_crc - bad_before;
-        self.count_bad(bad, t);
-        for (bytes, unknown) in found {
-            self.take(t, &bytes, unknown);
-        }
-    }
-
-    /// Ends every link's input at `at`: a frame held back (the parser waits to see whether
-    /// a checked frame starts inside one it cannot check) is taken now.
-    pub(crate) fn finish(&mut self, at: Instant) {
-        let links: Vec<LinkId> = self.deframers.keys().copied().collect();
-        for link in links {
-            self.finish_link(link, at);
-        }
-    }
-
-    fn finish_link(&mut self, link: LinkId, at: Instant) {
-        let t = self.secs(at);
-        let lookup = self.lookup;
-        let parser_lookup = move |id: u32| {
-            if id == V1_PROTOCOL_VERSION_ID {
-                None
-            } else {
-                lookup(id)
+        if end {
+            while let Some(item) = deframer.finish(&parser_lookup) {
+                found.push(owned(item));
             }
-        };
-        let mut found = Vec::new();
-        let Some(deframer) = self.deframers.get_mut(&link) else {
-            return;
-        };
-        let bad_before = deframer.stats().bad_crc;
-        while let Some(item) = deframer.finish(&parser_lookup) {
-            found.push(match item {
-                Item::Frame(f) => (f.as_bytes().to_vec(), false),
-                Item::Unknown(f) => (f.as_bytes().to_vec(), true),
-            });
         }
         let bad = deframer.stats().bad_crc - bad_before;
         self.count_bad(bad, t);
