@@ -8,8 +8,8 @@ use mavstack_core::signing::{self, SecretKey};
 use mavstack_core::wire::{FrameHeader, MAX_FRAME_LEN, Version, emit_message};
 use mavstack_dialects::common::{
     AutopilotVersion, CommandAck, CommandInt, CommandLong, Heartbeat, MavAutopilot, MavCmd,
-    MavFrame, MavMessage, MavModeFlag, MavProtocolCapability, MavResult, MavState, MavType,
-    ProtocolVersion, RadioStatus,
+    MavFrame, MavMessage, MavProtocolCapability, MavResult, MavState, MavType, ProtocolVersion,
+    RadioStatus,
 };
 use mavstack_transport::clock;
 
@@ -134,16 +134,8 @@ impl Session<'_> {
     }
 
     async fn heartbeat(&mut self) {
-        let hb = Heartbeat {
-            r#type: MavType::GCS,
-            autopilot: MavAutopilot::INVALID,
-            base_mode: MavModeFlag(0),
-            system_status: MavState::ACTIVE,
-            mavlink_version: 3,
-            ..Heartbeat::default()
-        };
         let version = self.heartbeat_version;
-        self.send(version, &hb).await;
+        self.send(version, &gcs_heartbeat()).await;
     }
 
     /// Reads the wire until `until` (seconds since the start) or until `done` says so,
