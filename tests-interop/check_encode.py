@@ -46,7 +46,6 @@ belong together.
 """
 
 import argparse
-import json
 import os
 import sys
 import time

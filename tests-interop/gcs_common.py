@@ -5,11 +5,12 @@ import json
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
 import time
+
+import scenario
 
 HOME = (-35.363261, 149.165230, 584.0)  # the vehicle's home: lat, lon, m AMSL
 
@@ -32,11 +33,7 @@ def mavstack_bin(argv_bin=None):
 
 
 def free_udp_port(host="127.0.0.1"):
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind((host, 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
+    return scenario.free_port(host=host)
 
 
 class Vehicle:

@@ -45,6 +45,7 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+from scenario import free_port  # noqa: E402
 from gcs_common import (  # noqa: E402
     HOME,
     Failure,
@@ -64,11 +65,7 @@ STEP_TIMEOUT = 20.0
 
 
 def free_tcp_port():
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
+    return free_port(socket.SOCK_STREAM)
 
 
 async def step(what, coro, timeout=STEP_TIMEOUT):

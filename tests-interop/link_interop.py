@@ -48,12 +48,7 @@ def fail(msg):
     print("FAIL: " + msg, file=sys.stderr)
 
 
-def free_port(kind=socket.SOCK_DGRAM):
-    s = socket.socket(socket.AF_INET, kind)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
+from scenario import free_port  # noqa: E402
 
 
 def messages(mav, n, sysid=7):

@@ -91,7 +91,7 @@ REQUEST_MESSAGE = M.MAV_CMD_REQUEST_MESSAGE  # 512
 PROTOCOL_VERSION_ID = M.MAVLINK_MSG_ID_PROTOCOL_VERSION  # 300
 SETTLE = 0.4  # s for frames in flight through the router to arrive
 
-from scenario import EPOCH_2015, check, fail, failures, free_port, signing_now  # noqa: E402,F401
+from scenario import check, fail, failures, free_port, signing_now  # noqa: E402
 
 
 # --------------------------------------------------------------------------------------------

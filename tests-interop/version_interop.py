@@ -83,7 +83,7 @@ UNSUPPORTED = M.MAV_RESULT_UNSUPPORTED
 KEY = hashlib.sha256(b"mavstack version interop").digest()
 OTHER_KEY = hashlib.sha256(b"not the vehicle's key").digest()
 
-from scenario import EPOCH_2015, check, fail, failures, free_port, signing_now  # noqa: E402,F401
+from scenario import check, fail, failures, free_port, signing_now  # noqa: E402
 
 
 class Rx:

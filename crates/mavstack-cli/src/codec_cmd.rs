@@ -1,21 +1,20 @@
 //! `mavstack decode` and `mavstack encode`: raw streams and tlogs ⇄ JSON lines.
 
-use core::fmt::Write as _;
 use std::io::{self, BufRead, Read, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, anyhow};
 use clap::Args;
-use mavstack_core::MAX_PAYLOAD_LEN;
 use mavstack_core::parse::{Item, SliceParser, Stats};
 use mavstack_core::signing::{self, SecretKey};
-use mavstack_core::wire::{Frame, FrameHeader, MAX_FRAME_LEN, Version, emit};
-use mavstack_dialect::codec::{self, Value};
-use mavstack_dialect::{Dialect, Message};
+use mavstack_core::wire::{Frame, MAX_FRAME_LEN};
+use mavstack_dialect::Message;
+use mavstack_dialect::codec;
+use mavstack_dialect::json::{self, EncodeDefaults, SignatureStatus};
+use mavstack_transport::tlog;
 use serde_json::Value as Json;
 
 use crate::Failure;
-use crate::json_frames::{push_fields, push_json_str, value_from_json};
 
 #[derive(Debug, Args)]
 pub(crate) struct DecodeArgs {
@@ -112,7 +111,7 @@ impl Counts {
     }
 }
 
-/// A frame as one JSON line, or `None` for an unknown id without `--keep-unknown`.
+/// A frame as one JSON line (appended to `out`), counting a signature that does not verify.
 pub(crate) fn frame_line(
     out: &mut String,
     frame: &Frame<&[u8]>,
@@ -121,92 +120,9 @@ pub(crate) fn frame_line(
     key: Option<&SecretKey>,
     counts: &mut Counts,
 ) {
-    out.push('{');
-    if let Some(ts) = ts_us {
-        let _ = write!(out, "\"ts_us\":{ts},");
+    if json::frame_line(out, frame, message, ts_us, key) == SignatureStatus::Invalid {
+        counts.bad_signature += 1;
     }
-    let _ = write!(
-        out,
-        "\"version\":{},\"seq\":{},\"sysid\":{},\"compid\":{},\"msgid\":{},\"name\":",
-        frame.version().number(),
-        frame.seq(),
-        frame.sysid(),
-        frame.compid(),
-        frame.msg_id()
-    );
-    match message {
-        Some(m) => {
-            push_json_str(out, &m.name);
-            out.push(',');
-            let values = codec::decode(m, frame.payload());
-            push_fields(out, m, &values);
-        }
-        None => {
-            out.push_str("null,\"payload_hex\":\"");
-            for b in frame.payload() {
-                let _ = write!(out, "{b:02x}");
-            }
-            out.push('"');
-        }
-    }
-    if let Some(sig) = frame.signature() {
-        let status = match key {
-            None => "unchecked",
-            Some(k) => match signing::verify(frame, k) {
-                Ok(()) => "valid",
-                Err(_) => {
-                    counts.bad_signature += 1;
-                    "invalid"
-                }
-            },
-        };
-        let _ = write!(
-            out,
-            ",\"signature\":{{\"link_id\":{},\"timestamp\":{},\"status\":\"{status}\"}}",
-            sig.link_id, sig.timestamp
-        );
-    }
-    out.push_str("}\n");
-}
-
-/// The frames of a tlog: each record is an 8-byte big-endian timestamp and one frame. A
-/// record that does not hold a frame is skipped byte by byte until one does.
-fn tlog_frames<'a>(
-    data: &'a [u8],
-    lookup: &impl Fn(u32) -> Option<u8>,
-    stats: &mut Stats,
-    mut each: impl FnMut(Item<'a>, u64),
-) {
-    stats.bytes = data.len() as u64;
-    let mut pos = 0;
-    while pos + 8 < data.len() {
-        let mut ts = [0u8; 8];
-        ts.copy_from_slice(&data[pos..pos + 8]);
-        let ts = u64::from_be_bytes(ts);
-        let rest = &data[pos + 8..];
-        if let Ok(frame) = Frame::new_checked(rest) {
-            let len = frame.frame_len();
-            let frame = Frame::new_unchecked(&rest[..len]);
-            match lookup(frame.msg_id()) {
-                Some(extra) if frame.check_crc(extra) => {
-                    stats.frames += 1;
-                    each(Item::Frame(frame), ts);
-                    pos += 8 + len;
-                    continue;
-                }
-                Some(_) => stats.bad_crc += 1,
-                None => {
-                    stats.unknown_id += 1;
-                    each(Item::Unknown(frame), ts);
-                    pos += 8 + len;
-                    continue;
-                }
-            }
-        }
-        stats.skipped_bytes += 1;
-        pos += 1;
-    }
-    stats.skipped_bytes += (data.len() - pos) as u64;
 }
 
 pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
@@ -284,10 +200,28 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
         }
     };
     if is_tlog {
+        // The reader checks each record's checksum through its own copy of the CRC table.
+        let crcs: std::collections::HashMap<u32, u8> = dialect
+            .messages
+            .iter()
+            .map(|m| (m.id, m.crc_extra))
+            .collect();
+        let mut reader =
+            tlog::Reader::new(&data[..]).with_crc_extra(move |id: u32| crcs.get(&id).copied());
         let mut stats = Stats::default();
-        tlog_frames(&data, &lookup, &mut stats, |item, ts| {
-            handle(item, Some(ts), &mut counts)
-        });
+        while let Some((ts, bytes)) = reader.read_record().context("reading the tlog")? {
+            let frame = Frame::new_unchecked(bytes);
+            if lookup(frame.msg_id()).is_some() {
+                stats.frames += 1;
+                handle(Item::Frame(frame), Some(ts), &mut counts);
+            } else {
+                stats.unknown_id += 1;
+                handle(Item::Unknown(frame), Some(ts), &mut counts);
+            }
+        }
+        let read = reader.stats();
+        (stats.bytes, stats.bad_crc, stats.skipped_bytes) =
+            (read.bytes, read.bad_crc, read.skipped_bytes);
         counts.parse = stats;
     } else {
         let mut parser = SliceParser::new(&data, lookup);
@@ -357,127 +291,6 @@ impl Progress {
     }
 }
 
-fn field_of<'o>(obj: &'o serde_json::Map<String, Json>, key: &str) -> Option<&'o Json> {
-    obj.get(key).filter(|v| !v.is_null())
-}
-
-fn small(obj: &serde_json::Map<String, Json>, key: &str, max: u64) -> Result<Option<u64>, String> {
-    match field_of(obj, key) {
-        None => Ok(None),
-        Some(v) => v
-            .as_u64()
-            .filter(|&n| n <= max)
-            .map(Some)
-            .ok_or_else(|| format!("{key}: {v} is not a number from 0 to {max}")),
-    }
-}
-
-/// Encodes one JSON object into `buf`; returns the frame length.
-fn encode_object(
-    obj: &serde_json::Map<String, Json>,
-    dialect: &Dialect,
-    args: &EncodeArgs,
-    key: Option<&SecretKey>,
-    seq: &mut u8,
-    buf: &mut [u8; MAX_FRAME_LEN],
-) -> Result<usize, String> {
-    let message = match (field_of(obj, "msgid"), field_of(obj, "name")) {
-        (Some(id), _) => {
-            let id = id
-                .as_u64()
-                .and_then(|i| u32::try_from(i).ok())
-                .ok_or_else(|| format!("msgid: {id} is not a message id"))?;
-            dialect
-                .message(id)
-                .ok_or_else(|| format!("message id {id} is not in dialect {}", dialect.name))?
-        }
-        (None, Some(Json::String(name))) => dialect
-            .message_by_name(name)
-            .ok_or_else(|| format!("message {name} is not in dialect {}", dialect.name))?,
-        _ => return Err("no \"msgid\" or \"name\"".to_owned()),
-    };
-    let version = match small(obj, "version", 2)? {
-        None | Some(2) => Version::V2,
-        Some(1) => Version::V1,
-        Some(v) => return Err(format!("version: {v} is neither 1 nor 2")),
-    };
-    let fields = match field_of(obj, "fields") {
-        None => serde_json::Map::new(),
-        Some(Json::Object(f)) => f.clone(),
-        Some(other) => return Err(format!("fields: expected an object, got {other}")),
-    };
-    if let Some(unknown) = fields.keys().find(|k| message.field(k).is_none()) {
-        return Err(format!("message {} has no field {unknown:?}", message.name));
-    }
-    let values: Vec<Value> = message
-        .fields
-        .iter()
-        .map(|f| {
-            fields
-                .get(&f.name)
-                .map_or_else(|| Ok(Value::zero(&f.ty)), |j| value_from_json(f, j))
-        })
-        .collect::<Result<_, _>>()?;
-    let mut payload = [0u8; MAX_PAYLOAD_LEN];
-    let len = codec::encode(message, &values, &mut payload).map_err(|e| e.to_string())?;
-    let this_seq = match small(obj, "seq", 255)? {
-        Some(s) => u8::try_from(s).unwrap_or(u8::MAX),
-        None => *seq,
-    };
-    *seq = this_seq.wrapping_add(1);
-    let header = FrameHeader {
-        version,
-        seq: this_seq,
-        sysid: small(obj, "sysid", 255)?.map_or(args.sysid, |v| u8::try_from(v).unwrap_or(u8::MAX)),
-        compid: small(obj, "compid", 255)?
-            .map_or(args.compid, |v| u8::try_from(v).unwrap_or(u8::MAX)),
-        signed: key.is_some() && version == Version::V2,
-    };
-    // MAVLink 1 carries the base fields only (as the C library sends them). An object whose
-    // extension fields are not all zero cannot be said that way: it goes out with the whole
-    // payload, as pymavlink sends it, so that decode(encode(x)) == x still holds.
-    let v1_len = if payload[message.min_len..len].iter().any(|&b| b != 0) {
-        message.max_len
-    } else {
-        message.min_len
-    };
-    let info = mavstack_core::MessageInfo {
-        id: message.id,
-        name: "",
-        crc_extra: message.crc_extra,
-        min_len: u8::try_from(v1_len).unwrap_or(u8::MAX),
-        max_len: u8::try_from(message.max_len).unwrap_or(u8::MAX),
-        target_system_offset: None,
-        target_component_offset: None,
-    };
-    let frame_len = emit(&header, &info, &payload[..len], buf).map_err(|e| e.to_string())?;
-    match key.filter(|_| header.signed) {
-        None => Ok(frame_len),
-        Some(k) => {
-            let sig = field_of(obj, "signature").and_then(Json::as_object);
-            let link_id = match sig.map(|s| small(s, "link_id", 255)).transpose()?.flatten() {
-                Some(l) => u8::try_from(l).unwrap_or(u8::MAX),
-                None => args.link_id,
-            };
-            let timestamp = match sig
-                .map(|s| small(s, "timestamp", signing::MAX_TIMESTAMP))
-                .transpose()?
-                .flatten()
-            {
-                Some(t) => t,
-                None => {
-                    let now = std::time::SystemTime::now()
-                        .duration_since(std::time::UNIX_EPOCH)
-                        .map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX));
-                    signing::timestamp_from_unix_micros(now)
-                }
-            };
-            signing::append_signature(buf, frame_len, link_id, timestamp, k)
-                .map_err(|e| e.to_string())
-        }
-    }
-}
-
 pub(crate) fn encode(args: &EncodeArgs) -> Result<(), Failure> {
     let dialect = crate::dialect_cmd::load(&args.dialect)?;
     let key = parse_key(args.key.as_deref())?;
@@ -498,6 +311,12 @@ pub(crate) fn encode(args: &EncodeArgs) -> Result<(), Failure> {
         .file
         .as_ref()
         .map_or_else(|| "stdin".to_owned(), |p| p.display().to_string());
+    let defaults = EncodeDefaults {
+        sysid: args.sysid,
+        compid: args.compid,
+        link_id: args.link_id,
+        timestamp: None,
+    };
     let mut seq = 0u8;
     let mut buf = [0u8; MAX_FRAME_LEN];
     for (n, line) in input.lines().enumerate() {
@@ -508,8 +327,8 @@ pub(crate) fn encode(args: &EncodeArgs) -> Result<(), Failure> {
         let at = |e: String| Failure::Input(anyhow!("{name}:{}: {e}", n + 1));
         let obj: serde_json::Map<String, Json> =
             serde_json::from_str(&line).map_err(|e| at(format!("not a JSON object: {e}")))?;
-        let len =
-            encode_object(&obj, &dialect, args, key.as_ref(), &mut seq, &mut buf).map_err(at)?;
+        let len = json::encode_object(&obj, &dialect, &defaults, key.as_ref(), &mut seq, &mut buf)
+            .map_err(|e| at(e.to_string()))?;
         sink.write_all(&buf[..len]).context("writing output")?;
     }
     sink.flush().context("writing output")?;

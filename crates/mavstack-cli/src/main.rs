@@ -9,7 +9,6 @@ mod demo_cmd;
 mod dialect_cmd;
 mod fast_count;
 mod gcs_cmd;
-mod json_frames;
 mod link_cmd;
 mod mission_file;
 mod probe_cmd;

@@ -1,15 +1,11 @@
 //! Mission plans on disk: QGroundControl's `QGC WPL 110` text format (also MAVProxy's and
-//! Mission Planner's; read and written by `mavstack_services::wpl`) and JSON.
-//!
-//! JSON: `{"mission_type": "mission", "items": [...]}`,
-//! each item with `seq`, `frame`, `command` (numbers), `current`, `autocontinue`,
-//! `param1`–`param4`, `x`/`y` (degE7 for global frames, as MISSION_ITEM_INT carries them),
-//! `z`; NaN parameters are `null`. Items read from either format are renumbered in order.
+//! Mission Planner's; `mavstack_services::wpl`) and JSON (`mavstack_services::mission_json`).
+//! Items read from either format are renumbered in order.
 
-use anyhow::{Context, anyhow, bail};
-use mavstack_dialects::common::{MavCmd, MavFrame, MavMissionType, MissionItemInt};
+use anyhow::{Context, anyhow};
+use mavstack_dialects::common::MissionItemInt;
+use mavstack_services::mission_json;
 use mavstack_services::wpl::{self, WplError};
-use serde_json::{Map, Value as Json, json};
 
 /// A QGC WPL 110 text's items; errors start with the line number (`2: ...`), as the file
 /// name is put before them (`plan.waypoints:2: ...`).
@@ -21,106 +17,11 @@ pub(crate) fn from_wpl(text: &str) -> anyhow::Result<Vec<MissionItemInt>> {
     })
 }
 
-/// The plan's type as JSON names it.
-pub(crate) fn type_name(t: MavMissionType) -> &'static str {
-    match t {
-        MavMissionType::FENCE => "fence",
-        MavMissionType::RALLY => "rally",
-        _ => "mission",
-    }
-}
-
-fn json_f32(v: f32) -> Json {
-    if v.is_finite() { json!(v) } else { Json::Null }
-}
-
-/// One item as a JSON object.
-pub(crate) fn item_json(it: &MissionItemInt) -> Json {
-    let mut m = Map::new();
-    m.insert("seq".into(), json!(it.seq));
-    m.insert("frame".into(), json!(it.frame.0));
-    m.insert("command".into(), json!(it.command.0));
-    if let Some(name) = it.command.name() {
-        m.insert("command_name".into(), json!(name));
-    }
-    m.insert("current".into(), json!(it.current));
-    m.insert("autocontinue".into(), json!(it.autocontinue));
-    m.insert("param1".into(), json_f32(it.param1));
-    m.insert("param2".into(), json_f32(it.param2));
-    m.insert("param3".into(), json_f32(it.param3));
-    m.insert("param4".into(), json_f32(it.param4));
-    m.insert("x".into(), json!(it.x));
-    m.insert("y".into(), json!(it.y));
-    m.insert("z".into(), json_f32(it.z));
-    Json::Object(m)
-}
-
-/// The plan as a JSON document.
-pub(crate) fn to_json(mission_type: MavMissionType, items: &[MissionItemInt]) -> Json {
-    json!({
-        "mission_type": type_name(mission_type),
-        "items": items.iter().map(item_json).collect::<Vec<_>>(),
-    })
-}
+pub(crate) use mavstack_services::mission_json::{to_json, type_name};
 
 /// A JSON plan's items; errors name the item and field.
 pub(crate) fn from_json(text: &str) -> anyhow::Result<Vec<MissionItemInt>> {
-    let doc: Json = serde_json::from_str(text).context("not JSON")?;
-    let items = doc
-        .get("items")
-        .and_then(Json::as_array)
-        .ok_or_else(|| anyhow!("expected an object with an \"items\" array"))?;
-    items
-        .iter()
-        .enumerate()
-        .map(|(i, v)| json_item(v, i).map_err(|e| anyhow!("item {i}: {e}")))
-        .collect()
-}
-
-fn json_item(v: &Json, seq: usize) -> anyhow::Result<MissionItemInt> {
-    let int = |key: &str, default: Option<i64>| -> anyhow::Result<i64> {
-        match v.get(key) {
-            None => default.ok_or_else(|| anyhow!("missing \"{key}\"")),
-            Some(x) => x
-                .as_i64()
-                .ok_or_else(|| anyhow!("\"{key}\" must be an integer, got {x}")),
-        }
-    };
-    let float = |key: &str| -> anyhow::Result<f32> {
-        match v.get(key) {
-            None | Some(Json::Null) => Ok(if key == "z" { 0.0 } else { f32::NAN }),
-            Some(x) => x
-                .as_f64()
-                .map(|f| f as f32)
-                .ok_or_else(|| anyhow!("\"{key}\" must be a number or null, got {x}")),
-        }
-    };
-    let ranged = |key: &str, value: i64, max: i64| -> anyhow::Result<i64> {
-        if (0..=max).contains(&value) {
-            Ok(value)
-        } else {
-            bail!("\"{key}\" {value} is out of range 0-{max}")
-        }
-    };
-    let coordinate = |key: &str| -> anyhow::Result<i32> {
-        let x = int(key, Some(0))?;
-        i32::try_from(x).map_err(|_| anyhow!("\"{key}\" {x} does not fit degE7"))
-    };
-    Ok(MissionItemInt {
-        seq: u16::try_from(seq).map_err(|_| anyhow!("more than 65,535 items"))?,
-        frame: MavFrame(ranged("frame", int("frame", None)?, 255)? as u8),
-        command: MavCmd(ranged("command", int("command", None)?, 65_535)? as u16),
-        current: u8::from(int("current", Some(0))? != 0),
-        autocontinue: u8::from(int("autocontinue", Some(1))? != 0),
-        param1: float("param1")?,
-        param2: float("param2")?,
-        param3: float("param3")?,
-        param4: float("param4")?,
-        x: coordinate("x")?,
-        y: coordinate("y")?,
-        z: float("z")?,
-        ..MissionItemInt::default()
-    })
+    mission_json::parse(text).map_err(|e| anyhow!("{e}"))
 }
 
 /// Reads a plan, JSON for `.json` files and WPL otherwise; errors name the file.
@@ -137,6 +38,7 @@ pub(crate) fn load(path: &str) -> anyhow::Result<Vec<MissionItemInt>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mavstack_dialects::common::{MavCmd, MavMissionType};
 
     const PLAN: &str = "QGC WPL 110\n\
         0\t1\t0\t16\t0\t0\t0\t0\t-35.36326100\t149.16523000\t584.000000\t1\n\

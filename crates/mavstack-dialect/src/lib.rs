@@ -18,6 +18,7 @@
 //! - Every [`Error`] names the file, line and column and what is wrong.
 //! - [`codec`] decodes a payload into [`codec::Value`]s and encodes values into a payload,
 //!   for any message of a dialect loaded at run time.
+//! - `json` (feature `json`) writes frames as JSON lines and reads them back.
 //!
 //! ```
 //! let dialect = mavstack_dialect::load("ardupilotmega")?;
@@ -32,6 +33,8 @@
 pub mod builtin;
 pub mod codec;
 mod error;
+#[cfg(feature = "json")]
+pub mod json;
 pub mod layout;
 mod loader;
 pub mod model;

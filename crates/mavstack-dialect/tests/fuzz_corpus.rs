@@ -61,3 +61,18 @@ proptest! {
         mavstack_dialect::fuzz_dialect_xml(text.as_bytes());
     }
 }
+
+/// The `json_frame` seeds: JSON lines pymavlink wrote for frames it packed
+/// (fuzz/make_seeds.py), and hand-written edge cases, each a fixed point of encode/decode.
+#[cfg(feature = "json")]
+#[test]
+fn json_frame_seeds() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/json_frame");
+    let mut count = 0;
+    for entry in std::fs::read_dir(&dir).expect("corpus folder exists") {
+        let data = std::fs::read(entry.expect("readable entry").path()).expect("readable file");
+        mavstack_dialect::json::fuzz_json_frame(&data);
+        count += 1;
+    }
+    assert!(count >= 20, "only {count} seeds in {}", dir.display());
+}

@@ -76,10 +76,11 @@ pub fn fuzz_link_options(data: &[u8]) {
 /// Fuzzing entry point for the router: the data itself picks, piece by piece, which of six
 /// links (MAVLink 1, 2, auto, signed, a second signed key, trusted) a piece arrives on,
 /// whether as a datagram or a stream, and how far time moves; everything emitted is drained
-/// and the router's invariants are checked on every frame written: never onto the link it
-/// came from... (the link of origin is not visible in a transmit, so the checks are the
-/// framing ones): a `version=1` link gets only MAVLink 1 frames with ids up to 255, a signed
-/// link only frames that verify with its key, other links no signed frames.
+/// and the router's invariants are checked on every frame written: a `version=1` link gets
+/// only MAVLink 1 frames with ids up to 255, a signed link only frames that verify with its
+/// key, other links no signed frames; and no frame goes back to the only link it came in on
+/// (a frame is known by its seq, sysid, compid and message id, which conversions keep: one
+/// written to link L whose header is in L's input and in no other link's input came back).
 #[doc(hidden)]
 pub fn fuzz_router(data: &[u8]) {
     use mavstack_channel::SigningConfig;
@@ -114,10 +115,13 @@ pub fn fuzz_router(data: &[u8]) {
     let mut now = Instant::from_secs(1_767_225_600);
     let mut buf = [0u8; MAX_FRAME_LEN];
     let mut rest = data;
+    let mut inputs = alloc::vec![alloc::vec::Vec::new(); links.len()];
     while let Some((&control, tail)) = rest.split_first() {
         let (piece, after) = tail.split_at(usize::from(control >> 3).min(tail.len()));
         rest = after;
-        let link = links[usize::from(control & 7) % links.len()];
+        let from = usize::from(control & 7) % links.len();
+        inputs[from].extend_from_slice(piece);
+        let link = links[from];
         if control & 0x80 == 0 {
             router.handle_datagram(now, link, piece);
         } else {
@@ -149,7 +153,31 @@ pub fn fuzz_router(data: &[u8]) {
                 ),
                 _ => assert!(!frame.is_signed(), "a signature on a link without a key"),
             }
+            let id = (frame.seq(), frame.sysid(), frame.compid(), frame.msg_id());
+            if let Some(own) = inputs.get(index) {
+                let elsewhere = inputs
+                    .iter()
+                    .enumerate()
+                    .any(|(i, input)| i != index && carries(input, id));
+                assert!(
+                    elsewhere || !carries(own, id),
+                    "a frame went back to the link it came from"
+                );
+            }
         }
         let _ = router.poll_timeout();
     }
+}
+
+/// Whether `input` holds a MAVLink 1 or 2 header with this seq, sysid, compid and message
+/// id anywhere (lengths and checksums aside: more than the router accepts, never less).
+fn carries(input: &[u8], (seq, sysid, compid, msg_id): (u8, u8, u8, u32)) -> bool {
+    let id = msg_id.to_le_bytes();
+    input.windows(10).any(|w| {
+        w[0] == mavstack_core::wire::STX_V2 && w[4..10] == [seq, sysid, compid, id[0], id[1], id[2]]
+    }) || input.windows(6).any(|w| {
+        w[0] == mavstack_core::wire::STX_V1
+            && msg_id <= 255
+            && w[2..6] == [seq, sysid, compid, id[0]]
+    })
 }

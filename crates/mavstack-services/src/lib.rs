@@ -69,6 +69,7 @@
 //!
 //! - `std` (default): links the standard library; nothing in the crate needs it. Without it
 //!   the crate is `no_std` and needs only `alloc` (for its tables and queues).
+//! - `json`: mission plans as JSON ([`mission_json`]; with `std`).
 //!
 //! # Example
 //!
@@ -118,13 +119,19 @@ extern crate alloc;
 extern crate std;
 
 pub mod command;
+mod fuzzing;
 pub mod heartbeat;
 pub mod mission;
+#[cfg(feature = "json")]
+pub mod mission_json;
 pub mod param;
 mod rtt;
 pub mod stream;
 pub mod timesync;
 pub mod wpl;
+
+#[doc(hidden)]
+pub use fuzzing::{HEAP_BOUND, fuzz_services};
 
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::MavMessage;

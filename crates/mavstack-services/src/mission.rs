@@ -36,6 +36,9 @@ use mavstack_dialects::common::{
 use crate::rtt::Rtt;
 use crate::{Address, Outgoing, Service};
 
+/// Items a transfer makes room for before they arrive.
+const PREALLOCATED_ITEMS: usize = 64;
+
 /// Timeouts and retries of both roles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct MissionConfig {
@@ -702,7 +705,9 @@ impl MissionClient {
                 let next = AwaitingItem {
                     seq: 0,
                     count: c.count,
-                    items: Vec::with_capacity(usize::from(c.count)),
+                    // Room for the first items only: a count is a claim (any peer may announce
+                    // 65,535 items), and the list grows as items really arrive.
+                    items: Vec::with_capacity(usize::from(c.count).min(PREALLOCATED_ITEMS)),
                     attempts: 1,
                     deadline: now + self.item_wait(),
                 };
@@ -1058,7 +1063,9 @@ impl MissionServer {
             peer: from,
             mission_type: ty,
             count: c.count,
-            items: Vec::with_capacity(usize::from(c.count)),
+            // Room for the first items only: a count is a claim (any peer may announce
+            // 65,535 items), and the list grows as items really arrive.
+            items: Vec::with_capacity(usize::from(c.count).min(PREALLOCATED_ITEMS)),
             attempts: 1,
             deadline: now + self.rtt.timeout(self.config.item_timeout),
             sent: now,

@@ -479,6 +479,84 @@ impl<R: Read> Iterator for Reader<R> {
     }
 }
 
+/// Fuzzing entry point for tlog records: `data` is read as a tlog, once from one slice and
+/// once through a reader that hands it over in pieces whose sizes the data picks, with the
+/// checksums of HEARTBEAT, COMMAND_LONG and one id above 255 known. Both must give the same
+/// records; every record must be a whole frame (with a right checksum when its id is
+/// known); and the records and the skipped bytes must add up to the input.
+#[doc(hidden)]
+pub fn fuzz_tlog(data: &[u8]) {
+    /// Hands the input over in pieces of 1 to 64 bytes, sizes cycling through the input.
+    struct Pieces<'a> {
+        data: &'a [u8],
+        at: usize,
+    }
+    impl Read for Pieces<'_> {
+        fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+            let rest = &self.data[self.at..];
+            if rest.is_empty() {
+                return Ok(0);
+            }
+            let size = usize::from(self.data[self.at % self.data.len()] & 63) + 1;
+            let n = size.min(rest.len()).min(buf.len());
+            buf[..n].copy_from_slice(&rest[..n]);
+            self.at += n;
+            Ok(n)
+        }
+    }
+    let lookup = |id: u32| match id {
+        0 => Some(50u8),
+        76 => Some(152),
+        300 => Some(217),
+        _ => None,
+    };
+    let read_all = |reader: &mut dyn FnMut() -> Option<(u64, Vec<u8>)>| {
+        let mut records = Vec::new();
+        while let Some(record) = reader() {
+            records.push(record);
+        }
+        records
+    };
+    let mut whole = Reader::new(data).with_crc_extra(lookup);
+    let from_slice = read_all(&mut || {
+        whole
+            .read_record()
+            .expect("a slice does not fail")
+            .map(|(ts, f)| (ts, f.to_vec()))
+    });
+    let mut pieces = Reader::new(Pieces { data, at: 0 }).with_crc_extra(lookup);
+    let from_pieces = read_all(&mut || {
+        pieces
+            .read_record()
+            .expect("the pieces do not fail")
+            .map(|(ts, f)| (ts, f.to_vec()))
+    });
+    assert_eq!(from_slice, from_pieces, "the records depend on the reads");
+    assert_eq!(
+        whole.stats(),
+        pieces.stats(),
+        "the counts depend on the reads"
+    );
+    let mut used = whole.stats().skipped_bytes;
+    for (_, bytes) in &from_slice {
+        let frame = Frame::new_checked(&bytes[..]).expect("a record holds a frame");
+        assert_eq!(
+            frame.frame_len(),
+            bytes.len(),
+            "a record is one whole frame"
+        );
+        if let Some(extra) = lookup(frame.msg_id()) {
+            assert!(frame.check_crc(extra), "a record with a bad checksum");
+        }
+        used += (TIMESTAMP_LEN + bytes.len()) as u64;
+    }
+    assert_eq!(
+        used,
+        data.len() as u64,
+        "records and skipped bytes are not the input"
+    );
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -88,3 +88,33 @@ impl LinkSpec {
         Ok(Self { conn, config })
     }
 }
+
+/// Fuzzing entry point for link strings (connection string and options): any text parses to
+/// a link or to an error, never a panic; a parsed connection writes back to a string that
+/// parses to the same connection; and neither an error nor the redacted text ever shows the
+/// value of a `key` option.
+#[doc(hidden)]
+pub fn fuzz_link_spec(data: &[u8]) {
+    let text = String::from_utf8_lossy(data);
+    let shown = match LinkSpec::parse(&text, &|name| (name == "ATTITUDE").then_some(30)) {
+        Ok(spec) => {
+            let written = spec.conn.to_string();
+            assert_eq!(
+                written.parse::<ConnSpec>().as_ref(),
+                Ok(&spec.conn),
+                "a connection does not read back from {written:?}"
+            );
+            redacted(&text)
+        }
+        Err(e) => e.to_string(),
+    };
+    let opts = text.split_once('?').map_or("", |(_, o)| o);
+    for key in opts.split('&').filter_map(|o| o.strip_prefix("key=")) {
+        // A value shorter than a few characters can appear anywhere by chance, and one that
+        // is also written elsewhere in the text may be shown for that.
+        let elsewhere = text.replacen(&format!("key={key}"), "", 1).contains(key);
+        if key.len() >= 8 && !elsewhere && !key.contains("***") {
+            assert!(!shown.contains(key), "a key shown in {shown:?}");
+        }
+    }
+}

@@ -1,5 +1,5 @@
-//! The seed corpora of the `router_conf`, `link_options` and `conform_wire` fuzz targets,
-//! replayed on stable.
+//! The seed corpora of the `router_conf`, `link_options`, `link_spec` and `conform_wire`
+//! fuzz targets, replayed on stable.
 
 use std::path::Path;
 
@@ -23,6 +23,11 @@ fn router_conf_seeds() {
 #[test]
 fn link_options_seeds() {
     replay("link_options", mavstack::router::fuzz_link_options);
+}
+
+#[test]
+fn link_spec_seeds() {
+    replay("link_spec", mavstack::link_spec::fuzz_link_spec);
 }
 
 #[cfg(feature = "sim")]

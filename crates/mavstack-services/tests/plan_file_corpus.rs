@@ -1,5 +1,5 @@
-//! The seed corpus of the `wpl` fuzz target, replayed on stable, and the errors and units
-//! of the format.
+//! The seed corpora of the `wpl` and `mission_json` fuzz targets, replayed on stable, and
+//! the errors and units of the WPL format.
 
 use std::path::Path;
 
@@ -13,6 +13,19 @@ fn wpl_seeds() {
     for entry in std::fs::read_dir(&dir).expect("corpus directory") {
         let path = entry.expect("entry").path();
         wpl::fuzz_wpl(&std::fs::read(&path).expect("seed"));
+        n += 1;
+    }
+    assert!(n >= 4, "seed corpus missing: {}", dir.display());
+}
+
+#[cfg(feature = "json")]
+#[test]
+fn mission_json_seeds() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/mission_json");
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).expect("corpus directory") {
+        let data = std::fs::read(entry.expect("entry").path()).expect("seed");
+        mavstack_services::mission_json::fuzz_mission_json(&data);
         n += 1;
     }
     assert!(n >= 4, "seed corpus missing: {}", dir.display());
