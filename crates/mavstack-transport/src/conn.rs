@@ -482,7 +482,11 @@ fn host_port(
 
 /// `DEVICE:BAUD` or `DEVICE,BAUD` (split at the last separator: device names may hold colons).
 fn serial(input: &str, rest: &str, expected: &'static str) -> Result<ConnSpec, ConnSpecError> {
-    let split = rest.rsplit_once(',').or_else(|| rest.rsplit_once(':'));
+    // The baud rate follows the last separator: a device path may hold either (by-path names
+    // have colons, any name may have commas), a baud rate neither.
+    let split = rest
+        .rfind([',', ':'])
+        .map(|at| (&rest[..at], &rest[at + 1..]));
     let Some((device, baud)) = split else {
         if rest.is_empty() {
             return Err(ConnSpecError::MissingDevice {
@@ -608,6 +612,12 @@ mod tests {
                 57600
             )
         );
+        // A comma in the device name (found by the link_spec fuzz target): the written form
+        // reads back.
+        let odd = p("/tmp/a,b,57600");
+        assert_eq!(odd, s("/tmp/a,b", 57600));
+        assert_eq!(p(&odd.to_string()), odd);
+        assert_eq!(p("serial:/tmp/a,b:9600"), s("/tmp/a,b", 9600));
     }
 
     #[test]
