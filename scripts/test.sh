@@ -1,10 +1,15 @@
 #!/usr/bin/env bash
 # The whole test suite, exactly what CI runs (.ci/run calls this script):
-# peers, formatting, lints, every test and doctest, docs, and a small feature matrix.
+# peers, formatting, lints, every test and doctest, every fuzz target for a few seconds, docs,
+# and a small feature matrix.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
-step() { printf '\n== %s\n' "$*"; }
+last_step=$SECONDS
+step() {
+    printf '\n== %s   (previous step: %d s; %d s in all)\n' "$*" $((SECONDS - last_step)) "$SECONDS"
+    last_step=$SECONDS
+}
 # A clean CI checkout builds everything once: incremental compilation would only add work.
 if [ "${CI:-}" = "true" ]; then
     export CARGO_INCREMENTAL=0
@@ -44,6 +49,11 @@ example mission_upload "uploaded 6 items from the built-in plan" "read back 6 it
 example companion "companion ← ATTITUDE from 1/1" "ground station ← MAV_SYS_ID = 1 (through the companion)" \
     "companion link fc" "companion link gcs"
 example vehicle_in_test "RTL_ALT set to 3000, arming MAV_RESULT_ACCEPTED"
+
+step "fuzz: every target for ${FUZZ_SECONDS:-10} s on nightly (a crash fails, kept as a regression seed)"
+# Without the address sanitizer: quicker to build and to run, and the code under test is safe
+# Rust (long campaigns by hand use it: scripts/fuzz.sh 480).
+FUZZ_SANITIZER=none FUZZ_JOBS=2 bash scripts/fuzz.sh "${FUZZ_SECONDS:-10}"
 
 step "feature matrix"
 # Type-checked without codegen (what a feature combination can break is whether it compiles).
