@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Writes the seed corpora of the fuzz targets whose seeds come from pymavlink (the peer):
-json_frame, tlog and services. Run with the project's virtualenv (scripts/setup-peers.sh):
+json_frames, tlog and services. Run with the project's virtualenv (scripts/setup-peers.sh):
 
     .venv/bin/python fuzz/make_seeds.py
 
@@ -50,7 +50,7 @@ def json_frame_seeds(rng):
             lines = f.read().splitlines()
     picked = rng.sample(lines, 48)
     for i in range(0, len(picked), 2):
-        write("json_frame", "pymavlink_%02d" % (i // 2), b"\n".join(picked[i:i + 2]) + b"\n")
+        write("json_frames", "pymavlink_%02d" % (i // 2), b"\n".join(picked[i:i + 2]) + b"\n")
     hand = [
         b'{"name":"HEARTBEAT","fields":{"type":2,"autopilot":3,"base_mode":81}}',
         b'{"msgid":30,"version":1,"fields":{"roll":"NaN","pitch":"inf","yaw":"-inf"}}',
@@ -62,7 +62,7 @@ def json_frame_seeds(rng):
         b'{"name":"NOPE"}\n{"msgid":99999999}\n{"fields":{}}\n{"name":"HEARTBEAT","fields":{"type":300}}',
     ]
     for i, line in enumerate(hand):
-        write("json_frame", "hand_%02d" % i, line + b"\n")
+        write("json_frames", "hand_%02d" % i, line + b"\n")
 
 
 def tlog_seeds(rng):

@@ -6,11 +6,12 @@
 # - Installs cargo-fuzz if it is missing; needs the nightly toolchain (`rustup toolchain list`).
 # - Each target starts from its committed seeds (fuzz/corpus/TARGET, only read) and from what
 #   earlier runs on this machine found (fuzz/work/TARGET, not committed); it runs for SECONDS.
-# - A crash (a panic: a broken property or an unexpected failure) is minimised with
-#   `cargo fuzz tmin` and kept as a regression seed, fuzz/corpus/TARGET/regress-<hash>, which
-#   the ordinary tests replay on stable from then on; the script then fails.
-# - Prints, per target, the executions, executions per second and corpus size, and a table at
-#   the end; the same as JSON lines in fuzz/work/summary.jsonl.
+# - A crash (a panic: a broken property or an unexpected failure) is kept under
+#   fuzz/artifacts/TARGET, minimised with `cargo fuzz tmin` and kept as a regression seed,
+#   fuzz/corpus/TARGET/regress-<hash>, which the ordinary tests replay on stable from then
+#   on; the script then fails.
+# - Prints a line per target as it ends (executions, executions per second, corpus size,
+#   crashes), and appends the same as a JSON line to fuzz/work/summary.jsonl.
 #
 # Environment: FUZZ_JOBS (targets run at once; default: the number of cores),
 # FUZZ_SANITIZER (address, the default, or none: faster to build and run, for CI),
@@ -69,29 +70,29 @@ echo "fuzz.sh: built in $(($(date +%s) - started)) s"
 # shellcheck disable=SC2086
 run_one() {
     local t="$1" log="$work/$1.log" out
-    mkdir -p "$work/$t" "$work/artifacts/$t"
+    mkdir -p "$work/$t" "$root/fuzz/artifacts/$t"
     local before
     before=$(find "$work/$t" -type f | wc -l)
     local status=0
     cargo +nightly fuzz run $flags "$t" "$work/$t" "corpus/$t" -- \
         -max_total_time="$seconds" -print_final_stats=1 -timeout=10 -rss_limit_mb=2048 \
-        -artifact_prefix="$work/artifacts/$t/" >"$log" 2>&1 || status=$?
+        -artifact_prefix="$root/fuzz/artifacts/$t/" >"$log" 2>&1 || status=$?
     local execs rate after crashes=0
     execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
     rate=$(sed -n 's/^stat::average_exec_per_sec: *//p' "$log" | tail -1)
     after=$(find "$work/$t" -type f | wc -l)
     if [ "$status" -ne 0 ]; then
-        for crash in "$work/artifacts/$t"/crash-* "$work/artifacts/$t"/oom-* "$work/artifacts/$t"/timeout-*; do
+        for crash in "$root/fuzz/artifacts/$t"/crash-* "$root/fuzz/artifacts/$t"/oom-* "$root/fuzz/artifacts/$t"/timeout-*; do
             [ -f "$crash" ] || continue
             crashes=$((crashes + 1))
-            local min="$work/artifacts/$t/min-$(basename "$crash")"
+            local min="$root/fuzz/artifacts/$t/min-$(basename "$crash")"
             cargo +nightly fuzz tmin $flags "$t" "$crash" -- -exact_artifact_path="$min" \
                 >>"$log" 2>&1 || true
             [ -f "$min" ] || min="$crash"
             local seed="corpus/$t/regress-$(sha1sum "$min" | cut -c1-12)"
             cp "$min" "$seed"
             echo "fuzz.sh: $t crashed; regression seed $seed (log: $log)" >&2
-            rm -f "$crash"
+            mv "$crash" "$(dirname "$crash")/seeded-$(basename "$crash")"
         done
         [ "$crashes" -gt 0 ] || { echo "fuzz.sh: $t failed without a crash input (log: $log):" >&2; tail -20 "$log" >&2; }
     fi
@@ -103,7 +104,7 @@ run_one() {
     [ "$status" -eq 0 ]
 }
 export -f run_one
-export seconds work flags
+export seconds work flags root
 
 echo "fuzz.sh: ${#targets[@]} targets x ${seconds} s, ${jobs} at once"
 failed=0

@@ -47,6 +47,35 @@ pub mod wire;
 pub use crc::Crc16;
 pub use message::{MAX_PAYLOAD_LEN, Message, MessageInfo, MessageSet, UnknownMessage};
 
+/// The seeds of fuzz target `target` (`fuzz/corpus/TARGET` in the source tree), in file-name
+/// order, for the tests that replay them on stable.
+///
+/// # Panics
+/// If the folder cannot be read or holds fewer than `at_least` seeds.
+#[cfg(feature = "std")]
+#[doc(hidden)]
+#[must_use]
+pub fn fuzz_seeds(target: &str, at_least: usize) -> std::vec::Vec<std::vec::Vec<u8>> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fuzz/corpus")
+        .join(target);
+    let mut paths: std::vec::Vec<_> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("seed corpus {}: {e}", dir.display()))
+        .map(|entry| entry.expect("a readable folder entry").path())
+        .collect();
+    paths.sort();
+    assert!(
+        paths.len() >= at_least,
+        "{} seeds in {}, expected at least {at_least}",
+        paths.len(),
+        dir.display()
+    );
+    paths
+        .iter()
+        .map(|p| std::fs::read(p).unwrap_or_else(|e| panic!("seed {}: {e}", p.display())))
+        .collect()
+}
+
 /// Fuzzing entry point for the parsers: runs `data` through the slice parser and, split at
 /// every byte boundary the data itself chooses, through the streaming deframer, and checks
 /// that both find the same frames. Never panics unless they disagree (a bug).

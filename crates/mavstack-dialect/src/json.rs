@@ -325,6 +325,12 @@ impl Default for EncodeDefaults {
 #[error("{0}")]
 pub struct JsonError(String);
 
+impl From<String> for JsonError {
+    fn from(message: String) -> Self {
+        Self(message)
+    }
+}
+
 fn field_of<'o>(obj: &'o Map<String, Json>, key: &str) -> Option<&'o Json> {
     obj.get(key).filter(|v| !v.is_null())
 }
@@ -359,17 +365,6 @@ pub fn encode_object(
     seq: &mut u8,
     buf: &mut [u8; MAX_FRAME_LEN],
 ) -> Result<usize, JsonError> {
-    encode(obj, dialect, defaults, key, seq, buf).map_err(JsonError)
-}
-
-fn encode(
-    obj: &Map<String, Json>,
-    dialect: &Dialect,
-    defaults: &EncodeDefaults,
-    key: Option<&SecretKey>,
-    seq: &mut u8,
-    buf: &mut [u8; MAX_FRAME_LEN],
-) -> Result<usize, String> {
     let message = match (field_of(obj, "msgid"), field_of(obj, "name")) {
         (Some(id), _) => {
             let id = id
@@ -383,21 +378,28 @@ fn encode(
         (None, Some(Json::String(name))) => dialect
             .message_by_name(name)
             .ok_or_else(|| format!("message {name} is not in dialect {}", dialect.name))?,
-        _ => return Err("no \"msgid\" or \"name\"".to_owned()),
+        _ => return Err(JsonError("no \"msgid\" or \"name\"".to_owned())),
     };
     let version = match small(obj, "version", 2)? {
         None | Some(2) => Version::V2,
         Some(1) => Version::V1,
-        Some(v) => return Err(format!("version: {v} is neither 1 nor 2")),
+        Some(v) => return Err(JsonError(format!("version: {v} is neither 1 nor 2"))),
     };
     let empty = Map::new();
     let fields = match field_of(obj, "fields") {
         None => &empty,
         Some(Json::Object(f)) => f,
-        Some(other) => return Err(format!("fields: expected an object, got {other}")),
+        Some(other) => {
+            return Err(JsonError(format!(
+                "fields: expected an object, got {other}"
+            )));
+        }
     };
     if let Some(unknown) = fields.keys().find(|k| message.field(k).is_none()) {
-        return Err(format!("message {} has no field {unknown:?}", message.name));
+        return Err(JsonError(format!(
+            "message {} has no field {unknown:?}",
+            message.name
+        )));
     }
     let values: Vec<Value> = message
         .fields
@@ -409,7 +411,8 @@ fn encode(
         })
         .collect::<Result<_, _>>()?;
     let mut payload = [0u8; MAX_PAYLOAD_LEN];
-    let len = codec::encode(message, &values, &mut payload).map_err(|e| e.to_string())?;
+    let len =
+        codec::encode(message, &values, &mut payload).map_err(|e| JsonError(e.to_string()))?;
     let this_seq = byte(obj, "seq", *seq)?;
     *seq = this_seq.wrapping_add(1);
     let header = FrameHeader {
@@ -436,7 +439,8 @@ fn encode(
         target_system_offset: None,
         target_component_offset: None,
     };
-    let frame_len = emit(&header, &info, &payload[..len], buf).map_err(|e| e.to_string())?;
+    let frame_len =
+        emit(&header, &info, &payload[..len], buf).map_err(|e| JsonError(e.to_string()))?;
     let Some(k) = key.filter(|_| header.signed) else {
         return Ok(frame_len);
     };
@@ -455,7 +459,8 @@ fn encode(
             .map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX));
         signing::timestamp_from_unix_micros(now)
     });
-    signing::append_signature(buf, frame_len, link_id, timestamp, k).map_err(|e| e.to_string())
+    signing::append_signature(buf, frame_len, link_id, timestamp, k)
+        .map_err(|e| JsonError(e.to_string()))
 }
 
 /// Fuzzing entry point for JSON frame objects: every line of `data` that is a JSON object
@@ -464,7 +469,7 @@ fn encode(
 /// encodes again to a frame with the same JSON line (a line is a fixed point of decode ∘
 /// encode). Never panics unless that fails.
 #[doc(hidden)]
-pub fn fuzz_json_frame(data: &[u8]) {
+pub fn fuzz_json_frames(data: &[u8]) {
     static COMMON: std::sync::OnceLock<Option<Dialect>> = std::sync::OnceLock::new();
     let Some(dialect) = COMMON.get_or_init(|| crate::load("common").ok()) else {
         return;

@@ -1,21 +1,13 @@
 //! Replays the checked-in seed corpus of the `dialect_xml` fuzz target (fuzz/corpus/) and a
 //! property over arbitrary input, on stable Rust: nothing may panic.
 
-use std::path::Path;
-
 use proptest::prelude::*;
 
 #[test]
 fn seed_corpus_never_panics() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/dialect_xml");
-    let mut count = 0;
-    for entry in std::fs::read_dir(&dir).expect("corpus folder exists") {
-        let path = entry.expect("readable entry").path();
-        let data = std::fs::read(&path).expect("readable file");
-        mavstack_dialect::fuzz_dialect_xml(&data);
-        count += 1;
+    for seed in mavstack_core::fuzz_seeds("dialect_xml", 20) {
+        mavstack_dialect::fuzz_dialect_xml(&seed);
     }
-    assert!(count >= 20, "only {count} seeds in {}", dir.display());
 }
 
 /// XML-shaped fragments glued together at random: deeper than random bytes get.
@@ -62,17 +54,12 @@ proptest! {
     }
 }
 
-/// The `json_frame` seeds: JSON lines pymavlink wrote for frames it packed
+/// The `json_frames` seeds: JSON lines pymavlink wrote for frames it packed
 /// (fuzz/make_seeds.py), and hand-written edge cases, each a fixed point of encode/decode.
 #[cfg(feature = "json")]
 #[test]
 fn json_frame_seeds() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/json_frame");
-    let mut count = 0;
-    for entry in std::fs::read_dir(&dir).expect("corpus folder exists") {
-        let data = std::fs::read(entry.expect("readable entry").path()).expect("readable file");
-        mavstack_dialect::json::fuzz_json_frame(&data);
-        count += 1;
+    for seed in mavstack_core::fuzz_seeds("json_frames", 20) {
+        mavstack_dialect::json::fuzz_json_frames(&seed);
     }
-    assert!(count >= 20, "only {count} seeds in {}", dir.display());
 }

@@ -176,12 +176,7 @@ proptest! {
 
 #[test]
 fn fuzz_seed_corpus_replays() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/router");
-    let mut n = 0;
-    for entry in std::fs::read_dir(&dir).unwrap() {
-        let data = std::fs::read(entry.unwrap().path()).unwrap();
-        fuzz_router(&data);
-        n += 1;
+    for seed in mavstack_core::fuzz_seeds("router", 4) {
+        fuzz_router(&seed);
     }
-    assert!(n >= 4, "seed corpus missing: {}", dir.display());
 }

@@ -1,34 +1,23 @@
-//! The seed corpora of the `wpl` and `mission_json` fuzz targets, replayed on stable, and
+//! The seed corpora of the `wpl` and `mission_file` fuzz targets, replayed on stable, and
 //! the errors and units of the WPL format.
-
-use std::path::Path;
 
 use mavstack_dialects::common::{MavCmd, MavFrame};
 use mavstack_services::wpl::{self, WplError};
 
 #[test]
 fn wpl_seeds() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/wpl");
-    let mut n = 0;
-    for entry in std::fs::read_dir(&dir).expect("corpus directory") {
-        let path = entry.expect("entry").path();
-        wpl::fuzz_wpl(&std::fs::read(&path).expect("seed"));
-        n += 1;
+    for seed in mavstack_core::fuzz_seeds("wpl", 4) {
+        wpl::fuzz_wpl(&seed);
     }
-    assert!(n >= 4, "seed corpus missing: {}", dir.display());
 }
 
 #[cfg(feature = "json")]
 #[test]
-fn mission_json_seeds() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/mission_json");
-    let mut n = 0;
-    for entry in std::fs::read_dir(&dir).expect("corpus directory") {
-        let data = std::fs::read(entry.expect("entry").path()).expect("seed");
-        mavstack_services::mission_json::fuzz_mission_json(&data);
-        n += 1;
+fn mission_file_seeds() {
+    for seed in mavstack_core::fuzz_seeds("mission_file", 4) {
+        mavstack_services::mission_json::fuzz_mission_json(&seed);
+        wpl::fuzz_wpl(&seed);
     }
-    assert!(n >= 4, "seed corpus missing: {}", dir.display());
 }
 
 #[test]

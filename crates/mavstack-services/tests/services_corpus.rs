@@ -4,7 +4,6 @@
 //! start. One test in its own binary, so that no other test's allocations are counted.
 
 use std::alloc::System;
-use std::path::Path;
 
 use stats_alloc::{INSTRUMENTED_SYSTEM, StatsAlloc};
 
@@ -20,14 +19,9 @@ fn live_bytes() -> Option<usize> {
 
 #[test]
 fn services_seeds_stay_within_their_heap_bound() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/services");
-    let mut n = 0;
-    for entry in std::fs::read_dir(&dir).expect("corpus directory") {
-        let data = std::fs::read(entry.expect("entry").path()).expect("seed");
-        mavstack_services::fuzz_services(&data, &live_bytes);
-        n += 1;
+    for seed in mavstack_core::fuzz_seeds("services", 8) {
+        mavstack_services::fuzz_services(&seed, &live_bytes);
     }
-    assert!(n >= 8, "seed corpus missing: {}", dir.display());
     // The counter counts: a megabyte held shows.
     let before = live_bytes().expect("counted");
     let held = vec![1u8; 1 << 20];

@@ -1,15 +1,8 @@
 //! The seed corpus of the `param_file` fuzz target, replayed on stable.
 
-use std::path::Path;
-
 #[test]
 fn param_file_seeds() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/param_file");
-    let mut n = 0;
-    for entry in std::fs::read_dir(&dir).expect("corpus directory") {
-        let path = entry.expect("entry").path();
-        mavstack_sim::params::fuzz_param_file(&std::fs::read(&path).expect("seed"));
-        n += 1;
+    for seed in mavstack_core::fuzz_seeds("param_file", 3) {
+        mavstack_sim::params::fuzz_param_file(&seed);
     }
-    assert!(n >= 3, "seed corpus missing: {}", dir.display());
 }

@@ -4,15 +4,9 @@
 use std::path::Path;
 
 fn replay(target: &str, f: fn(&[u8])) {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../fuzz/corpus")
-        .join(target);
-    let mut n = 0;
-    for entry in std::fs::read_dir(&dir).unwrap() {
-        f(&std::fs::read(entry.unwrap().path()).unwrap());
-        n += 1;
+    for seed in mavstack_core::fuzz_seeds(target, 3) {
+        f(&seed);
     }
-    assert!(n >= 3, "seed corpus missing: {}", dir.display());
 }
 
 #[test]
