@@ -189,8 +189,15 @@ impl fmt::Display for ConnSpec {
             | Self::TcpIn { host, port } => {
                 write!(f, "{}:{}", self.scheme(), HostPort(host, *port))
             }
-            Self::Serial { device, baud } => write!(f, "serial:{device}:{baud}"),
-            Self::File { path, .. } => write!(f, "file:{}", path.display()),
+            // A name that starts with `//` would read as the URL form's `://`: it is written
+            // in the URL form itself.
+            Self::Serial { device, baud } => {
+                write!(f, "serial:{}{device}:{baud}", url_prefix(device))
+            }
+            Self::File { path, .. } => {
+                let path = path.display().to_string();
+                write!(f, "file:{}{path}", url_prefix(&path))
+            }
         }
     }
 }
@@ -198,6 +205,11 @@ impl fmt::Display for ConnSpec {
 /// The schemes, as listed in error messages.
 const SCHEMES: &str = "udpin, udpout, udpbcast, tcp, tcpin, serial, file (as SCHEME:... or SCHEME://...), \
                        udp (listen), or DEVICE,BAUD";
+
+/// `//` before a device or path that starts with `//` (see `Display for ConnSpec`).
+fn url_prefix(name: &str) -> &'static str {
+    if name.starts_with("//") { "//" } else { "" }
+}
 
 /// Why a connection string is not one.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
@@ -618,6 +630,16 @@ mod tests {
         assert_eq!(odd, s("/tmp/a,b", 57600));
         assert_eq!(p(&odd.to_string()), odd);
         assert_eq!(p("serial:/tmp/a,b:9600"), s("/tmp/a,b", 9600));
+        // A name starting with `//` (found by the router_conf fuzz target): written in the
+        // URL form, it reads back.
+        for odd in [s("//", 115_200), s("//host/share:x", 9600)] {
+            assert_eq!(p(&odd.to_string()), odd, "{odd}");
+        }
+        let file = ConnSpec::File {
+            path: PathBuf::from("//logs/a.tlog"),
+            format: FileFormat::Tlog,
+        };
+        assert_eq!(p(&file.to_string()), file);
     }
 
     #[test]

@@ -1025,7 +1025,11 @@ impl<'a> Endpoint<'a> {
         let host = self.host.unwrap_or_default();
         let number = self.number.unwrap_or_default();
         let connection = match (self.section.kind, self.mode) {
-            (Kind::Uart, _) => format!("serial:{host}:{number}"),
+            (Kind::Uart, _) => mavstack_transport::ConnSpec::Serial {
+                device: host.to_owned(),
+                baud: number,
+            }
+            .to_string(),
             (Kind::Udp, Some(UdpMode::Server)) => format!("udpin:{host}:{number}"),
             (Kind::Udp, _) => format!("udpout:{host}:{number}"),
             (Kind::Tcp | Kind::General, _) => format!("tcp:{host}:{number}"),
