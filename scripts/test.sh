@@ -50,10 +50,10 @@ example companion "companion ← ATTITUDE from 1/1" "ground station ← MAV_SYS_
     "companion link fc" "companion link gcs"
 example vehicle_in_test "RTL_ALT set to 3000, arming MAV_RESULT_ACCEPTED"
 
-step "fuzz: every target for ${FUZZ_SECONDS:-10} s on nightly (a crash fails, kept as a regression seed)"
+step "fuzz: every target for ${FUZZ_SECONDS:-6} s on nightly (a crash fails, kept as a regression seed)"
 # Without the address sanitizer: quicker to build and to run, and the code under test is safe
 # Rust (long campaigns by hand use it: scripts/fuzz.sh 480).
-FUZZ_SANITIZER=none FUZZ_JOBS=2 bash scripts/fuzz.sh "${FUZZ_SECONDS:-10}"
+FUZZ_SANITIZER=none FUZZ_JOBS=2 bash scripts/fuzz.sh "${FUZZ_SECONDS:-6}"
 
 step "feature matrix"
 # Type-checked without codegen (what a feature combination can break is whether it compiles).
