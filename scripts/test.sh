@@ -15,6 +15,9 @@ if [ "${CI:-}" = "true" ]; then
     export CARGO_INCREMENTAL=0
 fi
 
+step "system packages (chromium, chromium-driver, fonts-dejavu-core)"
+bash scripts/setup-system.sh
+
 step "peers (pymavlink 2.4.50 in .venv)"
 MAVSTACK_PYTHON="$(scripts/setup-peers.sh)"
 export MAVSTACK_PYTHON

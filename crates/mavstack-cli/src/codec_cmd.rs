@@ -209,7 +209,14 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
         let mut reader =
             tlog::Reader::new(&data[..]).with_crc_extra(move |id: u32| crcs.get(&id).copied());
         let mut stats = Stats::default();
-        while let Some((ts, bytes)) = reader.read_record().context("reading the tlog")? {
+        let mut progress = crate::progress::Progress::new("decoding", data.len() as u64);
+        loop {
+            if (stats.frames + stats.unknown_id) % 4096 == 0 {
+                progress.set(reader.stats().bytes);
+            }
+            let Some((ts, bytes)) = reader.read_record().context("reading the tlog")? else {
+                break;
+            };
             let frame = Frame::new_unchecked(bytes);
             if lookup(frame.msg_id()).is_some() {
                 stats.frames += 1;
@@ -219,16 +226,19 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
                 handle(Item::Unknown(frame), Some(ts), &mut counts);
             }
         }
+        progress.finish();
         let read = reader.stats();
         (stats.bytes, stats.bad_crc, stats.skipped_bytes) =
             (read.bytes, read.bad_crc, read.skipped_bytes);
         counts.parse = stats;
     } else {
         let mut parser = SliceParser::new(&data, lookup);
-        let mut progress = Progress::new(data.len());
+        let mut progress = crate::progress::Progress::new("decoding", data.len() as u64);
         while let Some(item) = parser.next() {
             handle(item, None, &mut counts);
-            progress.update(parser.position());
+            if parser.stats().frames % 4096 == 0 {
+                progress.set(parser.position() as u64);
+            }
         }
         progress.finish();
         counts.parse = *parser.stats();
@@ -246,49 +256,6 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
         eprintln!("{}", counts.json());
     }
     Ok(())
-}
-
-/// A one-line progress report on stderr for inputs of 16 MB or more, only when stderr is a
-/// terminal (never when piped or in tests).
-struct Progress {
-    total: usize,
-    shown: Option<std::time::Instant>,
-    started: std::time::Instant,
-}
-
-impl Progress {
-    fn new(total: usize) -> Self {
-        use std::io::IsTerminal as _;
-        let on = total >= 16 << 20 && io::stderr().is_terminal();
-        let now = std::time::Instant::now();
-        Self {
-            total,
-            shown: on.then_some(now),
-            started: now,
-        }
-    }
-
-    fn update(&mut self, done: usize) {
-        let Some(last) = self.shown else { return };
-        if last.elapsed() < core::time::Duration::from_millis(200) {
-            return;
-        }
-        self.shown = Some(std::time::Instant::now());
-        let mb = |n: usize| n as f64 / 1e6;
-        let rate = mb(done) / self.started.elapsed().as_secs_f64().max(1e-9);
-        eprint!(
-            "\rdecoding: {:>3}% ({:.1} of {:.1} MB, {rate:.0} MB/s)",
-            done * 100 / self.total.max(1),
-            mb(done),
-            mb(self.total)
-        );
-    }
-
-    fn finish(&self) {
-        if self.shown.is_some() {
-            eprint!("\r\x1b[2K");
-        }
-    }
 }
 
 pub(crate) fn encode(args: &EncodeArgs) -> Result<(), Failure> {

@@ -384,34 +384,6 @@ pub(crate) fn listen(args: &ListenArgs) -> Result<(), Failure> {
     })
 }
 
-/// A live line on a terminal (stderr), at most five times a second.
-struct Status {
-    on: bool,
-    shown: Instant,
-}
-
-impl Status {
-    fn new() -> Self {
-        Self {
-            on: io::stderr().is_terminal(),
-            shown: Instant::now(),
-        }
-    }
-
-    fn show(&mut self, text: impl FnOnce() -> String) {
-        if self.on && self.shown.elapsed() >= Duration::from_millis(200) {
-            self.shown = Instant::now();
-            eprint!("\r\x1b[2K{}", text());
-        }
-    }
-
-    fn clear(&self) {
-        if self.on {
-            eprint!("\r\x1b[2K");
-        }
-    }
-}
-
 pub(crate) fn record(args: &RecordArgs) -> Result<(), Failure> {
     let spec = parse_spec(&args.conn)?;
     let dialect = load_dialect(&args.dialect.dialect)?;
@@ -425,7 +397,7 @@ pub(crate) fn record(args: &RecordArgs) -> Result<(), Failure> {
         eprintln!("recording {} to {}", args.conn, args.file.display());
         let mut batch = Vec::with_capacity(1024);
         let mut flush = tokio::time::interval(Duration::from_millis(500));
-        let mut status = Status::new();
+        let mut status = crate::progress::Progress::counter("recording");
         let stop = interrupted();
         tokio::pin!(stop);
         let mut recorded = 0u64;
@@ -453,10 +425,10 @@ pub(crate) fn record(args: &RecordArgs) -> Result<(), Failure> {
                 }
             }
             writer.flush_if_due().map_err(write_failed)?;
-            status.show(|| format!("recording: {recorded} frames"));
+            status.set(recorded);
         }
         writer.flush().map_err(write_failed)?;
-        status.clear();
+        status.finish();
         eprintln!("recorded {recorded} frames to {}", args.file.display());
         conn.close().await.map_err(other)?;
         Ok(())
@@ -513,7 +485,7 @@ pub(crate) fn replay(args: &ReplayArgs) -> Result<(), Failure> {
     }
     runtime()?.block_on(async {
         let conn = open(&spec, &dialect, false, FileMode::Write).await?;
-        let mut status = Status::new();
+        let mut status = crate::progress::Progress::frames("replaying", frames.len() as u64);
         let stop = interrupted();
         tokio::pin!(stop);
         // A server (udpin, tcpin) has no one to send to until a peer shows up.
@@ -549,20 +521,13 @@ pub(crate) fn replay(args: &ReplayArgs) -> Result<(), Failure> {
                     () = &mut stop => break 'run,
                 }
                 sent += 1;
-                status.show(|| {
-                    format!(
-                        "replaying: {:>3}% ({} of {} frames)",
-                        (i + 1) * 100 / frames.len(),
-                        i + 1,
-                        frames.len()
-                    )
-                });
+                status.set(i as u64 + 1);
             }
             if !args.repeat {
                 break;
             }
         }
-        status.clear();
+        status.finish();
         conn.close().await.map_err(other)?;
         eprintln!("replayed {sent} frames");
         Ok(())

@@ -10,8 +10,12 @@ mod dialect_cmd;
 mod fast_count;
 mod gcs_cmd;
 mod link_cmd;
+mod log_cmd;
+mod log_plot;
+mod log_reader;
 mod mission_file;
 mod probe_cmd;
+mod progress;
 mod radio_cmd;
 mod router_cmd;
 mod vehicle_cmd;
@@ -76,6 +80,11 @@ enum Command {
     /// Forward between many links, each with its own MAVLink version and signing, converting
     /// where they differ (runs until interrupted).
     Router(router_cmd::RouterArgs),
+    /// Logs: a summary, plots of fields, a smaller log of the frames selected.
+    Log {
+        #[command(subcommand)]
+        action: log_cmd::LogAction,
+    },
 }
 
 /// A failure with the exit code it maps to.
@@ -126,6 +135,7 @@ fn main() -> ExitCode {
         Command::Mission { action } => gcs_cmd::mission(action),
         Command::Cmd(args) => gcs_cmd::command(&args),
         Command::Router(args) => router_cmd::router(&args),
+        Command::Log { action } => log_cmd::run(action),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,7 +1,7 @@
 //! `mavstack router`: forwards between many links, each with its own MAVLink version and
 //! signing, converting where they differ (shared/DESIGN.md, "Router"). A thin shell over
 //! [`mavstack::Node`]: argument parsing, the mavlink-router configuration file, `--stats`
-//! JSON lines.
+//! JSON lines (the object of `mavstack::status`).
 
 use core::time::Duration;
 use std::path::PathBuf;
@@ -11,7 +11,6 @@ use clap::Args;
 use mavstack::core::MessageSet as _;
 use mavstack::router::{InfoFn, RouterConfig};
 use mavstack::{InputModeration, LinkSpec, Node, NodeReport, router_conf};
-use serde_json::{Map, Value, json};
 
 use crate::Failure;
 use crate::link_cmd::interrupted;
@@ -62,6 +61,42 @@ pub(crate) struct RouterArgs {
     /// comes: the least latency).
     #[arg(long, value_enum, default_value = "sleep")]
     input_moderation: ModerationArg,
+    #[command(flatten)]
+    http: HttpArgs,
+}
+
+/// `--http ADDR` and `--http-public`, on `router` and `vehicle`.
+#[derive(Debug, Args)]
+pub(crate) struct HttpArgs {
+    /// Serve a live status page on ADDR (`127.0.0.1:8080`): `/` the page, `/api/status`
+    /// the `--stats` object as JSON, `/api/events` it once a second (server-sent events).
+    #[arg(long, value_name = "ADDR")]
+    http: Option<String>,
+    /// Allow a `--http` address other than loopback (the page has no authentication).
+    #[arg(long, requires = "http")]
+    http_public: bool,
+}
+
+impl HttpArgs {
+    /// The status page's address, if one was asked for: a usage error for an address that
+    /// does not parse, or is not loopback without `--http-public`.
+    pub(crate) fn addr(&self) -> Result<Option<core::net::SocketAddr>, Failure> {
+        let Some(text) = &self.http else {
+            return Ok(None);
+        };
+        let addr: core::net::SocketAddr = text.parse().map_err(|_| {
+            Failure::Input(anyhow!(
+                "--http {text}: expected an address and port such as 127.0.0.1:8080"
+            ))
+        })?;
+        if !addr.ip().is_loopback() && !self.http_public {
+            return Err(Failure::Input(anyhow!(
+                "--http {text}: not a loopback address; the page has no authentication \
+                 (add --http-public to serve it there anyway)"
+            )));
+        }
+        Ok(Some(addr))
+    }
 }
 
 /// `--input-moderation`.
@@ -173,6 +208,7 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         )));
     }
     let stats_every = args.stats.map(|s| seconds(s, "--stats")).transpose()?;
+    let http = args.http.addr()?;
     let dialect = dialect(&dialect_name)?;
     // One thread: the node's task owns every socket, and a second worker would only add
     // cross-thread wake-ups (and spin) to each datagram.
@@ -201,7 +237,13 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         if let Some(dir) = &log {
             builder = builder.log_dir(dir);
         }
+        if let Some(addr) = http {
+            builder = builder.http(addr);
+        }
         let node = builder.start().await.map_err(crate::other)?;
+        if let Some(addr) = node.http_addr() {
+            eprintln!("mavstack router: status page on http://{addr}/");
+        }
         eprintln!("mavstack router: ready");
         let stop = interrupted();
         tokio::pin!(stop);
@@ -232,54 +274,5 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
 
 /// One `--stats` line (shared/DESIGN.md, "Router").
 fn print_stats(report: &NodeReport) {
-    println!("{}", stats_json(report));
-}
-
-pub(crate) fn stats_json(report: &NodeReport) -> Value {
-    let links: Vec<Value> = report
-        .links
-        .iter()
-        .map(|l| {
-            let dropped: Map<String, Value> = l
-                .dropped
-                .iter()
-                .map(|(k, v)| ((*k).to_owned(), json!(v)))
-                .collect();
-            let conversions: Map<String, Value> = l
-                .conversions
-                .iter()
-                .map(|(k, v)| ((*k).to_owned(), json!(v)))
-                .collect();
-            let sources: Vec<Value> = l
-                .sources
-                .iter()
-                .map(|(sysid, compid, received, lost)| {
-                    json!({"sysid": sysid, "compid": compid, "received": received, "lost": lost})
-                })
-                .collect();
-            json!({
-                "name": l.name,
-                "peer": l.peer,
-                "version": l.version,
-                "rx_frames": l.rx_frames,
-                "tx_frames": l.tx_frames,
-                "rx_bytes": l.rx_bytes,
-                "tx_bytes": l.tx_bytes,
-                "converted": l.converted,
-                "conversions": conversions,
-                "dropped": dropped,
-                "seq_lost": l.seq_lost,
-                "sources": sources,
-            })
-        })
-        .collect();
-    let routes: Vec<Value> = report
-        .routes
-        .iter()
-        .map(|(sysid, compid, link, peer, age)| {
-            json!({"sysid": sysid, "compid": compid, "link": link, "peer": peer,
-                   "age_s": (age * 10.0).round() / 10.0})
-        })
-        .collect();
-    json!({"t_s": (report.t_s * 10.0).round() / 10.0, "links": links, "routes": routes})
+    println!("{}", mavstack::status::status_json(report));
 }

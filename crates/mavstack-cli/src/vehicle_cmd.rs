@@ -73,6 +73,8 @@ pub(crate) struct VehicleArgs {
     /// plans) to stderr.
     #[arg(long, short)]
     verbose: bool,
+    #[command(flatten)]
+    http: crate::router_cmd::HttpArgs,
 }
 
 pub(crate) fn secret_key(hex: &str, what: &str) -> Result<SecretKey, Failure> {
@@ -151,7 +153,10 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
             "--sysid and --compid must be 1 to 255"
         )));
     }
-    let builder = vehicle_node(args)?;
+    let mut builder = vehicle_node(args)?;
+    if let Some(addr) = args.http.addr()? {
+        builder = builder.http(addr);
+    }
     let params = match &args.params {
         Some(path) => params::load(path).map_err(|e| Failure::Input(e.into()))?,
         None => params::defaults(args.autopilot),
@@ -167,6 +172,9 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
         let vehicle = SimVehicle::start_logged(builder, config, log)
             .await
             .map_err(other)?;
+        if let Some(addr) = vehicle.node().http_addr() {
+            eprintln!("mavstack vehicle: status page on http://{addr}/");
+        }
         tokio::select! {
             () = interrupted() => {}
             () = vehicle.node().closed() => {}

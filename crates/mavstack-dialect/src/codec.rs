@@ -67,6 +67,31 @@ impl Value {
         read_scalar(p, &[0u8; 8], 0)
     }
 
+    /// The value as `f64` if it is a number (an integer beyond 2^53 rounds); `None` for
+    /// text and arrays.
+    ///
+    /// ```
+    /// use mavstack_dialect::codec::Value;
+    /// assert_eq!(Value::I16(-3).as_f64(), Some(-3.0));
+    /// assert_eq!(Value::Text(b"x".to_vec()).as_f64(), None);
+    /// ```
+    #[must_use]
+    pub fn as_f64(&self) -> Option<f64> {
+        match *self {
+            Self::U8(v) => Some(v.into()),
+            Self::I8(v) => Some(v.into()),
+            Self::U16(v) => Some(v.into()),
+            Self::I16(v) => Some(v.into()),
+            Self::U32(v) => Some(v.into()),
+            Self::I32(v) => Some(v.into()),
+            Self::U64(v) => Some(v as f64),
+            Self::I64(v) => Some(v as f64),
+            Self::F32(v) => Some(v.into()),
+            Self::F64(v) => Some(v),
+            Self::Text(_) | Self::Array(_) => None,
+        }
+    }
+
     /// The value as `u64` if it is an integer that fits.
     #[must_use]
     pub fn as_u64(&self) -> Option<u64> {

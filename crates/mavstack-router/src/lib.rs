@@ -46,6 +46,7 @@ mod queue;
 pub mod route;
 pub mod router;
 pub mod stats;
+pub mod systems;
 
 pub use config::{
     DirectionFilters, IdFilter, LinkConfig, LinkRole, LocalDelivery, RateLimits, RouterConfig,

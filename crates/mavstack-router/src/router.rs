@@ -13,7 +13,7 @@ use mavstack_core::message::Message as _;
 use mavstack_core::signing;
 use mavstack_core::time::Instant;
 use mavstack_core::wire::MAX_FRAME_LEN;
-use mavstack_dialects::common::{AutopilotVersion, MavProtocolCapability, SetupSigning};
+use mavstack_dialects::common::{AutopilotVersion, Heartbeat, MavProtocolCapability, SetupSigning};
 
 use crate::config::{LinkConfig, LocalDelivery, RouterConfig, VersionMode};
 use crate::convert::{self, Origin, Plan};
@@ -23,6 +23,7 @@ use crate::limit::Limiter;
 use crate::queue::OutQueue;
 use crate::route::{Route, Routes};
 use crate::stats::{Counters, DropReason, LinkMode, LinkStatus};
+use crate::systems::{SystemInfo, Systems};
 
 /// How many events wait for [`Router::poll_event`]; more are dropped and counted
 /// ([`Router::events_dropped`]).
@@ -206,6 +207,7 @@ pub struct Router<D> {
     dialect: D,
     links: Vec<Option<LinkState<D>>>,
     routes: Routes,
+    systems: Systems,
     dedup: Option<Dedup>,
     events: VecDeque<Event>,
     events_dropped: u64,
@@ -224,6 +226,7 @@ impl<D: Dialect> Router<D> {
             dialect,
             links: Vec::new(),
             routes: Routes::default(),
+            systems: Systems::default(),
             dedup,
             events: VecDeque::new(),
             events_dropped: 0,
@@ -277,6 +280,7 @@ impl<D: Dialect> Router<D> {
     pub fn remove_link(&mut self, link: LinkId) -> Option<Counters> {
         let state = self.links.get_mut(link.index())?.take()?;
         self.routes.remove_link(link);
+        self.systems.forget_link(link);
         self.ready.retain(|&l| l != link);
         Some(state.counters)
     }
@@ -318,6 +322,12 @@ impl<D: Dialect> Router<D> {
     /// The learned routes.
     pub fn routes(&self) -> impl Iterator<Item = Route> + '_ {
         self.routes.iter()
+    }
+
+    /// The components heard, each with its latest HEARTBEAT (forgotten after the route
+    /// TTL of silence, or when its link goes).
+    pub fn systems(&self) -> impl Iterator<Item = &SystemInfo> + '_ {
+        self.systems.iter()
     }
 
     /// Events dropped because nobody drained [`poll_event`](Self::poll_event).
@@ -470,6 +480,10 @@ impl<D: Dialect> Router<D> {
         if sysid != 0 && compid != 0 {
             self.routes
                 .learn(now, (sysid, compid), src, self.config.route_move_after);
+            if msg_id == Heartbeat::ID && received.crc_checked {
+                self.systems
+                    .heard(now, (sysid, compid), src, frame.payload());
+            }
         }
         let info = if received.crc_checked {
             self.dialect.info(msg_id)
@@ -847,6 +861,7 @@ impl<D: Dialect> Router<D> {
     pub fn handle_timeout(&mut self, now: Instant) {
         if self.next_sweep.is_some_and(|t| now >= t) {
             self.routes.expire(now, self.config.route_ttl);
+            self.systems.expire(now, self.config.route_ttl);
             self.next_sweep = Some(now + SWEEP);
         }
         let ids: Vec<LinkId> = self

@@ -117,14 +117,16 @@ pub mod router_conf;
 pub mod serve;
 #[cfg(feature = "sim")]
 pub mod sim_vehicle;
+#[cfg(feature = "http")]
+pub mod status;
 #[cfg(feature = "services")]
 pub mod system;
 
 pub use link_spec::{LinkSpec, LinkSpecError, redacted};
 pub use node::{
     EventSubscription, Incoming, InputModeration, LinkEvent, LinkReport, Node, NodeBuilder,
-    NodeError, NodeEvent, NodeHandle, NodeReport, RequestError, Subscription, TapSubscription,
-    Tapped,
+    NodeError, NodeEvent, NodeHandle, NodeReport, RequestError, Subscription, SystemReport,
+    TapSubscription, Tapped,
 };
 
 /// A message's name in the common dialect (`"HEARTBEAT"`), or `"message N"` for an id it

@@ -26,6 +26,7 @@ use mavstack_channel::{
 use mavstack_core::time::Instant;
 use mavstack_core::wire::MAX_FRAME_LEN;
 use mavstack_core::{MAX_PAYLOAD_LEN, Message, MessageSet};
+use mavstack_router::systems::SystemInfo;
 use mavstack_router::{
     Event, InfoFn, LinkConfig, LinkId, LinkMode, LinkRole, LocalDelivery, Router, RouterConfig,
     SendTo,
@@ -58,6 +59,14 @@ pub enum NodeError {
         name: String,
         /// Why.
         source: LinkError,
+    },
+    /// The status page's address could not be bound.
+    #[error("status page on {addr}: {source}")]
+    Http {
+        /// The address.
+        addr: SocketAddr,
+        /// Why.
+        source: std::io::Error,
     },
     /// The traffic log could not be written.
     #[error("log {path}: {source}")]
@@ -131,10 +140,26 @@ pub struct NodeReport {
     pub links: Vec<LinkReport>,
     /// Routes: (sysid, compid, link name, peer, age in seconds).
     pub routes: Vec<(u8, u8, String, Option<String>, f64)>,
+    /// The components heard, by (sysid, compid), each with its latest HEARTBEAT.
+    pub systems: Vec<SystemReport>,
     /// The transport counters of each configured link: (name, counters).
     pub transport: Vec<(String, LinkStats)>,
     /// Frames a subscriber missed because it fell behind.
     pub subscriber_drops: u64,
+}
+
+/// A component a node has heard (its latest HEARTBEAT), as [`NodeReport::systems`] lists it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct SystemReport {
+    /// Its HEARTBEAT's fields, and when and where it came.
+    pub heartbeat: SystemInfo,
+    /// The configured link's name it came in on.
+    pub link: String,
+    /// The peer of that link it came from.
+    pub peer: Option<String>,
+    /// Milliseconds since that HEARTBEAT.
+    pub age_ms: u64,
 }
 
 /// A frame that reached the node's own component (see [`Node::subscribe`]).
@@ -293,6 +318,7 @@ pub struct NodeBuilder {
     heartbeat: Option<(Vec<u8>, Duration)>,
     role: Option<LinkRole>,
     moderation: InputModeration,
+    http: Option<SocketAddr>,
 }
 
 impl NodeBuilder {
@@ -391,6 +417,18 @@ impl NodeBuilder {
         self
     }
 
+    /// Serves a read-only status page on `addr` (feature `http`): `GET /` a live page of
+    /// the links (version, rates, drops, conversions), routes and systems heard;
+    /// `GET /api/status` the same as one JSON object ([`crate::status::status_json`]);
+    /// `GET /api/events` that object once a second as server-sent events. It has no
+    /// authentication: give a loopback address unless the network is trusted.
+    #[cfg(feature = "http")]
+    #[must_use]
+    pub const fn http(mut self, addr: SocketAddr) -> Self {
+        self.http = Some(addr);
+        self
+    }
+
     /// Transport options (socket buffers, peer timeout, reconnect back-off).
     #[must_use]
     pub fn transport_options(mut self, options: Options) -> Self {
@@ -445,6 +483,14 @@ impl NodeBuilder {
             Some(dir) => Some(open_log(&dir)?),
             None => None,
         };
+        let http = match self.http {
+            Some(addr) => Some(
+                tokio::net::TcpListener::bind(addr)
+                    .await
+                    .map_err(|source| NodeError::Http { addr, source })?,
+            ),
+            None => None,
+        };
         let (tx, rx) = mpsc::channel(64);
         let driver = Driver {
             router: Router::new(router_config, self.dialect),
@@ -472,12 +518,20 @@ impl NodeBuilder {
             driver.router.config().component_id,
         );
         let task = tokio::spawn(driver.run());
-        Ok(Node {
+        let node = Node {
             commands: tx,
             task,
             local_addrs,
             identity,
-        })
+            http_addr: http.as_ref().and_then(|l| l.local_addr().ok()),
+        };
+        #[cfg(feature = "http")]
+        if let Some(listener) = http {
+            tokio::spawn(crate::status::serve(listener, node.handle()));
+        }
+        #[cfg(not(feature = "http"))]
+        drop(http);
+        Ok(node)
     }
 }
 
@@ -498,6 +552,7 @@ pub struct Node {
     task: JoinHandle<Result<NodeReport, NodeError>>,
     local_addrs: Vec<Option<SocketAddr>>,
     identity: (u8, u8),
+    http_addr: Option<SocketAddr>,
 }
 
 impl Node {
@@ -515,6 +570,7 @@ impl Node {
             heartbeat: None,
             role: None,
             moderation: InputModeration::Timer,
+            http: None,
         }
     }
 
@@ -543,6 +599,12 @@ impl Node {
     #[must_use]
     pub fn local_addrs(&self) -> &[Option<SocketAddr>] {
         &self.local_addrs
+    }
+
+    /// The address the status page listens on (see [`NodeBuilder::http`]), if any.
+    #[must_use]
+    pub const fn http_addr(&self) -> Option<SocketAddr> {
+        self.http_addr
     }
 
     /// A snapshot of every link and route; `None` once the node has stopped.
@@ -792,6 +854,11 @@ impl NodeHandle {
         let (tx, rx) = oneshot::channel();
         self.commands.send(Command::Report(tx)).await.ok()?;
         rx.await.ok()
+    }
+
+    /// Resolves when the node has stopped.
+    pub async fn closed(&self) {
+        self.commands.closed().await;
     }
 }
 
@@ -1397,10 +1464,25 @@ impl Driver {
                 (r.sysid, r.compid, name, peer, age)
             })
             .collect();
+        let systems = self
+            .router
+            .systems()
+            .map(|s| {
+                let (link, peer) = names.get(&s.link).cloned().unwrap_or_default();
+                let age = now.saturating_duration_since(s.last_seen);
+                SystemReport {
+                    heartbeat: *s,
+                    link,
+                    peer,
+                    age_ms: u64::try_from(age.as_millis()).unwrap_or(u64::MAX),
+                }
+            })
+            .collect();
         NodeReport {
             t_s: now.saturating_duration_since(self.started).as_secs_f64(),
             links,
             routes,
+            systems,
             transport: self
                 .slots
                 .iter()

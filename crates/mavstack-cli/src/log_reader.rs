@@ -1,0 +1,115 @@
+//! Reading a log file frame by frame, for the `log` commands: a tlog (a timestamp before each
+//! frame) or a raw stream, chosen by the file name, with a progress bar on a terminal.
+
+use std::collections::HashMap;
+use std::io::{self, BufReader};
+use std::path::Path;
+
+use anyhow::{Context as _, anyhow};
+use mavstack_core::parse::{Item, SliceParser};
+use mavstack_core::wire::Frame;
+use mavstack_dialect::Dialect;
+use mavstack_transport::tlog;
+
+use crate::Failure;
+use crate::progress::Progress;
+
+/// Whether `path` names a tlog (its extension, any case).
+pub(crate) fn is_tlog(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("tlog"))
+}
+
+/// One frame of a log.
+pub(crate) struct LogFrame<'a> {
+    /// Its record's timestamp (µs since the Unix epoch) in a tlog; none in a raw stream.
+    pub(crate) ts_us: Option<u64>,
+    /// The frame, checksum verified when the dialect knows its id.
+    pub(crate) frame: Frame<&'a [u8]>,
+    /// Whether the dialect knows its message id.
+    pub(crate) known: bool,
+}
+
+/// What reading a whole log found besides the frames.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct ReadCounts {
+    /// Frames returned.
+    pub(crate) frames: u64,
+    /// Candidate frames rejected for a bad checksum.
+    pub(crate) bad_frames: u64,
+    /// Bytes that were part of no frame.
+    pub(crate) skipped_bytes: u64,
+    /// Bytes read.
+    pub(crate) bytes: u64,
+}
+
+/// Calls `each` for every frame of the log at `path`, in file order, with a progress bar
+/// labelled `what` on a terminal.
+pub(crate) fn read_log(
+    path: &Path,
+    dialect: &Dialect,
+    what: &str,
+    mut each: impl FnMut(&LogFrame<'_>),
+) -> Result<ReadCounts, Failure> {
+    let cannot = |e: io::Error| Failure::Input(anyhow!("cannot read {}: {e}", path.display()));
+    let crcs: HashMap<u32, u8> = dialect
+        .messages
+        .iter()
+        .map(|m| (m.id, m.crc_extra))
+        .collect();
+    let mut counts = ReadCounts::default();
+    if is_tlog(path) {
+        let file = std::fs::File::open(path).map_err(cannot)?;
+        let total = file.metadata().map_or(0, |m| m.len());
+        let mut progress = Progress::new(what, total);
+        let known = crcs.clone();
+        let mut reader = tlog::Reader::new(BufReader::with_capacity(1 << 16, file))
+            .with_crc_extra(move |id: u32| known.get(&id).copied());
+        while let Some((ts, bytes)) = reader
+            .read_record()
+            .with_context(|| format!("reading {}", path.display()))?
+        {
+            let frame = Frame::new_unchecked(bytes);
+            let known = crcs.contains_key(&frame.msg_id());
+            each(&LogFrame {
+                ts_us: Some(ts),
+                frame,
+                known,
+            });
+            counts.frames += 1;
+            if counts.frames % 4096 == 0 {
+                progress.set(reader.stats().bytes);
+            }
+        }
+        let stats = reader.stats();
+        counts.bad_frames = stats.bad_crc;
+        counts.skipped_bytes = stats.skipped_bytes;
+        counts.bytes = stats.bytes;
+        progress.finish();
+    } else {
+        let data = std::fs::read(path).map_err(cannot)?;
+        let mut progress = Progress::new(what, data.len() as u64);
+        let mut parser = SliceParser::new(&data, |id: u32| crcs.get(&id).copied());
+        while let Some(item) = parser.next() {
+            let (frame, known) = match item {
+                Item::Frame(f) => (f, true),
+                Item::Unknown(f) => (f, false),
+            };
+            each(&LogFrame {
+                ts_us: None,
+                frame,
+                known,
+            });
+            counts.frames += 1;
+            if counts.frames % 4096 == 0 {
+                progress.set(parser.position() as u64);
+            }
+        }
+        let stats = parser.stats();
+        counts.bad_frames = stats.bad_crc;
+        counts.skipped_bytes = stats.skipped_bytes;
+        counts.bytes = stats.bytes;
+        progress.finish();
+    }
+    Ok(counts)
+}

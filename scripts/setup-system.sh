@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# Installs, idempotently, the Debian packages the tests need beyond the Rust toolchain:
+#   chromium, chromium-driver  the browser the status page test drives (headless, WebDriver);
+#   fonts-dejavu-core          the font `mavstack log plot` labels its images with.
+# Quiet when everything is in place.
+set -euo pipefail
+need=()
+command -v chromium >/dev/null || need+=(chromium)
+command -v chromedriver >/dev/null || need+=(chromium-driver)
+[ -f /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || need+=(fonts-dejavu-core)
+if [ ${#need[@]} -eq 0 ]; then
+    exit 0
+fi
+echo "setup-system: installing ${need[*]}" >&2
+sudo=()
+if [ "$(id -u)" != 0 ]; then
+    sudo=(sudo -n)
+fi
+export DEBIAN_FRONTEND=noninteractive
+"${sudo[@]}" apt-get update -qq >&2
+"${sudo[@]}" apt-get install -y -qq --no-install-recommends "${need[@]}" >&2
