@@ -752,6 +752,16 @@ async fn script(
             is_message(e, RadioStatus::ID)
         })
         .await?;
+    // The rangefinder's HEARTBEAT (once a second) too, while the links still speak MAVLink 1:
+    // its first one can beat the ground station's first frame to the radio and be lost.
+    if ground.seen_peripheral.is_none() {
+        let _ = ground
+            .wait(timeline, Duration::from_millis(1500), |e| {
+                frame_of(e, Heartbeat::ID)
+                    .is_some_and(|rf| (rf.frame.sysid(), rf.frame.compid()) == PERIPHERAL)
+            })
+            .await?;
+    }
     // 2. The handshake.
     timeline.say("ground station → COMMAND_LONG REQUEST_MESSAGE(300) in MAVLink 2 (the handshake)");
     let handshake = {
