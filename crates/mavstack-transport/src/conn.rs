@@ -240,6 +240,16 @@ pub enum ConnSpecError {
         /// The form expected.
         expected: &'static str,
     },
+    /// A host name with characters no host name or IPv4 address has.
+    #[error(
+        "bad host {host:?} in {input:?}: a host name (letters, digits, '.', '-', '_') or an IP address"
+    )]
+    BadHost {
+        /// The string.
+        input: String,
+        /// The host part.
+        host: String,
+    },
     /// No `:PORT` at the end.
     #[error("missing port in {input:?}; expected {expected}")]
     MissingPort {
@@ -461,6 +471,15 @@ fn host_port(
         if host.contains(':') {
             return Err(ConnSpecError::Ipv6NeedsBrackets {
                 input: input.to_owned(),
+            });
+        }
+        if !host
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || matches!(b, b'.' | b'-' | b'_'))
+        {
+            return Err(ConnSpecError::BadHost {
+                input: input.to_owned(),
+                host: host.to_owned(),
             });
         }
         (host, port)
@@ -775,6 +794,13 @@ mod tests {
             assert!(got.contains(want), "{input:?}: got {got:?}, want {want:?}");
             assert!(!got.contains('\n') && !got.ends_with('.'), "{got:?}");
         }
+        assert_eq!(
+            err("udpbcast://///5:14550"),
+            ConnSpecError::BadHost {
+                input: "udpbcast://///5:14550".to_owned(),
+                host: "///5".to_owned(),
+            }
+        );
         assert_eq!(
             err("tcp::1"),
             ConnSpecError::MissingHost {
