@@ -16,6 +16,7 @@
 //!   (CRC_EXTRA, lengths, target offsets) a parser needs.
 //! - [`payload`]: the byte helpers generated code uses to read and write payload fields.
 //! - [`text`]: `char[N]` fields as text.
+//! - [`tlog`]: telemetry log records in a slice, zero-copy.
 //!
 //! ## Guarantees
 //! - `#![no_std]`, no allocation, `#![forbid(unsafe_code)]`.
@@ -42,6 +43,7 @@ pub mod serde_arrays;
 pub mod signing;
 pub mod text;
 pub mod time;
+pub mod tlog;
 pub mod wire;
 
 pub use crc::Crc16;

@@ -36,18 +36,15 @@
 use core::time::Duration;
 use std::io::{self, Read, Write};
 
-use mavstack_core::Crc16;
 use mavstack_core::parse::CrcExtra;
 use mavstack_core::time::Instant;
-use mavstack_core::wire::{Frame, MAX_FRAME_LEN, STX_V1, STX_V2};
+use mavstack_core::tlog::{LOOKAHEAD, RecordStats, record_len};
+use mavstack_core::wire::Frame;
 use tokio::io::{AsyncWrite, AsyncWriteExt as _};
 
 use crate::frame::FrameBuf;
 
-/// Length of a record's timestamp.
-pub const TIMESTAMP_LEN: usize = 8;
-/// The longest record: a timestamp and the longest frame.
-pub const MAX_RECORD_LEN: usize = TIMESTAMP_LEN + MAX_FRAME_LEN;
+pub use mavstack_core::tlog::{MAX_RECORD_LEN, TIMESTAMP_LEN};
 /// Buffered records are written out at least this often.
 pub const FLUSH_INTERVAL: Duration = Duration::from_secs(1);
 /// Buffered records are written out once they reach this many bytes.
@@ -298,10 +295,6 @@ pub struct ReaderStats {
     pub bad_crc: u64,
 }
 
-/// Bytes the reader keeps in view: a whole record plus the next record's timestamp and start
-/// marker, which tells whether a record of an unknown message ends where its header says.
-const LOOKAHEAD: usize = MAX_RECORD_LEN + TIMESTAMP_LEN + 1;
-
 /// Reads tlog records from a [`std::io::Read`]; see the [module docs](self).
 ///
 /// It is an [`Iterator`] of owned [`Record`]s; [`Reader::read_record`] borrows instead.
@@ -377,7 +370,10 @@ impl<R: Read> Reader<R> {
                 self.start = self.end;
                 return Ok(None);
             }
-            match check(avail, self.lookup.as_deref(), &mut self.stats) {
+            let mut found = RecordStats::default();
+            let len = record_len(avail, self.lookup.as_deref(), &mut found);
+            self.stats.bad_crc += found.bad_crc;
+            match len {
                 Some(frame_len) => {
                     let mut ts = [0u8; TIMESTAMP_LEN];
                     ts.copy_from_slice(&avail[..TIMESTAMP_LEN]);
@@ -423,47 +419,6 @@ impl<R: Read> Reader<R> {
     }
 }
 
-/// The frame length of the record at the start of `avail`, if it is plausible (see
-/// [`Reader::with_crc_extra`]). `avail` holds at least [`LOOKAHEAD`] bytes unless the input
-/// ends within them.
-fn check(
-    avail: &[u8],
-    lookup: Option<&(dyn CrcExtra + Send)>,
-    stats: &mut ReaderStats,
-) -> Option<usize> {
-    let bytes = &avail[TIMESTAMP_LEN..];
-    let frame = Frame::new_checked(bytes).ok()?;
-    let len = frame.frame_len();
-    if let Some(extra) = lookup.and_then(|l| l.crc_extra(frame.msg_id())) {
-        if frame.check_crc(extra) {
-            return Some(len);
-        }
-        stats.bad_crc += 1;
-        return None;
-    }
-    let followed = match avail.get(TIMESTAMP_LEN + len..) {
-        // The input ends with this record, or with fewer bytes than another record needs.
-        Some(next) if next.len() <= TIMESTAMP_LEN => true,
-        Some(next) => next[TIMESTAMP_LEN] == STX_V2 || next[TIMESTAMP_LEN] == STX_V1,
-        None => false,
-    };
-    (followed || checksum_fits_some_crc_extra(&frame)).then_some(len)
-}
-
-/// Whether some CRC_EXTRA byte makes the frame's checksum right: true for 1 in 256 random
-/// frames, and for every intact one whatever its dialect.
-fn checksum_fits_some_crc_extra(frame: &Frame<&[u8]>) -> bool {
-    let end = frame.version().header_len() + frame.payload_len();
-    let mut crc = Crc16::new();
-    crc.update(&frame.as_bytes()[1..end]);
-    let want = frame.checksum();
-    (0..=u8::MAX).any(|extra| {
-        let mut c = crc;
-        c.update_byte(extra);
-        c.value() == want
-    })
-}
-
 impl<R: Read> Iterator for Reader<R> {
     type Item = io::Result<Record>;
 
@@ -479,9 +434,10 @@ impl<R: Read> Iterator for Reader<R> {
     }
 }
 
-/// Fuzzing entry point for tlog records: `data` is read as a tlog, once from one slice and
-/// once through a reader that hands it over in pieces whose sizes the data picks, with the
-/// checksums of HEARTBEAT, COMMAND_LONG and one id above 255 known. Both must give the same
+/// Fuzzing entry point for tlog records: `data` is read as a tlog, once from one slice, once
+/// through a reader that hands it over in pieces whose sizes the data picks and once with
+/// `mavstack_core::tlog::Records` over the whole slice, with the
+/// checksums of HEARTBEAT, COMMAND_LONG and one id above 255 known. All three must give the same
 /// records; every record must be a whole frame (with a right checksum when its id is
 /// known); and the records and the skipped bytes must add up to the input.
 #[doc(hidden)]
@@ -532,6 +488,26 @@ pub fn fuzz_tlog(data: &[u8]) {
             .map(|(ts, f)| (ts, f.to_vec()))
     });
     assert_eq!(from_slice, from_pieces, "the records depend on the reads");
+    // The zero-copy reader of a whole log in memory (mavstack's Python package) finds the
+    // same records, and tells where each starts.
+    let mut in_memory = mavstack_core::tlog::Records::new(data, Some(lookup));
+    let mapped: Vec<(u64, Vec<u8>)> = in_memory
+        .by_ref()
+        .map(|r| {
+            assert_eq!(
+                &data[r.offset + TIMESTAMP_LEN..r.offset + TIMESTAMP_LEN + r.frame.len()],
+                r.frame,
+                "a record's offset is not where its frame is"
+            );
+            (r.ts_us, r.frame.to_vec())
+        })
+        .collect();
+    assert_eq!(from_slice, mapped, "the in-memory records differ");
+    assert_eq!(
+        in_memory.stats().skipped_bytes,
+        whole.stats().skipped_bytes,
+        "the in-memory reader skips other bytes"
+    );
     assert_eq!(
         whole.stats(),
         pieces.stats(),
