@@ -3,7 +3,8 @@
 # (mavlink_parse_char + generated decode, gcc -O2) and rust-mavlink 0.21 (typed decode),
 # all on pymavlink's 50 MB mixed corpus (ardupilotmega; v1, v2, signed, noise).
 # Needs ../shared/peers (set up here: pymavlink, C library, rust-mavlink bench; minutes the
-# first time). Prints each peer's line and the ratios. Never part of the test suite.
+# first time). Prints each peer's line and the ratios: the parse loop as each program times
+# itself, then whole processes timed from outside. Never part of the test suite.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 peers="$root/../shared/peers"
@@ -62,4 +63,28 @@ awk -v f="$frames" -v o="$t_ours" -v c="$t_c" -v r="$t_rust" -v ok="$t_ours_key"
     printf "%-44s %8.4f s\n", "mavstack with --key (verify signed frames)", ok
     printf "%-44s %8.4f s\n", "C library with --key", ck
     printf "ratios: mavstack/C %.2fx, mavstack/rust-mavlink %.2fx, with signing mavstack/C %.2fx\n", c/o, r/o, ck/ok
+}'
+
+# Whole processes, timed from outside (start, read the file, parse, validate, decode, exit):
+# what a user waits for. One warm-up run each, then the median of $runs.
+whole() { # median wall-clock seconds of $runs runs of a command (after one warm-up)
+    local t0 t1 all=()
+    "$@" >/dev/null 2>&1
+    for _ in $(seq "$runs"); do
+        t0=$(date +%s%N)
+        "$@" >/dev/null 2>&1
+        t1=$(date +%s%N)
+        all+=("$(awk -v a="$t0" -v b="$t1" 'BEGIN{printf "%.6f", (b-a)/1e9}')")
+    done
+    printf '%s\n' "${all[@]}" | sort -n | awk '{v[NR]=$1} END{print v[int((NR+1)/2)]}'
+}
+w_ours=$(whole "$ours" decode --count --dialect ardupilotmega "$corpus.bin")
+w_c=$(whole "$PEERS_C_BENCH" "$corpus.bin" --decode)
+w_rust=$(whole "$PEERS_RUST_BENCH" "$corpus.bin")
+awk -v o="$w_ours" -v c="$w_c" -v r="$w_rust" -v mb="$(stat -c %s "$corpus.bin")" 'BEGIN {
+    printf "whole process, %.1f MB (median of '"$runs"' after a warm-up, wall clock)\n", mb/1e6
+    printf "%-44s %8.4f s\n", "mavstack decode --count", o
+    printf "%-44s %8.4f s\n", "C library bench (parse + decode)", c
+    printf "%-44s %8.4f s\n", "rust-mavlink 0.21 bench", r
+    printf "whole-process ratios: mavstack/C %.2fx, mavstack/rust-mavlink %.2fx\n", c/o, r/o
 }'

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, anyhow};
 use clap::Args;
-use mavstack_core::parse::{Item, SliceParser, Stats};
+use mavstack_core::parse::{Item, Stats};
 use mavstack_core::signing::{self, SecretKey};
 use mavstack_core::wire::{Frame, MAX_FRAME_LEN};
 use mavstack_dialect::Message;
@@ -72,21 +72,17 @@ pub(crate) struct EncodeArgs {
     output: Option<PathBuf>,
 }
 
-fn read_input(file: Option<&Path>) -> Result<Vec<u8>, Failure> {
-    let mut data = Vec::new();
+/// The input as a stream (never read into memory whole) and its length when known.
+fn open_input(file: Option<&Path>) -> Result<(Box<dyn Read>, u64), Failure> {
     match file {
         Some(path) => {
-            data = std::fs::read(path)
+            let f = std::fs::File::open(path)
                 .map_err(|e| Failure::Input(anyhow!("cannot read {}: {e}", path.display())))?;
+            let len = f.metadata().map_or(0, |m| m.len());
+            Ok((Box::new(f), len))
         }
-        None => {
-            io::stdin()
-                .lock()
-                .read_to_end(&mut data)
-                .context("reading stdin")?;
-        }
+        None => Ok((Box::new(io::stdin().lock()), 0)),
     }
-    Ok(data)
 }
 
 pub(crate) fn parse_key(key: Option<&str>) -> Result<Option<SecretKey>, Failure> {
@@ -127,7 +123,11 @@ pub(crate) fn frame_line(
 
 pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
     let key = parse_key(args.key.as_deref())?;
-    let data = read_input(args.file.as_deref())?;
+    let (mut input, input_len) = open_input(args.file.as_deref())?;
+    let cannot = |e: io::Error| match &args.file {
+        Some(path) => Failure::Input(anyhow!("cannot read {}: {e}", path.display())),
+        None => Failure::Input(anyhow!("cannot read stdin: {e}")),
+    };
     let is_tlog = args.tlog
         || (!args.raw
             && args.file.as_ref().is_some_and(|f| {
@@ -138,9 +138,10 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
     let started = std::time::Instant::now();
     if args.count
         && !is_tlog
-        && let Some((parse, bad_signature)) =
-            crate::fast_count::count_builtin(&args.dialect, &data, key.as_ref())
+        && let Some(counted) =
+            crate::fast_count::count_builtin(&args.dialect, &mut input, key.as_ref())
     {
+        let (parse, bad_signature) = counted.map_err(cannot)?;
         let seconds = started.elapsed().as_secs_f64();
         if args.time {
             eprintln!(
@@ -207,9 +208,9 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
             .map(|m| (m.id, m.crc_extra))
             .collect();
         let mut reader =
-            tlog::Reader::new(&data[..]).with_crc_extra(move |id: u32| crcs.get(&id).copied());
+            tlog::Reader::new(input).with_crc_extra(move |id: u32| crcs.get(&id).copied());
         let mut stats = Stats::default();
-        let mut progress = crate::progress::Progress::new("decoding", data.len() as u64);
+        let mut progress = crate::progress::Progress::new("decoding", input_len);
         loop {
             if (stats.frames + stats.unknown_id) % 4096 == 0 {
                 progress.set(reader.stats().bytes);
@@ -232,16 +233,18 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
             (read.bytes, read.bad_crc, read.skipped_bytes);
         counts.parse = stats;
     } else {
-        let mut parser = SliceParser::new(&data, lookup);
-        let mut progress = crate::progress::Progress::new("decoding", data.len() as u64);
-        while let Some(item) = parser.next() {
-            handle(item, None, &mut counts);
-            if parser.stats().frames % 4096 == 0 {
-                progress.set(parser.position() as u64);
-            }
-        }
+        let mut progress = crate::progress::Progress::new("decoding", input_len);
+        let mut parse_counts = Counts::default();
+        let stats = crate::log_reader::raw_items(
+            &mut input,
+            lookup,
+            |item| handle(item, None, &mut parse_counts),
+            |at| progress.set(at),
+        )
+        .map_err(cannot)?;
         progress.finish();
-        counts.parse = *parser.stats();
+        counts.bad_signature = parse_counts.bad_signature;
+        counts.parse = stats;
     }
     if let Some(e) = write_err {
         return Err(Failure::Other(

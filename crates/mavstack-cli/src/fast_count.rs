@@ -2,9 +2,13 @@
 //! parsing, checksum validation, typed decoding of every frame, no allocation per frame.
 
 use mavstack_core::MessageSet;
-use mavstack_core::parse::{CrcExtra, Item, SliceParser, Stats};
+use std::io::{self, Read};
+
+use mavstack_core::parse::{CrcExtra, Item, Stats};
 use mavstack_core::signing::{self, SecretKey};
 use mavstack_dialects as d;
+
+use crate::log_reader::raw_items;
 
 /// CRC_EXTRA of ids below 65536 from a dense table (0: unknown, else 0x100 | crc), the rest
 /// through the dialect's lookup: one load per frame, inlined into the parser.
@@ -38,31 +42,39 @@ impl<M: MessageSet> CrcExtra for &DenseCrcExtra<M> {
     }
 }
 
-/// Parses, validates and decodes every frame of `data` as dialect `M`; returns the parser's
-/// counts and the number of frames whose signature does not match `key`.
-pub(crate) fn count<M: MessageSet>(data: &[u8], key: Option<&SecretKey>) -> (Stats, u64) {
+/// Parses, validates and decodes every frame read from `input` as dialect `M` (through one
+/// fixed buffer); returns the parser's counts and the number of frames whose signature does
+/// not match `key`.
+pub(crate) fn count<M: MessageSet>(
+    input: &mut dyn Read,
+    key: Option<&SecretKey>,
+) -> io::Result<(Stats, u64)> {
     let lookup = DenseCrcExtra::<M>::new();
-    let mut parser = SliceParser::new(data, &lookup);
     let mut bad_signature = 0;
-    for item in parser.by_ref() {
-        let Item::Frame(frame) = item else { continue };
-        // Kept where it was decoded (no move of the whole enum out of the `Result`).
-        core::hint::black_box(&M::decode(frame.msg_id(), frame.payload()));
-        if let Some(k) = key.filter(|_| frame.is_signed())
-            && signing::verify(&frame, k).is_err()
-        {
-            bad_signature += 1;
-        }
-    }
-    (*parser.stats(), bad_signature)
+    let stats = raw_items(
+        input,
+        &lookup,
+        |item| {
+            let Item::Frame(frame) = item else { return };
+            // Kept where it was decoded (no move of the whole enum out of the `Result`).
+            core::hint::black_box(&M::decode(frame.msg_id(), frame.payload()));
+            if let Some(k) = key.filter(|_| frame.is_signed())
+                && signing::verify(&frame, k).is_err()
+            {
+                bad_signature += 1;
+            }
+        },
+        |_| {},
+    )?;
+    Ok((stats, bad_signature))
 }
 
 /// [`count`] for the built-in dialect called `name` (any case), or `None` if it is not one.
 pub(crate) fn count_builtin(
     name: &str,
-    data: &[u8],
+    input: &mut dyn Read,
     key: Option<&SecretKey>,
-) -> Option<(Stats, u64)> {
+) -> Option<io::Result<(Stats, u64)>> {
     let run = match name.to_ascii_lowercase().as_str() {
         "all" => count::<d::all::MavMessage>,
         "ardupilotmega" => count::<d::ardupilotmega::MavMessage>,
@@ -85,5 +97,5 @@ pub(crate) fn count_builtin(
         "ualberta" => count::<d::ualberta::MavMessage>,
         _ => return None,
     };
-    Some(run(data, key))
+    Some(run(input, key))
 }

@@ -2,17 +2,68 @@
 //! frame) or a raw stream, chosen by the file name, with a progress bar on a terminal.
 
 use std::collections::HashMap;
-use std::io::{self, BufReader};
+use std::io::{self, BufReader, Read};
 use std::path::Path;
 
 use anyhow::{Context as _, anyhow};
-use mavstack_core::parse::{Item, SliceParser};
+use mavstack_core::parse::{CrcExtra, Item, SliceParser, Stats};
 use mavstack_core::wire::Frame;
 use mavstack_dialect::Dialect;
 use mavstack_transport::tlog;
 
 use crate::Failure;
 use crate::progress::Progress;
+
+/// Bytes read at a time from a raw stream.
+const CHUNK_LEN: usize = 1 << 20;
+
+/// Parses a raw MAVLink stream read from `input` through one fixed buffer (a file is never
+/// in memory whole), calling `each` for every item and `consumed` with the bytes parsed so
+/// far after each chunk. Returns the parser's counts over the whole stream.
+pub(crate) fn raw_items<L: CrcExtra + Copy>(
+    input: &mut dyn Read,
+    lookup: L,
+    mut each: impl FnMut(Item<'_>),
+    mut consumed: impl FnMut(u64),
+) -> io::Result<Stats> {
+    let mut buf = vec![0u8; CHUNK_LEN];
+    let mut filled = 0;
+    let mut eof = false;
+    let mut total = Stats::default();
+    loop {
+        while !eof && filled < buf.len() {
+            match input.read(&mut buf[filled..]) {
+                Ok(0) => eof = true,
+                Ok(n) => filled += n,
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
+            }
+        }
+        let piece = &buf[..filled];
+        let mut parser = if eof {
+            SliceParser::new(piece, lookup)
+        } else {
+            SliceParser::partial(piece, lookup)
+        };
+        for item in parser.by_ref() {
+            each(item);
+        }
+        let s = parser.stats();
+        total.frames += s.frames;
+        total.bytes += s.bytes;
+        total.bad_crc += s.bad_crc;
+        total.unknown_id += s.unknown_id;
+        total.bad_incompat += s.bad_incompat;
+        total.skipped_bytes += s.skipped_bytes;
+        consumed(total.bytes);
+        if eof {
+            return Ok(total);
+        }
+        let keep = parser.position();
+        buf.copy_within(keep..filled, 0);
+        filled -= keep;
+    }
+}
 
 /// Whether `path` names a tlog (its extension, any case).
 pub(crate) fn is_tlog(path: &Path) -> bool {
@@ -87,25 +138,29 @@ pub(crate) fn read_log(
         counts.bytes = stats.bytes;
         progress.finish();
     } else {
-        let data = std::fs::read(path).map_err(cannot)?;
-        let mut progress = Progress::new(what, data.len() as u64);
-        let mut parser = SliceParser::new(&data, |id: u32| crcs.get(&id).copied());
-        while let Some(item) = parser.next() {
-            let (frame, known) = match item {
-                Item::Frame(f) => (f, true),
-                Item::Unknown(f) => (f, false),
-            };
-            each(&LogFrame {
-                ts_us: None,
-                frame,
-                known,
-            });
-            counts.frames += 1;
-            if counts.frames % 4096 == 0 {
-                progress.set(parser.position() as u64);
-            }
-        }
-        let stats = parser.stats();
+        let mut file = std::fs::File::open(path).map_err(cannot)?;
+        let total = file.metadata().map_or(0, |m| m.len());
+        let mut progress = Progress::new(what, total);
+        let mut frames = 0;
+        let stats = raw_items(
+            &mut file,
+            |id: u32| crcs.get(&id).copied(),
+            |item| {
+                let (frame, known) = match item {
+                    Item::Frame(f) => (f, true),
+                    Item::Unknown(f) => (f, false),
+                };
+                each(&LogFrame {
+                    ts_us: None,
+                    frame,
+                    known,
+                });
+                frames += 1;
+            },
+            |at| progress.set(at),
+        )
+        .map_err(cannot)?;
+        counts.frames = frames;
         counts.bad_frames = stats.bad_crc;
         counts.skipped_bytes = stats.skipped_bytes;
         counts.bytes = stats.bytes;

@@ -79,8 +79,8 @@ pub fn fuzz_seeds(target: &str, at_least: usize) -> std::vec::Vec<std::vec::Vec<
 }
 
 /// Fuzzing entry point for the parsers: runs `data` through the slice parser and, split at
-/// every byte boundary the data itself chooses, through the streaming deframer, and checks
-/// that both find the same frames. Never panics unless they disagree (a bug).
+/// every byte boundary the data itself chooses, through the streaming deframer and through
+/// the slice parser piece by piece, and checks that all find the same frames. Never panics unless they disagree (a bug).
 #[doc(hidden)]
 pub fn fuzz_deframer(data: &[u8]) {
     // A small fixed dialect: HEARTBEAT, COMMAND_LONG and one id above 255.
@@ -127,6 +127,47 @@ pub fn fuzz_deframer(data: &[u8]) {
     assert!(
         n_stream >= n_slice.min(64),
         "deframer found fewer frames than the slice parser"
+    );
+    // The slice parser over the same pieces, each parse continued from where the last one
+    // stopped (how `mavstack decode` reads a file in fixed chunks): the same frames again.
+    let mut buf = [0u8; 2 * wire::MAX_FRAME_LEN + 256];
+    let (mut held, mut fed, mut n_pieces) = (0, 0, 0);
+    loop {
+        let take = chunk.min(data.len() - fed).min(buf.len() - held);
+        buf[held..held + take].copy_from_slice(&data[fed..fed + take]);
+        held += take;
+        fed += take;
+        let at_end = fed == data.len();
+        let mut p = if at_end {
+            parse::SliceParser::new(&buf[..held], lookup)
+        } else {
+            parse::SliceParser::partial(&buf[..held], lookup)
+        };
+        for item in p.by_ref() {
+            let (parse::Item::Frame(f) | parse::Item::Unknown(f)) = item;
+            if n_pieces < n_slice {
+                assert_eq!(
+                    from_slice[n_pieces],
+                    (f.frame_len(), f.msg_id()),
+                    "the slice parser over pieces disagrees with it over the whole"
+                );
+            }
+            n_pieces += 1;
+        }
+        if at_end {
+            break;
+        }
+        let keep = p.position();
+        assert!(
+            keep > 0 || take > 0,
+            "the parser over pieces stopped making progress"
+        );
+        buf.copy_within(keep..held, 0);
+        held -= keep;
+    }
+    assert!(
+        n_pieces >= n_slice.min(64),
+        "the slice parser over pieces found fewer frames than over the whole"
     );
 }
 

@@ -247,17 +247,23 @@ fn scan(
     }
 }
 
-/// Parses a complete buffer; frames borrow from it.
+/// Parses a buffer in place; frames borrow from it.
+///
+/// [`SliceParser::new`] takes a complete input. [`SliceParser::partial`] takes one piece of
+/// a longer stream read in chunks: it stops before a frame that the next piece may complete,
+/// and [`SliceParser::position`] is then where the next piece must continue (move the bytes
+/// from there to the front of the buffer, append more, parse again).
 #[derive(Debug)]
 pub struct SliceParser<'a, L> {
     buf: &'a [u8],
     pos: usize,
     lookup: L,
     stats: Stats,
+    at_end: bool,
 }
 
 impl<'a, L: CrcExtra> SliceParser<'a, L> {
-    /// A parser over `buf` with CRC_EXTRA from `lookup`.
+    /// A parser over `buf`, the whole input, with CRC_EXTRA from `lookup`.
     pub fn new(buf: &'a [u8], lookup: L) -> Self {
         Self {
             buf,
@@ -267,6 +273,16 @@ impl<'a, L: CrcExtra> SliceParser<'a, L> {
                 bytes: buf.len() as u64,
                 ..Stats::default()
             },
+            at_end: true,
+        }
+    }
+
+    /// A parser over `buf`, a piece of an input that goes on after it. Its `bytes` count is
+    /// the bytes it consumed, so the counts of consecutive pieces add up.
+    pub fn partial(buf: &'a [u8], lookup: L) -> Self {
+        Self {
+            at_end: false,
+            ..Self::new(buf, lookup)
         }
     }
 
@@ -290,13 +306,22 @@ impl<'a, L: CrcExtra> Iterator for SliceParser<'a, L> {
         if self.pos >= self.buf.len() {
             return None;
         }
-        match scan(self.buf, self.pos, true, &self.lookup, &mut self.stats) {
+        match scan(
+            self.buf,
+            self.pos,
+            self.at_end,
+            &self.lookup,
+            &mut self.stats,
+        ) {
             Step::Found { start, len, known } => {
                 self.pos = start + len;
                 Some(Item::new(&self.buf[start..start + len], known))
             }
-            Step::NeedMore { .. } => {
-                self.pos = self.buf.len();
+            Step::NeedMore { keep } => {
+                self.pos = if self.at_end { self.buf.len() } else { keep };
+                if !self.at_end {
+                    self.stats.bytes = self.pos as u64;
+                }
                 None
             }
         }
@@ -416,5 +441,82 @@ impl Deframer {
     #[must_use]
     pub fn buffered(&self) -> usize {
         self.end - self.start
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A HEARTBEAT (CRC_EXTRA 50) from system `sys`.
+    fn heartbeat(sys: u8) -> [u8; 21] {
+        let mut f = [
+            0xfd, 9, 0, 0, 0, sys, 1, 0, 0, 0, 0, 0, 0, 0, 2, 12, 0x51, 4, 3, 0, 0,
+        ];
+        let mut crc = crate::Crc16::new();
+        crc.update(&f[1..19]);
+        crc.update_byte(50);
+        f[19..].copy_from_slice(&crc.value().to_le_bytes());
+        f
+    }
+
+    #[test]
+    fn pieces_parse_as_the_whole() {
+        let lookup = |id: u32| (id == 0).then_some(50u8);
+        let mut stream = std::vec::Vec::new();
+        for i in 0..200u8 {
+            stream.extend_from_slice(&heartbeat(i));
+            // Noise, false starts and a frame cut short between the frames.
+            stream.extend_from_slice(&[0x11, 0xfe, 0x03][..usize::from(i % 4).min(3)]);
+            if i % 9 == 0 {
+                stream.extend_from_slice(&heartbeat(i)[..15]);
+            }
+        }
+        let mut whole = SliceParser::new(&stream, lookup);
+        let want: std::vec::Vec<u8> = whole
+            .by_ref()
+            .filter_map(|it| match it {
+                Item::Frame(f) => Some(f.sysid()),
+                Item::Unknown(_) => None,
+            })
+            .collect();
+        for chunk in [64, 100, 333, 1000] {
+            let mut buf = std::vec::Vec::new();
+            let (mut got, mut stats, mut fed) = (std::vec::Vec::new(), Stats::default(), 0);
+            loop {
+                let take = chunk.min(stream.len() - fed);
+                buf.extend_from_slice(&stream[fed..fed + take]);
+                fed += take;
+                let at_end = fed == stream.len();
+                let mut p = if at_end {
+                    SliceParser::new(&buf, lookup)
+                } else {
+                    SliceParser::partial(&buf, lookup)
+                };
+                got.extend(p.by_ref().filter_map(|it| match it {
+                    Item::Frame(f) => Some(f.sysid()),
+                    Item::Unknown(_) => None,
+                }));
+                let s = p.stats();
+                stats.frames += s.frames;
+                stats.bytes += s.bytes;
+                stats.bad_crc += s.bad_crc;
+                stats.skipped_bytes += s.skipped_bytes;
+                let keep = p.position();
+                if at_end {
+                    break;
+                }
+                buf.drain(..keep);
+            }
+            assert_eq!(got, want, "chunks of {chunk}");
+            assert_eq!(stats.frames, whole.stats().frames);
+            assert_eq!(stats.bytes, stream.len() as u64);
+            assert_eq!(
+                stats.skipped_bytes,
+                whole.stats().skipped_bytes,
+                "chunks of {chunk}"
+            );
+            assert_eq!(stats.bad_crc, whole.stats().bad_crc);
+        }
     }
 }
