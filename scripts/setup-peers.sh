@@ -6,7 +6,10 @@
 #                        (vtk, opencv, matplotlib, wxPython...), plus what its console needs;
 #     mavsdk 4.1.0       MAVSDK's native Python binding (ctypes over the bundled libcmavsdk.so);
 #     mavsdk-grpc 4.0.5  MAVSDK's gRPC wrapper (import mavsdk_grpc) with its bundled
-#                        mavsdk_server binary (mavsdk_grpc/bin/mavsdk_server).
+#                        mavsdk_server binary (mavsdk_grpc/bin/mavsdk_server);
+#     for the Python package (crates/mavstack-python): maturin 1.16.0 (builds the wheel),
+#     pytest 9.2.0, and the readers of its Arrow tables: pyarrow 26.0.1, polars 2.1.0,
+#     pandas 3.1.1, matplotlib 3.11.2 (its README's example).
 # Prints the python to use (also exported by scripts/test.sh as MAVSTACK_PYTHON).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -18,6 +21,11 @@ pins=(
     "pyserial==3.5" "pexpect==4.9.0" "ptyprocess==0.7.0" "defusedxml==0.7.1" "pynmeagps==1.1.8"
     "mavsdk==4.1.0"
     "mavsdk-grpc==4.0.5" "grpcio==1.85.1" "protobuf==6.33.6" "typing_extensions==4.16.0"
+    "maturin==1.16.0" "pytest==9.2.0" "iniconfig==2.3.1" "pluggy==1.7.0" "packaging==26.4"
+    "Pygments==2.21.0" "pyarrow==26.0.1" "polars==2.1.0" "polars-runtime-32==2.1.0"
+    "pandas==3.1.1" "numpy==2.4.6" "python-dateutil==4.0.0" "tzdata==2026.6"
+    "matplotlib==3.11.2" "contourpy==1.3.3" "cycler==0.12.1" "fonttools==4.68.0"
+    "kiwisolver==1.5.1" "pillow==13.0.0" "pyparsing==3.3.3"
 )
 nodeps=("MAVProxy==1.8.75")
 if ! command -v python3 >/dev/null; then

@@ -32,6 +32,16 @@ cargo clippy --workspace --all-targets --all-features --locked -- -D warnings
 step "cargo test (workspace, all features)"
 cargo test --workspace --all-features --locked
 
+step "Python package: maturin builds the wheel, installed in .venv, pytest"
+# The same build as `pip install crates/mavstack-python` (release, abi3), then the package's
+# tests against pymavlink, pyarrow, polars and pandas in the test venv.
+rm -f target/wheels/mavstack-*.whl
+"$(dirname "$MAVSTACK_PYTHON")/maturin" build --release --locked -q \
+    -m crates/mavstack-python/Cargo.toml -o target/wheels
+"$MAVSTACK_PYTHON" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps \
+    target/wheels/mavstack-*-abi3-*.whl
+(cd crates/mavstack-python && "$MAVSTACK_PYTHON" -m pytest -q -p no:cacheprovider tests)
+
 step "examples, against the in-process simulated vehicle"
 # Each example runs and its output must show what it is for.
 example() {

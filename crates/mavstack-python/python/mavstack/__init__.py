@@ -1,0 +1,33 @@
+"""mavstack: MAVLink logs at native speed.
+
+- ``mavstack.mavutil.mavlink_connection(path, dialect="ardupilotmega", key=None)`` reads a
+  ``.tlog`` (or a raw capture) message by message with pymavlink's API: ``recv_match``,
+  ``recv_msg``, iteration, ``messages``; each message has pymavlink's methods and attributes.
+- ``mavstack.read_tlog(path, types=None, dialect="ardupilotmega", key=None, progress=False)``
+  returns ``{name: Table}``, one Arrow table per message type (the Arrow C stream interface):
+  ``pyarrow.table(t)``, ``polars.from_arrow(t)``, ``pyarrow.table(t).to_pandas()``.
+"""
+
+from mavstack._native import (
+    LatestMessages,
+    MAVLinkHeader,
+    MAVLinkMessage,
+    Table,
+    __version__,
+    dialects,
+    mavlogfile,
+    read_tlog,
+)
+from mavstack import mavutil
+
+__all__ = [
+    "LatestMessages",
+    "MAVLinkHeader",
+    "MAVLinkMessage",
+    "Table",
+    "__version__",
+    "dialects",
+    "mavlogfile",
+    "mavutil",
+    "read_tlog",
+]

@@ -1,0 +1,163 @@
+//! A dialect as the reader needs it: per message id its CRC_EXTRA and the layout of its
+//! fields (XML order, as pymavlink lists them, and wire order), loaded once per name.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+
+use mavstack_dialect::PrimitiveType;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+
+/// One field of a message.
+#[derive(Debug)]
+pub(crate) struct FieldLayout {
+    /// Its name.
+    pub(crate) name: String,
+    /// Its element type.
+    pub(crate) primitive: PrimitiveType,
+    /// `N` of an array (`char[N]` included); `None` for a scalar.
+    pub(crate) array_len: Option<usize>,
+    /// Offset in the full payload.
+    pub(crate) offset: usize,
+    /// The XML's `units`, if any.
+    pub(crate) units: Option<String>,
+}
+
+impl FieldLayout {
+    /// Elements (1 for a scalar).
+    pub(crate) fn count(&self) -> usize {
+        self.array_len.unwrap_or(1)
+    }
+
+    /// Whether the field is text (`char` or `char[N]`).
+    pub(crate) fn is_text(&self) -> bool {
+        self.primitive == PrimitiveType::Char
+    }
+}
+
+/// One message of the dialect.
+#[derive(Debug)]
+pub(crate) struct MessageType {
+    /// Its id.
+    pub(crate) id: u32,
+    /// Its name, e.g. `ATTITUDE`.
+    pub(crate) name: String,
+    /// CRC_EXTRA.
+    pub(crate) crc_extra: u8,
+    /// Length of the full payload, extensions included.
+    pub(crate) max_len: usize,
+    /// Fields in XML order (pymavlink's `fieldnames`).
+    pub(crate) fields: Vec<FieldLayout>,
+    /// Field indexes in wire order (pymavlink's `ordered_fieldnames`).
+    pub(crate) wire_order: Vec<usize>,
+    /// Field index by name.
+    by_name: HashMap<String, usize>,
+}
+
+impl MessageType {
+    /// The field called `name`.
+    pub(crate) fn field(&self, name: &str) -> Option<&FieldLayout> {
+        self.by_name.get(name).map(|&i| &self.fields[i])
+    }
+}
+
+/// A loaded dialect.
+#[derive(Debug)]
+pub(crate) struct Dialect {
+    /// The name it was loaded by.
+    pub(crate) name: String,
+    /// Its messages.
+    pub(crate) messages: Vec<Arc<MessageType>>,
+    by_id: HashMap<u32, usize>,
+    by_name: HashMap<String, usize>,
+}
+
+impl Dialect {
+    /// Loads a built-in dialect by name or an XML file by path (once per name).
+    pub(crate) fn load(name: &str) -> PyResult<Arc<Self>> {
+        static CACHE: OnceLock<Mutex<HashMap<String, Arc<Dialect>>>> = OnceLock::new();
+        let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
+        let builtin = mavstack_dialect::builtin::dialect_names()
+            .iter()
+            .any(|b| b.eq_ignore_ascii_case(name));
+        if builtin && let Some(found) = cache.lock().ok().and_then(|c| c.get(name).cloned()) {
+            return Ok(found);
+        }
+        let loaded = mavstack_dialect::load(name)
+            .map_err(|e| PyValueError::new_err(format!("dialect {name:?}: {e}")))?;
+        let dialect = Arc::new(Self::from_loaded(name, &loaded));
+        if builtin && let Ok(mut c) = cache.lock() {
+            c.insert(name.to_owned(), Arc::clone(&dialect));
+        }
+        Ok(dialect)
+    }
+
+    fn from_loaded(name: &str, loaded: &mavstack_dialect::Dialect) -> Self {
+        let mut messages = Vec::with_capacity(loaded.messages.len());
+        for m in &loaded.messages {
+            let xml = m.fields_in_xml_order();
+            let fields: Vec<FieldLayout> = xml
+                .iter()
+                .map(|f| FieldLayout {
+                    name: f.name.clone(),
+                    primitive: f.ty.primitive,
+                    array_len: f.ty.array_len.map(usize::from),
+                    offset: f.offset,
+                    units: f.units.clone(),
+                })
+                .collect();
+            let wire_order = m
+                .fields
+                .iter()
+                .filter_map(|w| xml.iter().position(|f| f.name == w.name))
+                .collect();
+            let by_name = fields
+                .iter()
+                .enumerate()
+                .map(|(i, f)| (f.name.clone(), i))
+                .collect();
+            messages.push(Arc::new(MessageType {
+                id: m.id,
+                name: m.name.clone(),
+                crc_extra: m.crc_extra,
+                max_len: m.max_len,
+                fields,
+                wire_order,
+                by_name,
+            }));
+        }
+        let by_id = messages
+            .iter()
+            .enumerate()
+            .map(|(i, m)| (m.id, i))
+            .collect();
+        let by_name = messages
+            .iter()
+            .enumerate()
+            .map(|(i, m)| (m.name.clone(), i))
+            .collect();
+        Self {
+            name: name.to_owned(),
+            messages,
+            by_id,
+            by_name,
+        }
+    }
+
+    /// The index of message `id`.
+    #[inline]
+    pub(crate) fn index_of_id(&self, id: u32) -> Option<usize> {
+        self.by_id.get(&id).copied()
+    }
+
+    /// The index of the message called `name`.
+    pub(crate) fn index_of_name(&self, name: &str) -> Option<usize> {
+        self.by_name.get(name).copied()
+    }
+
+    /// CRC_EXTRA of message `id`, for the frame parsers.
+    #[inline]
+    pub(crate) fn crc_extra(&self, id: u32) -> Option<u8> {
+        self.index_of_id(id).map(|i| self.messages[i].crc_extra)
+    }
+}

@@ -1,0 +1,188 @@
+//! A log file's bytes (mapped, not read into memory) and the scan over them that finds each
+//! good frame: tlog records or a raw stream, checksums checked, signatures verified with a
+//! key, everything else counted.
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::path::Path;
+use std::sync::Arc;
+
+use mavstack_core::parse::{Item, SliceParser};
+use mavstack_core::signing::{self, SecretKey};
+use mavstack_core::tlog::Records;
+use mavstack_core::wire::Frame;
+
+use crate::dialect::Dialect;
+
+/// A log's bytes: the file mapped into memory (pages are read on demand and can be dropped
+/// by the kernel again, so a log larger than memory works), or owned bytes for what cannot
+/// be mapped (an empty file, a pipe).
+pub(crate) enum LogBytes {
+    /// A mapped file.
+    Mapped(memmap2::Mmap),
+    /// Bytes read.
+    Owned(Vec<u8>),
+}
+
+impl core::ops::Deref for LogBytes {
+    type Target = [u8];
+
+    fn deref(&self) -> &[u8] {
+        match self {
+            Self::Mapped(m) => m,
+            Self::Owned(v) => v,
+        }
+    }
+}
+
+impl LogBytes {
+    /// The bytes of the file at `path`.
+    pub(crate) fn open(path: &Path) -> std::io::Result<Arc<Self>> {
+        let file = File::open(path)?;
+        let meta = file.metadata()?;
+        if !meta.is_file() || meta.len() == 0 {
+            return Ok(Arc::new(Self::Owned(std::fs::read(path)?)));
+        }
+        // SAFETY: the mapping is read-only and private to this process. Rust's aliasing rules
+        // would be broken only if another process truncated or rewrote the file while it is
+        // mapped; a log being analysed is not written to (the README says so: copy a log that
+        // is still being recorded). Truncation would raise SIGBUS, not corrupt memory.
+        #[allow(unsafe_code)]
+        let map = unsafe { memmap2::MmapOptions::new().map(&file)? };
+        #[cfg(unix)]
+        {
+            let _ = map.advise(memmap2::Advice::Sequential);
+        }
+        Ok(Arc::new(Self::Mapped(map)))
+    }
+}
+
+/// Whether `path` names a tlog (by its extension, any case).
+pub(crate) fn is_tlog(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("tlog"))
+}
+
+/// What a scan counted besides the frames it returned.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct ScanStats {
+    /// Good frames returned.
+    pub(crate) frames: u64,
+    /// Candidates rejected for a bad checksum.
+    pub(crate) bad_crc: u64,
+    /// Frames of message ids the dialect does not define.
+    pub(crate) unknown_id: u64,
+    /// Signed frames whose signature did not verify with the key, or that replayed an older
+    /// timestamp of their stream.
+    pub(crate) bad_signature: u64,
+    /// Bytes that were part of no frame.
+    pub(crate) skipped_bytes: u64,
+    /// Frames that carried a signature (verified or not).
+    pub(crate) signed: u64,
+}
+
+/// One good frame found by a [`Scan`].
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Found {
+    /// Where the frame starts in the log.
+    pub(crate) start: usize,
+    /// Its length.
+    pub(crate) len: usize,
+    /// The tlog timestamp (µs since the Unix epoch, link bits included); 0 in a raw stream.
+    pub(crate) ts_us: u64,
+    /// The message's index in the dialect.
+    pub(crate) message: usize,
+    /// Whether the frame's signature was verified with the key.
+    pub(crate) verified: bool,
+}
+
+/// A position in a log and what has been counted up to it.
+pub(crate) struct Scan {
+    pos: usize,
+    tlog: bool,
+    key: Option<SecretKey>,
+    /// The last accepted signature timestamp per (link id, sysid, compid).
+    streams: HashMap<(u8, u8, u8), u64>,
+    /// The counts so far.
+    pub(crate) stats: ScanStats,
+}
+
+impl Scan {
+    /// A scan from the start of a log.
+    pub(crate) fn new(tlog: bool, key: Option<SecretKey>) -> Self {
+        Self {
+            pos: 0,
+            tlog,
+            key,
+            streams: HashMap::new(),
+            stats: ScanStats::default(),
+        }
+    }
+
+    /// Where the scan is.
+    pub(crate) const fn position(&self) -> usize {
+        self.pos
+    }
+
+    /// The next good frame of a known message in `log`, or `None` at its end.
+    pub(crate) fn next(&mut self, log: &[u8], dialect: &Dialect) -> Option<Found> {
+        let lookup = |id: u32| dialect.crc_extra(id);
+        loop {
+            let (start, len, ts_us) = if self.tlog {
+                let mut records = Records::starting_at(log, self.pos, Some(lookup));
+                let record = records.next();
+                self.pos = records.position();
+                self.stats.skipped_bytes += records.stats().skipped_bytes;
+                self.stats.bad_crc += records.stats().bad_crc;
+                let r = record?;
+                (
+                    r.offset + mavstack_core::tlog::TIMESTAMP_LEN,
+                    r.frame.len(),
+                    r.ts_us,
+                )
+            } else {
+                let rest = log.get(self.pos..)?;
+                let mut parser = SliceParser::new(rest, lookup);
+                let item = parser.next();
+                let s = *parser.stats();
+                self.stats.skipped_bytes += s.skipped_bytes;
+                self.stats.bad_crc += s.bad_crc;
+                self.stats.unknown_id += s.unknown_id;
+                let end = self.pos + parser.position();
+                self.pos = end;
+                match item? {
+                    Item::Frame(f) => (end - f.as_bytes().len(), f.as_bytes().len(), 0),
+                    Item::Unknown(_) => continue,
+                }
+            };
+            let frame = Frame::new_unchecked(&log[start..start + len]);
+            let Some(message) = dialect.index_of_id(frame.msg_id()) else {
+                // A tlog record of an id the dialect does not know (a raw scan counted it).
+                self.stats.unknown_id += 1;
+                continue;
+            };
+            let mut verified = false;
+            if let Some(sig) = frame.signature() {
+                self.stats.signed += 1;
+                if let Some(key) = &self.key {
+                    let stream = (sig.link_id, frame.sysid(), frame.compid());
+                    let fresh = self.streams.get(&stream).is_none_or(|&t| sig.timestamp > t);
+                    if !fresh || signing::verify(&frame, key).is_err() {
+                        self.stats.bad_signature += 1;
+                        continue;
+                    }
+                    self.streams.insert(stream, sig.timestamp);
+                    verified = true;
+                }
+            }
+            self.stats.frames += 1;
+            return Some(Found {
+                start,
+                len,
+                ts_us,
+                message,
+                verified,
+            });
+        }
+    }
+}
