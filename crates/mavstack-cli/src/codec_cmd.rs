@@ -128,12 +128,8 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
         Some(path) => Failure::Input(anyhow!("cannot read {}: {e}", path.display())),
         None => Failure::Input(anyhow!("cannot read stdin: {e}")),
     };
-    let is_tlog = args.tlog
-        || (!args.raw
-            && args.file.as_ref().is_some_and(|f| {
-                f.extension()
-                    .is_some_and(|e| e.eq_ignore_ascii_case("tlog"))
-            }));
+    let is_tlog =
+        args.tlog || (!args.raw && args.file.as_deref().is_some_and(crate::log_reader::is_tlog));
     // Counting a raw stream of a built-in dialect goes through the generated, typed code.
     let started = std::time::Instant::now();
     if args.count

@@ -48,13 +48,7 @@ pub(crate) fn raw_items<L: CrcExtra + Copy>(
         for item in parser.by_ref() {
             each(item);
         }
-        let s = parser.stats();
-        total.frames += s.frames;
-        total.bytes += s.bytes;
-        total.bad_crc += s.bad_crc;
-        total.unknown_id += s.unknown_id;
-        total.bad_incompat += s.bad_incompat;
-        total.skipped_bytes += s.skipped_bytes;
+        total += *parser.stats();
         consumed(total.bytes);
         if eof {
             return Ok(total);
@@ -65,11 +59,7 @@ pub(crate) fn raw_items<L: CrcExtra + Copy>(
     }
 }
 
-/// Whether `path` names a tlog (its extension, any case).
-pub(crate) fn is_tlog(path: &Path) -> bool {
-    path.extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("tlog"))
-}
+pub(crate) use mavstack_core::tlog::is_tlog_path as is_tlog;
 
 /// One frame of a log.
 pub(crate) struct LogFrame<'a> {

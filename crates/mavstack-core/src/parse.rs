@@ -87,6 +87,19 @@ pub struct Stats {
     pub skipped_bytes: u64,
 }
 
+/// Adds the counts of another part of the same stream (a piece parsed with
+/// [`SliceParser::partial`]).
+impl core::ops::AddAssign for Stats {
+    fn add_assign(&mut self, other: Self) {
+        self.frames += other.frames;
+        self.bytes += other.bytes;
+        self.bad_crc += other.bad_crc;
+        self.unknown_id += other.unknown_id;
+        self.bad_incompat += other.bad_incompat;
+        self.skipped_bytes += other.skipped_bytes;
+    }
+}
+
 fn is_magic(b: u8) -> bool {
     b == STX_V2 || b == STX_V1
 }
@@ -497,11 +510,7 @@ mod tests {
                     Item::Frame(f) => Some(f.sysid()),
                     Item::Unknown(_) => None,
                 }));
-                let s = p.stats();
-                stats.frames += s.frames;
-                stats.bytes += s.bytes;
-                stats.bad_crc += s.bad_crc;
-                stats.skipped_bytes += s.skipped_bytes;
+                stats += *p.stats();
                 let keep = p.position();
                 if at_end {
                     break;

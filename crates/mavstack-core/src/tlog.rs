@@ -35,6 +35,15 @@ pub const MAX_RECORD_LEN: usize = TIMESTAMP_LEN + MAX_FRAME_LEN;
 /// ends where its header says.
 pub const LOOKAHEAD: usize = MAX_RECORD_LEN + TIMESTAMP_LEN + 1;
 
+/// Whether `path` names a tlog: a `.tlog` extension, any case (how every mavstack tool and
+/// the Python package tell a tlog from a raw capture).
+#[cfg(feature = "std")]
+#[must_use]
+pub fn is_tlog_path(path: &std::path::Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("tlog"))
+}
+
 /// Counts of what record scanning rejected.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RecordStats {

@@ -57,11 +57,7 @@ impl LogBytes {
     }
 }
 
-/// Whether `path` names a tlog (by its extension, any case).
-pub(crate) fn is_tlog(path: &Path) -> bool {
-    path.extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("tlog"))
-}
+pub(crate) use mavstack_core::tlog::is_tlog_path as is_tlog;
 
 /// What a scan counted besides the frames it returned.
 #[derive(Clone, Copy, Debug, Default)]
@@ -90,6 +86,8 @@ pub(crate) struct Found {
     pub(crate) len: usize,
     /// The tlog timestamp (µs since the Unix epoch, link bits included); 0 in a raw stream.
     pub(crate) ts_us: u64,
+    /// The sender's system id.
+    pub(crate) sysid: u8,
     /// The message's index in the dialect.
     pub(crate) message: usize,
     /// Whether the frame's signature was verified with the key.
@@ -180,6 +178,7 @@ impl Scan {
                 start,
                 len,
                 ts_us,
+                sysid: frame.sysid(),
                 message,
                 verified,
             });

@@ -50,10 +50,7 @@ impl FileFormat {
     /// case), else [`FileFormat::Raw`].
     #[must_use]
     pub fn from_path(path: &std::path::Path) -> Self {
-        if path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("tlog"))
-        {
+        if mavstack_core::tlog::is_tlog_path(path) {
             Self::Tlog
         } else {
             Self::Raw
