@@ -43,12 +43,6 @@ pub(crate) fn parse_key(key: Option<&Bound<'_, PyAny>>) -> PyResult<Option<Secre
     ))
 }
 
-/// Where the latest message of one type is.
-#[derive(Clone, Copy, Debug)]
-struct Latest {
-    found: Found,
-}
-
 /// A MAVLink log read message by message, as pymavlink's `mavlogfile`: `.tlog` files by
 /// their extension, anything else as raw frames. Bad frames and unknown message ids are
 /// counted (`stats()`), never returned.
@@ -61,9 +55,9 @@ pub(crate) struct LogConnection {
     key: Option<SecretKey>,
     scan: Scan,
     /// Latest message per (sysid, message index): pymavlink's `sysid_state[s].messages`.
-    by_sysid: HashMap<(u8, usize), Latest>,
+    by_sysid: HashMap<(u8, usize), Found>,
     /// Latest message per message index: pymavlink's `messages`.
-    latest: HashMap<usize, Latest>,
+    latest: HashMap<usize, Found>,
     /// The globals conditions are evaluated with (Python's `math`, as pymavlink).
     globals: Option<Py<PyDict>>,
     /// Compiled conditions by their text.
@@ -109,10 +103,8 @@ impl LogConnection {
     /// The next good frame, recorded as the latest of its type.
     fn next_found(&mut self) -> Option<Found> {
         let found = self.scan.next(&self.log, &self.dialect)?;
-        let sysid = self.log[found.start + sysid_offset(self.log[found.start])];
-        self.by_sysid
-            .insert((sysid, found.message), Latest { found });
-        self.latest.insert(found.message, Latest { found });
+        self.by_sysid.insert((found.sysid, found.message), found);
+        self.latest.insert(found.message, found);
         Some(found)
     }
 
@@ -228,15 +220,6 @@ impl LogConnection {
     }
 }
 
-/// Offset of the sysid in a frame starting with `magic`.
-const fn sysid_offset(magic: u8) -> usize {
-    if magic == mavstack_core::wire::STX_V2 {
-        5
-    } else {
-        3
-    }
-}
-
 #[pymethods]
 impl LogConnection {
     /// The next message, or `None` at the end of the log.
@@ -263,19 +246,14 @@ impl LogConnection {
             _ => None,
         };
         loop {
-            let (found, sysid) = {
-                let mut me = slf.borrow_mut();
-                let Some(found) = me.next_found() else {
-                    return Ok(None);
-                };
-                if wanted.as_ref().is_some_and(|w| !w[found.message]) {
-                    continue;
-                }
-                let sysid = me.log[found.start + sysid_offset(me.log[found.start])];
-                (found, sysid)
+            let Some(found) = slf.borrow_mut().next_found() else {
+                return Ok(None);
             };
+            if wanted.as_ref().is_some_and(|w| !w[found.message]) {
+                continue;
+            }
             if let Some(c) = condition
-                && !Self::condition_holds(slf, py, c, sysid)?
+                && !Self::condition_holds(slf, py, c, found.sysid)?
             {
                 continue;
             }
@@ -375,7 +353,7 @@ impl LatestMessages {
             Some(s) => c.by_sysid.get(&(s, i)),
             None => c.latest.get(&i),
         }?;
-        Some(c.message(&latest.found))
+        Some(c.message(latest))
     }
 
     fn names(&self, py: Python<'_>) -> Vec<String> {
@@ -385,9 +363,9 @@ impl LatestMessages {
                 .by_sysid
                 .iter()
                 .filter(|((sys, _), _)| *sys == s)
-                .map(|((_, i), l)| (l.found.start, *i))
+                .map(|((_, i), l)| (l.start, *i))
                 .collect(),
-            None => c.latest.iter().map(|(i, l)| (l.found.start, *i)).collect(),
+            None => c.latest.iter().map(|(i, l)| (l.start, *i)).collect(),
         };
         found.sort_unstable();
         found

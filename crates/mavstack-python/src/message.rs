@@ -26,10 +26,10 @@ pub(crate) fn bytes_at<const N: usize>(payload: &[u8], at: usize) -> [u8; N] {
 }
 
 /// The bytes of a `char[N]` field up to its first NUL (zero-extended past the payload).
-pub(crate) fn text_bytes(f: &FieldLayout, payload: &[u8]) -> Vec<u8> {
+fn text_bytes<'a>(f: &FieldLayout, payload: &'a [u8]) -> &'a [u8] {
     let end = payload.len().min(f.offset + f.count());
     let raw = payload.get(f.offset..end).unwrap_or_default();
-    mavstack_core::text::until_nul(raw).to_vec()
+    mavstack_core::text::until_nul(raw)
 }
 
 /// One element of a field as a Python int or float.
