@@ -319,9 +319,30 @@ pub struct NodeBuilder {
     role: Option<LinkRole>,
     moderation: InputModeration,
     http: Option<SocketAddr>,
+    /// Taps and event subscribers registered before the node starts.
+    taps: Vec<mpsc::Sender<Tapped>>,
+    watchers: Vec<mpsc::Sender<NodeEvent>>,
 }
 
 impl NodeBuilder {
+    /// A tap ([`NodeHandle::tap`]) that sees every input from the node's first datagram on:
+    /// [`NodeHandle::tap`] on a started node misses what a quick peer sent before it was
+    /// registered.
+    #[must_use]
+    pub fn with_tap(mut self) -> (Self, TapSubscription) {
+        let (tx, rx) = mpsc::channel(SUBSCRIPTION_DEPTH);
+        self.taps.push(tx);
+        (self, rx)
+    }
+
+    /// Link events ([`NodeHandle::events`]) from the node's start on, none missed.
+    #[must_use]
+    pub fn with_events(mut self) -> (Self, EventSubscription) {
+        let (tx, rx) = mpsc::channel(SUBSCRIPTION_DEPTH);
+        self.watchers.push(tx);
+        (self, rx)
+    }
+
     /// Adds a link.
     #[must_use]
     pub fn link(mut self, spec: LinkSpec) -> Self {
@@ -503,9 +524,9 @@ impl NodeBuilder {
             buf: [0; MAX_FRAME_LEN],
             subscribers: Vec::new(),
             subscriber_drops: 0,
-            watchers: Vec::new(),
+            watchers: self.watchers,
             pending: Vec::new(),
-            taps: Vec::new(),
+            taps: self.taps,
             moderation: Moderation::new(self.moderation, clock::now()),
             heartbeat: self.heartbeat.map(|(payload, period)| Heartbeat {
                 payload,
@@ -571,6 +592,8 @@ impl Node {
             role: None,
             moderation: InputModeration::Timer,
             http: None,
+            taps: Vec::new(),
+            watchers: Vec::new(),
         }
     }
 

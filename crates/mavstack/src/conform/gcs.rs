@@ -95,13 +95,16 @@ pub async fn grade_ground_station(
     );
     config.mavlink2 = options.mode == VehicleMode::Answer;
     let own = (config.own.system, config.own.component);
-    let builder = Node::builder().link(link).role(LinkRole::Vehicle {
-        protocol_version: options.mode != VehicleMode::Silent,
-    });
+    // Subscribed before the link is read: a ground station that goes quiet after its first
+    // few frames (one that gives up after a NACK) must still be seen.
+    let (builder, mut tap) = Node::builder()
+        .link(link)
+        .role(LinkRole::Vehicle {
+            protocol_version: options.mode != VehicleMode::Silent,
+        })
+        .with_tap();
+    let (builder, mut events) = builder.with_events();
     let vehicle = SimVehicle::start(builder, config).await?;
-    let handle = vehicle.node().handle();
-    let mut tap = handle.tap().await;
-    let mut events = handle.events().await;
     let mut wire = Wire::new(
         started,
         mavstack_transport::frame::crc_extra_of::<mavstack_dialects::common::MavMessage>,
