@@ -5,8 +5,7 @@
 use core::net::SocketAddr;
 use std::io;
 
-use tokio::io::Interest;
-use tokio::net::UdpSocket;
+use crate::udp_io::UdpIo;
 
 /// Datagrams taken per receive call.
 pub(crate) const RECV_BATCH: usize = 32;
@@ -18,12 +17,20 @@ pub(crate) const SEND_BATCH: usize = 64;
 /// The largest datagram frames are packed into: an Ethernet MTU less the IP and UDP headers.
 pub(crate) const PACK_LIMIT: usize = 1472;
 
+/// Datagrams asked for while they come one at a time: the second slot only tells whether
+/// the socket is drained, which saves the read that would find it empty.
+const PAIR: usize = 2;
+
+/// Whether a receive takes several datagrams per call (and so knows, when it gets fewer
+/// than it asked for, that the socket is drained).
+const BATCHED: bool = cfg!(target_os = "linux");
+
 /// Receive buffers for one socket.
 ///
-/// Two modes: while datagrams come one at a time (a wake-up each), one is taken per plain
-/// `recvfrom`, which costs less than a `recvmmsg` set up for a whole batch and lets the
-/// caller forward it before looking for the next; once two reads in a row find a datagram
-/// waiting, batches are taken, until a batch finds at most one.
+/// Two modes: while datagrams come one at a time (a wake-up each), a read asks for two, so
+/// that the one that came goes on at once and the socket is known to be drained without
+/// another system call; once a read finds two waiting, batches of [`RECV_BATCH`] are taken,
+/// until a batch finds at most one.
 #[derive(Debug)]
 pub(crate) struct RecvBatch {
     buf: Vec<u8>,
@@ -32,8 +39,6 @@ pub(crate) struct RecvBatch {
     pub(crate) truncated: u64,
     /// Batch mode (see above).
     busy: bool,
-    /// The last single read found a datagram.
-    last_found: bool,
 }
 
 /// What one [`RecvBatch::recv`] found.
@@ -53,70 +58,34 @@ impl RecvBatch {
             got: Vec::with_capacity(RECV_BATCH),
             truncated: 0,
             busy: false,
-            last_found: false,
         }
     }
 
-    /// Receives what is waiting without blocking: one datagram, or up to [`RECV_BATCH`] in
-    /// batch mode.
+    /// Receives what is waiting without blocking: up to two datagrams, or up to
+    /// [`RECV_BATCH`] in batch mode.
     ///
     /// # Errors
     /// A receive error other than "would block".
-    pub(crate) fn recv(&mut self, socket: &UdpSocket) -> io::Result<Received> {
+    pub(crate) fn recv(&mut self, socket: &UdpIo) -> io::Result<Received> {
         self.got.clear();
-        if !self.busy {
-            return match socket.try_recv_from(&mut self.buf[..RECV_SLOT]) {
-                Ok((len, from)) => {
-                    if len >= RECV_SLOT {
-                        // Cut (or exactly a slot long, which no MAVLink datagram is).
-                        self.truncated += 1;
-                    }
-                    self.got.push((len.min(RECV_SLOT), from));
-                    self.busy = core::mem::replace(&mut self.last_found, true);
-                    Ok(Received {
-                        count: 1,
-                        more: true,
-                    })
-                }
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
-                    self.last_found = false;
-                    Ok(Received {
-                        count: 0,
-                        more: false,
-                    })
-                }
-                Err(e) => Err(e),
-            };
+        let want = if self.busy { RECV_BATCH } else { PAIR };
+        let count = match socket.try_read(|s| self.recv_now(s, want)) {
+            Ok(n) => n,
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => 0,
+            Err(e) => return Err(e),
+        };
+        let drained = BATCHED && count < want;
+        if drained && count > 0 {
+            // Fewer than asked for: the queue was empty when the call returned. Say so to
+            // the runtime now rather than with another system call (a datagram that
+            // arrived meanwhile raised readiness again: the runtime's ticks see to that).
+            socket.drained();
         }
-        self.batch(socket).map(|count| {
-            if count <= 1 {
-                self.busy = false;
-                self.last_found = false;
-            }
-            Received {
-                count,
-                more: count == RECV_BATCH,
-            }
+        self.busy = if self.busy { count > 1 } else { count == PAIR };
+        Ok(Received {
+            count,
+            more: count > 0 && !drained,
         })
-    }
-
-    fn batch(&mut self, socket: &UdpSocket) -> io::Result<usize> {
-        match socket.try_io(Interest::READABLE, || self.recv_now(socket)) {
-            Ok(n) => {
-                if n < RECV_BATCH {
-                    // Fewer than asked for: the queue was empty when the call returned. Say
-                    // so to the runtime now rather than with another system call (a datagram
-                    // that arrived meanwhile raised readiness again: the runtime's ticks see
-                    // to that).
-                    let _ = socket.try_io(Interest::READABLE, || {
-                        Err::<(), _>(io::Error::from(io::ErrorKind::WouldBlock))
-                    });
-                }
-                Ok(n)
-            }
-            Err(e) if e.kind() == io::ErrorKind::WouldBlock => Ok(0),
-            Err(e) => Err(e),
-        }
     }
 
     /// Datagram `i` of the last receive: its bytes and sender.
@@ -126,42 +95,57 @@ impl RecvBatch {
         Some((&self.buf[start..start + len], from))
     }
 
+    /// One `recvmmsg` for up to `want` datagrams (headers kept per thread: no allocation).
     #[cfg(target_os = "linux")]
-    fn recv_now(&mut self, socket: &UdpSocket) -> io::Result<usize> {
+    fn recv_now(&mut self, socket: &std::net::UdpSocket, want: usize) -> io::Result<usize> {
+        use core::cell::RefCell;
         use std::io::IoSliceMut;
         use std::os::fd::AsRawFd as _;
 
         use nix::sys::socket::{MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg};
 
-        let mut headers = MultiHeaders::<SockaddrStorage>::preallocate(RECV_BATCH, None);
-        let mut chunks = self.buf.chunks_exact_mut(RECV_SLOT);
-        let mut slices: [[IoSliceMut<'_>; 1]; RECV_BATCH] =
-            core::array::from_fn(|_| [IoSliceMut::new(chunks.next().unwrap_or(&mut []))]);
-        let results = recvmmsg(
-            socket.as_raw_fd(),
-            &mut headers,
-            slices.iter_mut(),
-            MsgFlags::MSG_DONTWAIT,
-            None,
-        )
-        .map_err(io::Error::from)?;
-        for r in results {
-            if r.flags.contains(MsgFlags::MSG_TRUNC) {
-                self.truncated += 1;
-            }
-            let from = r.address.and_then(|a| to_std(&a));
-            // A datagram without a usable sender (not IP) cannot be answered: skipped.
-            if let Some(from) = from {
-                self.got.push((r.bytes.min(RECV_SLOT), from));
-            }
+        thread_local! {
+            static HEADERS: RefCell<MultiHeaders<SockaddrStorage>> =
+                RefCell::new(MultiHeaders::preallocate(RECV_BATCH, None));
         }
-        Ok(self.got.len())
+        let want = want.min(RECV_BATCH);
+        let (buf, got, truncated) = (&mut self.buf, &mut self.got, &mut self.truncated);
+        HEADERS.with(|headers| {
+            let mut headers = headers.borrow_mut();
+            let mut chunks = buf.chunks_exact_mut(RECV_SLOT);
+            let mut slices: [[IoSliceMut<'_>; 1]; RECV_BATCH] =
+                core::array::from_fn(|_| [IoSliceMut::new(chunks.next().unwrap_or(&mut []))]);
+            let results = recvmmsg(
+                socket.as_raw_fd(),
+                &mut headers,
+                slices[..want].iter_mut(),
+                MsgFlags::MSG_DONTWAIT,
+                None,
+            )
+            .map_err(io::Error::from)?;
+            for r in results {
+                if r.flags.contains(MsgFlags::MSG_TRUNC) {
+                    *truncated += 1;
+                }
+                let from = r.address.and_then(|a| to_std(&a));
+                // A datagram without a usable sender (not IP) cannot be answered: skipped.
+                if let Some(from) = from {
+                    got.push((r.bytes.min(RECV_SLOT), from));
+                }
+            }
+            Ok(got.len())
+        })
     }
 
+    /// One datagram per call off Linux.
     #[cfg(not(target_os = "linux"))]
-    fn recv_now(&mut self, socket: &UdpSocket) -> io::Result<usize> {
-        let (len, from) = socket.try_recv_from(&mut self.buf[..RECV_SLOT])?;
-        self.got.push((len, from));
+    fn recv_now(&mut self, socket: &std::net::UdpSocket, _want: usize) -> io::Result<usize> {
+        let (len, from) = socket.recv_from(&mut self.buf[..RECV_SLOT])?;
+        if len >= RECV_SLOT {
+            // Cut (or exactly a slot long, which no MAVLink datagram is).
+            self.truncated += 1;
+        }
+        self.got.push((len.min(RECV_SLOT), from));
         Ok(1)
     }
 }
@@ -218,7 +202,7 @@ impl SendBatch {
 
     /// Sends everything queued without blocking. What the socket refuses (its buffer is
     /// full) is dropped and counted: a router must not stall every link for one.
-    pub(crate) fn flush(&mut self, socket: &UdpSocket) -> Sent {
+    pub(crate) fn flush(&mut self, socket: &UdpIo) -> Sent {
         let mut sent = Sent::default();
         let mut from = 0;
         while from < self.items.len() {
@@ -229,7 +213,7 @@ impl SendBatch {
                     .try_send_to(&self.bytes[start..start + len], to)
                     .map(|_| 1)
             } else {
-                socket.try_io(Interest::WRITABLE, || self.send_now(socket, from))
+                self.send_now(socket.get_ref(), from)
             };
             match result {
                 Ok(n) => {
@@ -258,7 +242,7 @@ impl SendBatch {
     }
 
     #[cfg(target_os = "linux")]
-    fn send_now(&self, socket: &UdpSocket, from: usize) -> io::Result<usize> {
+    fn send_now(&self, socket: &std::net::UdpSocket, from: usize) -> io::Result<usize> {
         use std::io::IoSlice;
         use std::os::fd::AsRawFd as _;
 
@@ -286,9 +270,9 @@ impl SendBatch {
     }
 
     #[cfg(not(target_os = "linux"))]
-    fn send_now(&self, socket: &UdpSocket, from: usize) -> io::Result<usize> {
+    fn send_now(&self, socket: &std::net::UdpSocket, from: usize) -> io::Result<usize> {
         let (start, len, to) = self.items[from];
-        socket.try_send_to(&self.bytes[start..start + len], to)?;
+        socket.send_to(&self.bytes[start..start + len], to)?;
         Ok(1)
     }
 }

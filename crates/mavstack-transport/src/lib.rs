@@ -90,6 +90,7 @@ pub mod frame;
 mod link;
 pub mod protocol;
 pub mod tlog;
+mod udp_io;
 
 pub use conn::{ConnSpec, ConnSpecError, FileFormat};
 pub use connection::{Connection, ConnectionStats, FileMode, Options};

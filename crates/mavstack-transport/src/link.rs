@@ -19,7 +19,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use mavstack_core::time::Instant;
 use mavstack_core::wire::Frame;
 use tokio::io::{AsyncRead, AsyncReadExt as _, AsyncWrite, AsyncWriteExt as _};
-use tokio::net::{TcpListener, TcpStream, UdpSocket};
+use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 
@@ -30,6 +30,7 @@ use crate::connection::{FileMode, Options};
 use crate::error::{LinkError, OpenError, Reason};
 use crate::protocol::{Dest, Framing, Input, PeerAddr, PeerId, PeerInfo};
 use crate::tlog;
+use crate::udp_io::UdpIo;
 
 /// The largest UDP datagram, and so the driver's receive buffer.
 pub(crate) const MAX_DATAGRAM: usize = 65_536;
@@ -474,7 +475,7 @@ async fn resolve(host: &str, port: u16, what: &str) -> Result<SocketAddr, OpenEr
 }
 
 /// A UDP socket bound to `addr` with big buffers.
-fn udp_socket(addr: SocketAddr, broadcast: bool, options: &Options) -> io::Result<UdpSocket> {
+fn udp_socket(addr: SocketAddr, broadcast: bool, options: &Options) -> io::Result<UdpIo> {
     use socket2::{Domain, Protocol as SockProtocol, Socket, Type};
     let socket = Socket::new(
         Domain::for_address(addr),
@@ -493,7 +494,7 @@ fn udp_socket(addr: SocketAddr, broadcast: bool, options: &Options) -> io::Resul
     }
     socket.set_nonblocking(true)?;
     socket.bind(&addr.into())?;
-    UdpSocket::from_std(socket.into())
+    UdpIo::new(socket.into())
 }
 
 /// A TCP listener on `addr` (with `SO_REUSEADDR`, so a restarted server can bind again while
@@ -545,7 +546,7 @@ struct Learned {
 
 #[derive(Debug)]
 struct Udp {
-    socket: UdpSocket,
+    socket: UdpIo,
     rx: RecvBatch,
     tx: SendBatch,
     /// Pack frames for one peer into datagrams up to this many bytes (0: one per datagram).
@@ -567,7 +568,7 @@ struct UdpPeers {
 
 impl Udp {
     fn new(
-        socket: UdpSocket,
+        socket: UdpIo,
         target: Option<(PeerId, SocketAddr)>,
         ids: PeerIds,
         options: &Options,
@@ -590,7 +591,7 @@ impl Udp {
 
     fn poll_ready(&self, cx: &mut Context<'_>) -> Poll<()> {
         // An error (ICMP and the like) shows as readiness too: the receive reports it.
-        self.socket.poll_recv_ready(cx).map(|_| ())
+        self.socket.poll_read_ready(cx)
     }
 
     fn dispatch<I: Input>(
@@ -767,7 +768,7 @@ impl UdpPeers {
     }
 }
 
-async fn send_to(socket: &UdpSocket, data: &[u8], addr: SocketAddr, stats: &mut LinkStats) {
+async fn send_to(socket: &UdpIo, data: &[u8], addr: SocketAddr, stats: &mut LinkStats) {
     match socket.send_to(data, addr).await {
         Ok(n) => {
             stats.tx_chunks += 1;
