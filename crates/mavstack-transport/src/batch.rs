@@ -95,9 +95,20 @@ impl RecvBatch {
         Some((&self.buf[start..start + len], from))
     }
 
-    /// One `recvmmsg` for up to `want` datagrams (headers kept per thread: no allocation).
+    /// One `recvmmsg` for up to `want` (two or [`RECV_BATCH`]) datagrams (headers kept per
+    /// thread: no allocation).
     #[cfg(target_os = "linux")]
     fn recv_now(&mut self, socket: &std::net::UdpSocket, want: usize) -> io::Result<usize> {
+        if want <= PAIR {
+            self.recv_slots::<PAIR>(socket)
+        } else {
+            self.recv_slots::<RECV_BATCH>(socket)
+        }
+    }
+
+    /// One `recvmmsg` into the first `N` slots.
+    #[cfg(target_os = "linux")]
+    fn recv_slots<const N: usize>(&mut self, socket: &std::net::UdpSocket) -> io::Result<usize> {
         use core::cell::RefCell;
         use std::io::IoSliceMut;
         use std::os::fd::AsRawFd as _;
@@ -108,17 +119,16 @@ impl RecvBatch {
             static HEADERS: RefCell<MultiHeaders<SockaddrStorage>> =
                 RefCell::new(MultiHeaders::preallocate(RECV_BATCH, None));
         }
-        let want = want.min(RECV_BATCH);
         let (buf, got, truncated) = (&mut self.buf, &mut self.got, &mut self.truncated);
         HEADERS.with(|headers| {
             let mut headers = headers.borrow_mut();
             let mut chunks = buf.chunks_exact_mut(RECV_SLOT);
-            let mut slices: [[IoSliceMut<'_>; 1]; RECV_BATCH] =
+            let mut slices: [[IoSliceMut<'_>; 1]; N] =
                 core::array::from_fn(|_| [IoSliceMut::new(chunks.next().unwrap_or(&mut []))]);
             let results = recvmmsg(
                 socket.as_raw_fd(),
                 &mut headers,
-                slices[..want].iter_mut(),
+                slices.iter_mut(),
                 MsgFlags::MSG_DONTWAIT,
                 None,
             )
