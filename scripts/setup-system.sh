@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # Installs, idempotently, the Debian packages the tests need beyond the Rust toolchain:
 #   chromium, chromium-driver  the browser the status page test drives (headless, WebDriver);
-#   fonts-dejavu-core          the font `mavstack log plot` labels its images with.
+#   fonts-dejavu-core          the font `mavstack log plot` labels its images with;
+#   mosquitto                  the MQTT broker the fleet bridge's tests run (on a port of their own).
 # Quiet when everything is in place.
 set -euo pipefail
 need=()
 command -v chromium >/dev/null || need+=(chromium)
 command -v chromedriver >/dev/null || need+=(chromium-driver)
 [ -f /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || need+=(fonts-dejavu-core)
+command -v mosquitto >/dev/null || [ -x /usr/sbin/mosquitto ] || need+=(mosquitto)
 if [ ${#need[@]} -eq 0 ]; then
     exit 0
 fi

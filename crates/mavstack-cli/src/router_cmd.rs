@@ -194,7 +194,15 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
             specs.push(spec);
         }
     }
+    let mut bridges = Vec::new();
     for text in &args.links {
+        if mavstack_bridge::is_bridge_link(text) {
+            bridges.push(
+                mavstack_bridge::BridgeSpec::parse(text)
+                    .map_err(|e| Failure::Input(anyhow!("{e}")))?,
+            );
+            continue;
+        }
         specs.push(LinkSpec::parse(text, &message_id).map_err(|e| Failure::Input(anyhow!("{e}")))?);
     }
     if let Some(port) = tcp_server {
@@ -202,7 +210,7 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         specs
             .push(LinkSpec::parse(&text, &message_id).map_err(|e| Failure::Input(anyhow!("{e}")))?);
     }
-    if specs.is_empty() {
+    if specs.is_empty() && bridges.is_empty() {
         return Err(Failure::Input(anyhow!(
             "no links: give connection strings, --conf FILE or --tcp-server PORT"
         )));
@@ -233,6 +241,12 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         }
         for spec in specs {
             builder = builder.link(spec);
+        }
+        let mut handles = Vec::new();
+        for spec in &bridges {
+            let bridge = mavstack_bridge::mqtt::open(spec, dialect);
+            builder = builder.opened_link(bridge.config, bridge.link);
+            handles.push(bridge.handle);
         }
         if let Some(dir) = &log {
             builder = builder.log_dir(dir);
@@ -265,6 +279,9 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
             stop.await;
         }
         let report = node.shutdown().await.map_err(crate::other)?;
+        for handle in handles {
+            handle.finish().await;
+        }
         if stats_every.is_some() {
             print_stats(&report);
         }

@@ -43,6 +43,11 @@ pub enum VersionMode {
     /// the peer's first MAVLink 2 frame; from then on the link is MAVLink 2.
     #[default]
     Auto,
+    /// A fleet bridge's link (no link option spells it): every frame goes out byte for byte
+    /// in the framing it arrived in, signature kept, never converted, so that what crosses
+    /// the broker is what the vehicle sent; and it gets every frame of the network, targeted
+    /// ones included, wherever their target is.
+    Transparent,
 }
 
 impl VersionMode {
@@ -52,7 +57,7 @@ impl VersionMode {
         match self {
             Self::Mavlink1 => VehicleVersion::Mavlink1Only,
             Self::Mavlink2 => VehicleVersion::Mavlink2,
-            Self::Auto => VehicleVersion::StartMavlink1,
+            Self::Auto | Self::Transparent => VehicleVersion::StartMavlink1,
         }
     }
 }
@@ -204,7 +209,9 @@ impl LinkConfig {
                     config.role = mavstack_channel::Role::GroundStation(GroundPolicy::Mavlink2);
                     config
                 }
-                VersionMode::Auto => ChannelConfig::ground_station(sysid, compid),
+                VersionMode::Auto | VersionMode::Transparent => {
+                    ChannelConfig::ground_station(sysid, compid)
+                }
             },
         };
         config.signing.clone_from(&self.signing);

@@ -43,6 +43,7 @@ pub(crate) fn plan(
     let v2 = frame.version() == Version::V2;
     let signed = frame.is_signed();
     let plan = match mode {
+        LinkMode::Transparent => Plan::AsIs,
         LinkMode::Mavlink1 if !v2 => Plan::AsIs,
         LinkMode::Mavlink1 => {
             if frame.msg_id() > 255 {

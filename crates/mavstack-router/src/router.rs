@@ -167,6 +167,7 @@ impl<D: Dialect> LinkState<D> {
                 LinkMode::Mavlink2
             }
             (VersionMode::Auto, _) => LinkMode::Auto,
+            (VersionMode::Transparent, _) => LinkMode::Transparent,
         }
     }
 }
@@ -506,6 +507,17 @@ impl<D: Dialect> Router<D> {
             let known = self
                 .routes
                 .links_to(now, self.config.route_ttl, tsys, tcomp, &mut dests);
+            // A fleet bridge's link carries every frame of the network, targeted or not.
+            for (i, l) in self.links.iter().enumerate() {
+                if let Some(l) = l
+                    && l.config.version == VersionMode::Transparent
+                {
+                    let id = LinkId(u32::try_from(i).unwrap_or(u32::MAX));
+                    if !dests.contains(&id) {
+                        dests.push(id);
+                    }
+                }
+            }
             dests.retain(|&l| l != src);
             let local = self.config.local != LocalDelivery::None && tsys == own.0;
             if !known

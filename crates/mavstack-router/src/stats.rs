@@ -130,10 +130,12 @@ pub enum LinkMode {
     /// `"auto"`: an auto link before its peer's first MAVLink 2 frame (frames go out in the
     /// framing they arrived in).
     Auto,
+    /// `"transparent"`: a fleet bridge's link, frames byte for byte whatever their framing.
+    Transparent,
 }
 
 impl LinkMode {
-    /// `"1"`, `"2"`, `"signed"` or `"auto"`.
+    /// `"1"`, `"2"`, `"signed"`, `"auto"` or `"transparent"`.
     #[must_use]
     pub const fn as_str(self) -> &'static str {
         match self {
@@ -141,6 +143,7 @@ impl LinkMode {
             Self::Mavlink2 => "2",
             Self::Signed => "signed",
             Self::Auto => "auto",
+            Self::Transparent => "transparent",
         }
     }
 }

@@ -777,3 +777,40 @@ fn with_forwarding_off_links_carry_only_the_routers_own_traffic() {
     assert_eq!(r.poll_transmit(&mut buf).map(|t| t.link), Some(a));
     assert!(r.link_status(b).is_some());
 }
+
+#[test]
+fn a_transparent_link_gets_every_frame_as_it_arrived() {
+    let mut r = router();
+    let vehicle = link(&mut r, "vehicle", |c| c.version = VersionMode::Mavlink2);
+    let gcs = link(&mut r, "gcs", |_| {});
+    let bridge = link(&mut r, "bridge", |c| c.version = VersionMode::Transparent);
+    let legacy = link(&mut r, "legacy", |c| c.version = VersionMode::Mavlink1);
+    // A MAVLink 1 frame stays MAVLink 1 on the bridge (the vehicle's link converts it).
+    let v1 = frame(&hb(), Version::V1, (9, 1), 0, None);
+    r.handle_datagram(T0, legacy, &v1);
+    let out = drain(&mut r);
+    assert_eq!(on(&out, bridge), vec![v1.clone()]);
+    assert_ne!(on(&out, vehicle), vec![v1]);
+    // A signed frame keeps its signature there (the plain ground station's copy loses it).
+    let k = key(3);
+    let signed = frame(&hb(), Version::V2, (1, 1), 0, Some((&k, 1_000)));
+    r.handle_datagram(T0, vehicle, &signed);
+    let out = drain(&mut r);
+    assert_eq!(on(&out, bridge), vec![signed.clone()]);
+    assert_ne!(on(&out, gcs), vec![signed]);
+    // A targeted frame reaches it wherever its target is, and never goes back to it.
+    r.handle_datagram(T0, gcs, &frame(&hb(), Version::V2, (255, 190), 0, None));
+    drain(&mut r);
+    let cmd = frame(&command((1, 1)), Version::V2, (255, 190), 1, None);
+    r.handle_datagram(T0, gcs, &cmd);
+    let out = drain(&mut r);
+    assert_eq!(
+        (on(&out, vehicle), on(&out, bridge)),
+        (vec![cmd.clone()], vec![cmd])
+    );
+    let from_cloud = frame(&command((1, 1)), Version::V2, (250, 1), 0, None);
+    r.handle_datagram(T0, bridge, &from_cloud);
+    let out = drain(&mut r);
+    assert_eq!(out, vec![(vehicle, from_cloud)]);
+    assert_eq!(r.link_status(bridge).unwrap().mode.as_str(), "transparent");
+}

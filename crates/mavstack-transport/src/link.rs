@@ -132,6 +132,37 @@ pub(crate) enum LinkMsg {
     Closed(Result<(), LinkError>),
 }
 
+/// The far end of a [`Link::external`]: the code that carries its frames.
+#[derive(Debug)]
+pub struct ExternalPeer {
+    id: PeerId,
+    input: mpsc::Sender<LinkMsg>,
+    output: mpsc::Receiver<Vec<u8>>,
+}
+
+impl ExternalPeer {
+    /// Hands `bytes` (whole frames) to the link as one datagram from this peer, waiting
+    /// while the link's queue is full. False once the link has closed.
+    pub async fn deliver(&self, bytes: Vec<u8>) -> bool {
+        let msg = LinkMsg::Data {
+            peer: self.id,
+            time: clock::now(),
+            bytes,
+        };
+        self.input.send(msg).await.is_ok()
+    }
+
+    /// The next frame the link sends to this peer; `None` once the link has closed.
+    pub async fn recv(&mut self) -> Option<Vec<u8>> {
+        self.output.recv().await
+    }
+
+    /// A frame the link has sent, if one is waiting.
+    pub fn try_recv(&mut self) -> Option<Vec<u8>> {
+        self.output.try_recv().ok()
+    }
+}
+
 /// The queue to a stream peer's writer task, and the task (awaited when the link closes, so
 /// that what was queued is written).
 #[derive(Debug)]
@@ -277,6 +308,50 @@ impl Link {
             finished: None,
             local_addr,
         })
+    }
+
+    /// A link whose one peer is code of the caller's (a fleet bridge): what the link sends
+    /// comes out of [`ExternalPeer::recv`], one frame (or datagram) each, and what
+    /// [`ExternalPeer::deliver`] is given comes in as datagrams from that peer. The link
+    /// ends when the [`ExternalPeer`] is dropped.
+    ///
+    /// `queue` bounds the frames waiting for the peer (more are dropped and counted as
+    /// [`LinkStats::tx_dropped`], like a full writer queue).
+    #[must_use]
+    pub fn external(what: impl Into<String>, queue: usize) -> (Self, ExternalPeer) {
+        let ids = PeerIds::default();
+        let id = ids.next();
+        let (tx, rx) = mpsc::channel(LINK_QUEUE);
+        let (wtx, wrx) = mpsc::channel(queue.max(1));
+        let mut tasks = Tasks::new(rx);
+        let info = PeerInfo {
+            id,
+            addr: PeerAddr::External(what.into()),
+            framing: Framing::Datagram,
+        };
+        tasks.writers.insert(
+            id,
+            PeerWriter {
+                queue: wtx,
+                task: None,
+            },
+        );
+        tasks.initial.push(info);
+        let link = Self {
+            kind: Kind::Tasks(tasks),
+            stats: LinkStats::default(),
+            peers: Arc::new(PeerTable::default()),
+            finished: None,
+            local_addr: None,
+        };
+        (
+            link,
+            ExternalPeer {
+                id,
+                input: tx,
+                output: wrx,
+            },
+        )
     }
 
     /// The peers table the user's handle reads.

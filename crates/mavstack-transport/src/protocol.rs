@@ -51,6 +51,9 @@ pub enum PeerAddr {
     Serial(String),
     /// A file.
     File(PathBuf),
+    /// Another program part that carries the frames (a fleet bridge's broker connection),
+    /// named by it.
+    External(String),
 }
 
 impl fmt::Display for PeerAddr {
@@ -60,6 +63,7 @@ impl fmt::Display for PeerAddr {
             Self::Tcp(a) => write!(f, "tcp {a}"),
             Self::Serial(d) => write!(f, "serial {d}"),
             Self::File(p) => write!(f, "file {}", p.display()),
+            Self::External(what) => f.write_str(what),
         }
     }
 }

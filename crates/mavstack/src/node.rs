@@ -312,7 +312,7 @@ enum Command {
 pub struct NodeBuilder {
     router: RouterConfig,
     dialect: InfoFn,
-    links: Vec<LinkSpec>,
+    links: Vec<NewLink>,
     log_dir: Option<PathBuf>,
     options: Options,
     heartbeat: Option<(Vec<u8>, Duration)>,
@@ -322,6 +322,13 @@ pub struct NodeBuilder {
     /// Taps and event subscribers registered before the node starts.
     taps: Vec<mpsc::Sender<Tapped>>,
     watchers: Vec<mpsc::Sender<NodeEvent>>,
+}
+
+/// A link of a node that has not started: one to open, or one opened by the caller.
+#[derive(Debug)]
+enum NewLink {
+    Spec(LinkSpec),
+    Open(LinkConfig, Box<Link>),
 }
 
 impl NodeBuilder {
@@ -346,7 +353,15 @@ impl NodeBuilder {
     /// Adds a link.
     #[must_use]
     pub fn link(mut self, spec: LinkSpec) -> Self {
-        self.links.push(spec);
+        self.links.push(NewLink::Spec(spec));
+        self
+    }
+
+    /// Adds a link the caller opened (a fleet bridge's [`Link::external`]), with its
+    /// options; it takes its place among the links in the order added.
+    #[must_use]
+    pub fn opened_link(mut self, config: LinkConfig, link: Link) -> Self {
+        self.links.push(NewLink::Open(config, Box::new(link)));
         self
     }
 
@@ -481,22 +496,27 @@ impl NodeBuilder {
         options.peer_timeout = options.peer_timeout.max(router_config.route_ttl);
         // An endpoint that is not up yet is tried again, as mavlink-router does.
         options.keep_trying = true;
-        for mut spec in self.links {
-            if let Some(role) = self.role {
-                spec.config.role = role;
-            }
-            let mut io =
-                Link::open(&spec.conn, &options)
-                    .await
-                    .map_err(|source| NodeError::Open {
-                        name: spec.config.name.clone(),
-                        source,
+        for new in self.links {
+            let (mut config, mut io) = match new {
+                NewLink::Spec(spec) => {
+                    let io = Link::open(&spec.conn, &options).await.map_err(|source| {
+                        NodeError::Open {
+                            name: spec.config.name.clone(),
+                            source,
+                        }
                     })?;
-            io.set_packing(spec.config.pack);
+                    (spec.config, io)
+                }
+                NewLink::Open(config, io) => (config, *io),
+            };
+            if let Some(role) = self.role {
+                config.role = role;
+            }
+            io.set_packing(config.pack);
             local_addrs.push(io.local_addr());
             slots.push(Slot {
                 io,
-                template: spec.config,
+                template: config,
                 peers: HashMap::new(),
             });
         }
@@ -1525,6 +1545,7 @@ const fn mode_of(config: &LinkConfig) -> LinkMode {
         mavstack_router::VersionMode::Mavlink1 => LinkMode::Mavlink1,
         mavstack_router::VersionMode::Mavlink2 => LinkMode::Mavlink2,
         mavstack_router::VersionMode::Auto => LinkMode::Auto,
+        mavstack_router::VersionMode::Transparent => LinkMode::Transparent,
     }
 }
 

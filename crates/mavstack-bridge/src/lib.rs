@@ -1,0 +1,286 @@
+//! Fleet links: a vehicle's MAVLink network onto an MQTT 5 broker, as one more link of a
+//! `mavstack` router or node.
+//!
+//! A bridge link is a router link whose far end is a broker connection instead of a
+//! socket. Every frame the router sends to it is published on its own key, raw and byte for
+//! byte (signatures kept, never converted: the link's version mode is
+//! [`VersionMode::Transparent`](mavstack_router::VersionMode::Transparent)); frames
+//! published to the vehicle's `in` key come into the router as if a peer had sent them.
+//! The key layout (shared/DESIGN.md, "Fleet bridge"), for fleet `F` and vehicle `V`:
+//!
+//! | key | what |
+//! | --- | --- |
+//! | `mav/F/V/{sysid}/{compid}/{MSG_NAME}` | every frame from the vehicle's network (unknown ids: the number) |
+//! | `mav/F/V/in` | raw frames into the vehicle's network |
+//! | `mav/F/V/{sysid}/{compid}/@cmd` | COMMAND_LONG/INT in (MQTT 5 response topic + correlation data), COMMAND_ACK out |
+//! | `mav/F/V/@alive` | `online` / `offline`, retained, with a last will |
+//!
+//! `V` is a stable vehicle id, not the sysid: a fleet reuses sysids. Telemetry goes at
+//! QoS 0 and is latest-wins per key when the broker is slow ([`outbox`]); control traffic
+//! (commands, parameters, missions) goes at QoS 1 and is never dropped without being
+//! counted. Commands sent to `@cmd` are run by the bridge itself ([`command`]): it
+//! resends them as a ground station does, matches the COMMAND_ACK by command and sender,
+//! and answers each request once (intermediate IN_PROGRESS acks aside), with the ACK or a
+//! timeout error.
+//!
+//! The sans-IO parts (keys, the outbox, the command tracker) take bytes and times and give
+//! bytes back; [`mqtt`] is the tokio driver over rumqttc.
+//!
+//! ```
+//! use mavstack_bridge::BridgeSpec;
+//! let spec = BridgeSpec::parse("mqtt://127.0.0.1:1883?fleet=demo&vid=truck-7").unwrap();
+//! assert_eq!(spec.keys.alive(), "mav/demo/truck-7/@alive");
+//! assert_eq!(spec.client_id, "mavstack-demo-truck-7");
+//! ```
+#![forbid(unsafe_code)]
+
+pub mod command;
+pub mod keys;
+#[cfg(feature = "mqtt")]
+pub mod mqtt;
+pub mod outbox;
+
+pub use keys::{KeyError, Keys, Topic};
+
+/// The link strings a bridge opens (the CLI sends these here instead of to the transport).
+#[must_use]
+pub fn is_bridge_link(text: &str) -> bool {
+    ["mqtt://", "mqtts://", "zenoh://", "zenoh:"]
+        .iter()
+        .any(|p| text.starts_with(p))
+}
+
+/// A parsed bridge link string: `mqtt://HOST:PORT?fleet=F&vid=V[&trusted=true][&user=U]
+/// [&password=P][&client_id=C][&name=N]`.
+#[derive(Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct BridgeSpec {
+    /// The broker's host.
+    pub host: String,
+    /// The broker's port (default 1883).
+    pub port: u16,
+    /// The vehicle's keys.
+    pub keys: Keys,
+    /// Frames from the broker may be signed onto signed links.
+    pub trusted: bool,
+    /// MQTT user name and password.
+    pub credentials: Option<(String, String)>,
+    /// MQTT client id (default `mavstack-F-V`).
+    pub client_id: String,
+    /// The link's name in statistics and logs (default the string without its options).
+    pub name: String,
+}
+
+impl core::fmt::Debug for BridgeSpec {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        // The password never shows.
+        f.debug_struct("BridgeSpec")
+            .field("host", &self.host)
+            .field("port", &self.port)
+            .field("keys", &self.keys)
+            .field("trusted", &self.trusted)
+            .field("user", &self.credentials.as_ref().map(|(u, _)| u))
+            .field("client_id", &self.client_id)
+            .field("name", &self.name)
+            .finish()
+    }
+}
+
+/// A bridge link string that cannot be used.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum BridgeSpecError {
+    /// Not `mqtt://HOST:PORT`.
+    #[error("link \"{text}\": expected mqtt://HOST:PORT?fleet=F&vid=V")]
+    Syntax {
+        /// The link string (options left out).
+        text: String,
+    },
+    /// A scheme this build does not carry.
+    #[error("link \"{text}\": {scheme} links are not supported yet (mqtt:// is)")]
+    Unsupported {
+        /// The link string (options left out).
+        text: String,
+        /// `mqtts`, `zenoh`.
+        scheme: String,
+    },
+    /// A bad port.
+    #[error("link \"{text}\": bad port \"{port}\"")]
+    Port {
+        /// The link string (options left out).
+        text: String,
+        /// What was given.
+        port: String,
+    },
+    /// An unknown option or a bad value.
+    #[error("link \"{text}\": option \"{option}\": {what}")]
+    Option {
+        /// The link string (options left out).
+        text: String,
+        /// The option's name.
+        option: String,
+        /// What is wrong.
+        what: String,
+    },
+    /// `fleet` or `vid` missing or not a key segment.
+    #[error("link \"{text}\": {source}")]
+    Key {
+        /// The link string (options left out).
+        text: String,
+        /// What is wrong.
+        source: KeyError,
+    },
+}
+
+impl BridgeSpec {
+    /// Parses a bridge link string.
+    ///
+    /// # Errors
+    /// [`BridgeSpecError`] naming the part that is wrong (a password never appears in it).
+    pub fn parse(text: &str) -> Result<Self, BridgeSpecError> {
+        let (conn, opts) = text.split_once('?').unwrap_or((text, ""));
+        let shown = conn.to_owned();
+        let (scheme, rest) = conn
+            .split_once("://")
+            .or_else(|| conn.split_once(':'))
+            .ok_or_else(|| BridgeSpecError::Syntax {
+                text: shown.clone(),
+            })?;
+        if scheme != "mqtt" {
+            return Err(BridgeSpecError::Unsupported {
+                text: shown,
+                scheme: scheme.to_owned(),
+            });
+        }
+        let (host, port) = match rest.rsplit_once(':') {
+            Some((h, p)) => {
+                let port = p.parse::<u16>().ok().filter(|&p| p > 0).ok_or_else(|| {
+                    BridgeSpecError::Port {
+                        text: shown.clone(),
+                        port: p.to_owned(),
+                    }
+                })?;
+                (h, port)
+            }
+            None => (rest, 1883),
+        };
+        let host = host.trim_start_matches('[').trim_end_matches(']');
+        if host.is_empty() || host.contains(['/', '?', '&', ' ']) {
+            return Err(BridgeSpecError::Syntax { text: shown });
+        }
+        let option_err = |option: &str, what: &str| BridgeSpecError::Option {
+            text: shown.clone(),
+            option: option.to_owned(),
+            what: what.to_owned(),
+        };
+        let (mut fleet, mut vid, mut trusted) = (None, None, false);
+        let (mut user, mut password, mut client_id, mut name) = (None, None, None, None);
+        for opt in opts.split('&').filter(|o| !o.is_empty()) {
+            let (k, v) = opt
+                .split_once('=')
+                .ok_or_else(|| option_err(opt, "expected name=value"))?;
+            let slot = match k {
+                "fleet" => &mut fleet,
+                "vid" => &mut vid,
+                "user" => &mut user,
+                "password" => &mut password,
+                "client_id" => &mut client_id,
+                "name" => &mut name,
+                "trusted" => {
+                    trusted = match v {
+                        "true" => true,
+                        "false" => false,
+                        _ => return Err(option_err(k, "expected true or false")),
+                    };
+                    continue;
+                }
+                "version" | "key" | "link_id" | "secure" => {
+                    return Err(option_err(
+                        k,
+                        "does not apply to a bridge link (frames cross it byte for byte)",
+                    ));
+                }
+                _ => return Err(option_err(k, "unknown option")),
+            };
+            if slot.is_some() {
+                return Err(option_err(k, "given twice"));
+            }
+            *slot = Some(v.to_owned());
+        }
+        let keys = Keys::new(
+            fleet.as_deref().unwrap_or_default(),
+            vid.as_deref().unwrap_or_default(),
+        )
+        .map_err(|source| BridgeSpecError::Key {
+            text: shown.clone(),
+            source,
+        })?;
+        let credentials = match (user, password) {
+            (Some(u), p) => Some((u, p.unwrap_or_default())),
+            (None, Some(_)) => return Err(option_err("password", "needs user")),
+            (None, None) => None,
+        };
+        let client_id =
+            client_id.unwrap_or_else(|| format!("mavstack-{}-{}", keys.fleet(), keys.vid()));
+        Ok(Self {
+            host: host.to_owned(),
+            port,
+            keys,
+            trusted,
+            credentials,
+            client_id,
+            name: name.unwrap_or(shown),
+        })
+    }
+
+    /// The router's settings for this link: transparent framing, `trusted` as given.
+    #[must_use]
+    pub fn link_config(&self) -> mavstack_router::LinkConfig {
+        let mut config = mavstack_router::LinkConfig::new(self.name.clone());
+        config.version = mavstack_router::VersionMode::Transparent;
+        config.trusted = self.trusted;
+        config
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_the_documented_form() {
+        let s = BridgeSpec::parse(
+            "mqtt://broker.local:8883?fleet=f1&vid=v-2&trusted=true&user=u&password=secret",
+        )
+        .unwrap();
+        assert_eq!((s.host.as_str(), s.port), ("broker.local", 8883));
+        assert_eq!(s.keys.input(), "mav/f1/v-2/in");
+        assert!(s.trusted);
+        assert_eq!(s.credentials, Some(("u".into(), "secret".into())));
+        assert_eq!(s.name, "mqtt://broker.local:8883");
+        assert!(!format!("{s:?}").contains("secret"));
+        let c = s.link_config();
+        assert_eq!(c.version, mavstack_router::VersionMode::Transparent);
+        assert!(c.trusted);
+        assert_eq!(
+            BridgeSpec::parse("mqtt://h?fleet=a&vid=b").unwrap().port,
+            1883
+        );
+    }
+
+    #[test]
+    fn bad_strings_name_what_is_wrong() {
+        let err = |t: &str| BridgeSpec::parse(t).unwrap_err().to_string();
+        assert!(err("mqtt://h:1883?vid=b").contains("fleet"));
+        assert!(err("mqtt://h:1883?fleet=a").contains("vid"));
+        assert!(err("mqtt://h:1883?fleet=a/b&vid=c").contains("fleet"));
+        assert!(err("mqtt://h:99999?fleet=a&vid=b").contains("port \"99999\""));
+        assert!(err("mqtt://h:1?fleet=a&vid=b&key=00").contains("does not apply"));
+        assert!(err("mqtt://h:1?fleet=a&vid=b&colour=red").contains("unknown option"));
+        assert!(err("mqtt://h:1?fleet=a&vid=b&trusted=yes").contains("true or false"));
+        assert!(err("zenoh://h:7447?fleet=a&vid=b").contains("not supported yet"));
+        let e = err("mqtt://h:1?fleet=a&vid=b&password=hunter2");
+        assert!(e.contains("needs user") && !e.contains("hunter2"));
+        assert!(is_bridge_link("mqtt://x") && !is_bridge_link("udpin:0.0.0.0:14550"));
+    }
+}

@@ -1,0 +1,59 @@
+//! `mavstack router` with an MQTT 5 fleet link (`mqtt://HOST:PORT?fleet=F&vid=V`), against
+//! mosquitto (Debian's broker, started by the script on a free port) with paho-mqtt as the
+//! independent MQTT peer and pymavlink 2.4.50 packing and reading every frame
+//! (`tests-interop/bridge_interop.py`; shared/DESIGN.md "Fleet bridge"):
+//!
+//! - `telemetry`: every frame from the vehicle's network (MAVLink 1, MAVLink 2, signed, an id
+//!   no dialect knows) reaches a paho subscriber on `mav/F/V/{sysid}/{compid}/{NAME}` byte for
+//!   byte; telemetry at QoS 0, control at QoS 1;
+//! - `inbound`: frames published on `mav/F/V/in` reach the vehicles byte for byte (a signed
+//!   one through a `key=` link), and none is published back;
+//! - `command`: an MQTT 5 request to `@cmd` gets `mavstack vehicle`'s COMMAND_ACK with the
+//!   request's correlation data; no answer gives `timeout` after the resends; a key that does
+//!   not match the target is refused at once;
+//! - `alive`: `@alive` retained `online`, `offline` on SIGTERM, and by the last will on
+//!   SIGKILL.
+//!
+//! Never skipped: without mosquitto, paho-mqtt or pymavlink they fail.
+
+#[path = "support/pymavlink_dialect.rs"]
+mod pymavlink_dialect;
+mod support;
+
+use std::ffi::OsStr;
+
+use support::{require_pymavlink, run_script};
+
+fn scenario(name: &str) {
+    require_pymavlink();
+    pymavlink_dialect::dialect_ready();
+    let bin = env!("CARGO_BIN_EXE_mavstack");
+    let out = run_script(
+        "bridge_interop.py",
+        &[OsStr::new(name), OsStr::new("--mavstack"), OsStr::new(bin)],
+    );
+    assert!(
+        out.starts_with(&format!("{name}: ")) && out.trim_end().ends_with(" ok"),
+        "{name}: {out}"
+    );
+}
+
+#[test]
+fn bridge_publishes_every_frame_on_its_key_byte_for_byte() {
+    scenario("telemetry");
+}
+
+#[test]
+fn bridge_lets_frames_from_the_broker_into_the_network() {
+    scenario("inbound");
+}
+
+#[test]
+fn bridge_answers_mqtt5_command_requests_with_the_vehicles_ack() {
+    scenario("command");
+}
+
+#[test]
+fn bridge_says_offline_on_exit_and_by_last_will() {
+    scenario("alive");
+}

@@ -1,0 +1,407 @@
+#!/usr/bin/env python3
+"""`mavstack router` with an MQTT 5 fleet link (mqtt://...?fleet=F&vid=V), against mosquitto
+(Debian's broker, started here on a free port) and paho-mqtt as the independent MQTT peer;
+pymavlink 2.4.50 plays the vehicle's network and packs and reads every frame.
+
+Usage: bridge_interop.py SCENARIO --mavstack BIN
+
+Topology: pymavlink peer (or `mavstack vehicle`) --udp--> router --mqtt--> mosquitto <-- paho.
+Keys as shared/DESIGN.md "Fleet bridge" gives them. Exit 0 with "<scenario>: ... ok", or 1
+with FAIL lines. Never skipped: without mosquitto or paho-mqtt it fails.
+
+Scenarios:
+  telemetry  a pymavlink vehicle (1/1) sends MAVLink 2, MAVLink 1, signed MAVLink 2 frames and a
+             frame of an id no dialect knows; a paho subscriber on mav/F/V/# gets each on
+             mav/F/V/{sysid}/{compid}/{pymavlink's message name} (the number for the unknown
+             id), byte for byte, signature and all; telemetry at QoS 0, control (HEARTBEAT,
+             COMMAND_ACK) at QoS 1
+  inbound    frames published on mav/F/V/in (pymavlink-packed COMMAND_LONG, a MAVLink 1
+             HEARTBEAT, a signed frame) reach the vehicle's UDP socket byte for byte, and are
+             never published back
+  command    `mavstack vehicle` behind the router: an MQTT 5 request (response topic +
+             correlation data) with a COMMAND_LONG to mav/F/V/1/1/@cmd gets the vehicle's
+             COMMAND_ACK frame (pymavlink decodes it: command and result) with the same
+             correlation data; a request to a system nobody has seen gets the payload
+             `timeout` and error=timeout after the resends; a key that does not match the
+             frame's target gets error=target_mismatch at once
+  alive      @alive is retained `online` while the router runs, `offline` after SIGTERM
+             (published by the router), and `offline` by the last will after SIGKILL
+"""
+
+import argparse
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+import router_interop as ri  # noqa: E402
+from router_interop import KEY, M, V1, Peer, decode, heartbeat, start_router  # noqa: E402
+from scenario import check, fail, failures, free_port  # noqa: E402
+
+try:
+    import paho.mqtt.client as mqtt
+    from paho.mqtt.packettypes import PacketTypes
+    from paho.mqtt.properties import Properties
+except ImportError as e:  # a missing peer is a failure, never a skip
+    print("FAIL: paho-mqtt is not installed (%s); run scripts/setup-peers.sh" % e, file=sys.stderr)
+    sys.exit(1)
+
+FLEET, VID = "fleet1", "veh-7"
+PREFIX = "mav/%s/%s" % (FLEET, VID)
+
+
+class Broker:
+    """mosquitto on a free loopback port, anonymous, no persistence."""
+
+    def __init__(self):
+        exe = shutil.which("mosquitto") or ("/usr/sbin/mosquitto" if os.path.exists("/usr/sbin/mosquitto") else None)
+        if exe is None:
+            fail("mosquitto is not installed (Debian package mosquitto; scripts/setup-system.sh installs it)")
+            raise SystemExit(1)
+        self.dir = tempfile.mkdtemp(prefix="bridge-mosquitto-")
+        self.port = free_port(socket.SOCK_STREAM)
+        conf = os.path.join(self.dir, "mosquitto.conf")
+        with open(conf, "w") as f:
+            f.write("listener %d 127.0.0.1\nallow_anonymous true\npersistence false\n" % self.port)
+        self.log = open(os.path.join(self.dir, "log"), "wb")
+        self.proc = subprocess.Popen([exe, "-c", conf], stdout=self.log, stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline:
+            try:
+                socket.create_connection(("127.0.0.1", self.port), 0.2).close()
+                return
+            except OSError:
+                time.sleep(0.05)
+        fail("mosquitto did not listen on %d within 5 s" % self.port)
+
+    def url(self, extra=""):
+        return "mqtt://127.0.0.1:%d?fleet=%s&vid=%s%s" % (self.port, FLEET, VID, extra)
+
+    def stop(self):
+        self.proc.terminate()
+        try:
+            self.proc.wait(5)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+        self.log.close()
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
+class Client:
+    """A paho MQTT 5 client that records every message: (topic, payload, qos, retain, properties)."""
+
+    def __init__(self, broker, subs=(), name="paho"):
+        self.got = []
+        self.lock = threading.Lock()
+        self.c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="%s-%d" % (name, os.getpid()),
+                             protocol=mqtt.MQTTv5)
+        self.c.on_message = self._on_message
+        self.ready = threading.Event()
+        self.subs = list(subs)
+        self.c.on_connect = self._on_connect
+        self.c.on_subscribe = lambda *a: self.ready.set()
+        self.c.connect("127.0.0.1", broker.port)
+        self.c.loop_start()
+        if self.subs and not self.ready.wait(5):
+            fail("%s: not subscribed within 5 s" % name)
+        elif not self.subs:
+            time.sleep(0.2)
+
+    def _on_connect(self, client, userdata, flags, reason, props):
+        for s in self.subs:
+            client.subscribe(s, qos=1)
+        if not self.subs:
+            self.ready.set()
+
+    def _on_message(self, client, userdata, m):
+        with self.lock:
+            self.got.append((m.topic, bytes(m.payload), m.qos, m.retain, m.properties, time.monotonic()))
+
+    def messages(self, pred=lambda t, p: True):
+        with self.lock:
+            return [g for g in self.got if pred(g[0], g[1])]
+
+    def wait(self, pred, timeout=5.0):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            m = self.messages(pred)
+            if m:
+                return m[0]
+            time.sleep(0.02)
+        return None
+
+    def publish(self, topic, payload, qos=1, props=None):
+        info = self.c.publish(topic, payload, qos=qos, properties=props)
+        info.wait_for_publish(5)
+
+    def close(self):
+        self.c.loop_stop()
+        self.c.disconnect()
+
+
+def with_router(bin_, broker, udp_link, extra_links=()):
+    router, _ = start_router(bin_, lambda: [udp_link(), broker.url(), *extra_links])
+    return router
+
+
+def telemetry(bin_):
+    broker = Broker()
+    sub = Client(broker, ["%s/#" % PREFIX], "sub")
+    port = free_port()
+    router = with_router(bin_, broker, lambda: "udpin:127.0.0.1:%d" % port)
+    if router is None:
+        broker.stop()
+        return None
+    veh = Peer("vehicle", M, 1, 1, dest=port)
+    signer = Peer("signed", M, 1, 2, dest=port, key=KEY, link_id=3)
+    v1 = Peer("v1", V1, 2, 1, dest=port)
+    sent = []  # (topic, raw, qos)
+    try:
+        veh.send(heartbeat(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA))
+        time.sleep(0.3)  # the route to the broker link exists from the start; the UDP peer is learned
+        msgs = [
+            (veh, M.MAVLink_attitude_message(1000, 0.1, -0.2, 0.3, 0.01, 0.02, 0.03), 0),
+            (veh, M.MAVLink_global_position_int_message(2000, -353632610, 1491652380, 584000, 10000, 1, 2, 3, 9000), 0),
+            (veh, M.MAVLink_command_ack_message(M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 255, 190), 1),
+            (signer, M.MAVLink_sys_status_message(1, 1, 1, 500, 11000, 10, 90, 0, 0, 0, 0, 0, 0), 0),
+            (v1, V1.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3), 1),
+            (v1, V1.MAVLink_vfr_hud_message(10.0, 11.0, 90, 50, 100.0, 1.0), 0),
+        ]
+        for peer, m, qos in msgs:
+            f = peer.send(m)
+            sent.append(("%s/%d/%d/%s" % (PREFIX, f.sysid, f.compid, f.type), f.raw, qos))
+        # An id no dialect has (MAVLink 2 frame, id 60001, valid header and CRC bytes as sent).
+        unknown = bytes([0xFD, 3, 0, 0, 9, 1, 1]) + (60001).to_bytes(3, "little") + b"\x01\x02\x03\xaa\xbb"
+        veh.write(unknown)
+        sent.append(("%s/1/1/60001" % PREFIX, unknown, 0))
+        time.sleep(1.0)
+        for topic, raw, qos in sent:
+            got = sub.messages(lambda t, p, raw=raw: p == raw)
+            check(got, "%s: frame %s never reached the subscriber" % (topic, raw.hex()))
+            for t, p, q, retain, _, _ in got:
+                check(t == topic, "frame %s on %s, expected %s" % (raw.hex()[:40], t, topic))
+                check(q == qos, "%s at QoS %d, expected %d" % (topic, q, qos))
+        signed = [p for t, p, *_ in sub.messages() if len(p) > 12 and p[0] == 0xFD and p[2] & 1]
+        check(signed and all(mi_verify(p) for p in signed),
+              "signed frames on the broker: %d, all verify with the key: %s" % (len(signed), signed and all(mi_verify(p) for p in signed)))
+        nframes = len([1 for t, *_ in sub.messages() if not t.endswith("@alive")])
+        return "%d frames on their keys byte for byte (v1, v2, signed, unknown id), %d messages in all" % (
+            len(sent), nframes)
+    finally:
+        for p in (veh, signer, v1):
+            p.close()
+        router.stop()
+        sub.close()
+        broker.stop()
+
+
+def mi_verify(raw):
+    """pymavlink verifies the signature of raw with KEY."""
+    mav = M.MAVLink(None)
+    mav.signing.secret_key = KEY
+    mav.signing.allow_unsigned_callback = None
+    msgs = mav.parse_buffer(raw) or []
+    return len(msgs) == 1 and msgs[0].get_type() != "BAD_DATA" and mav.signing.sig_count == 1
+
+
+def inbound(bin_):
+    broker = Broker()
+    sub = Client(broker, ["%s/#" % PREFIX], "sub")
+    pub = Client(broker, [], "pub")
+    ports = (free_port(), free_port())
+    router, _ = start_router(bin_, lambda: ["udpin:127.0.0.1:%d" % ports[0],
+                                            "udpin:127.0.0.1:%d?key=%s" % (ports[1], KEY.hex()),
+                                            broker.url()])
+    veh = Peer("vehicle", M, 1, 1, dest=ports[0])
+    sveh = Peer("signed vehicle", M, 2, 1, dest=ports[1], key=KEY, link_id=4)
+    if router is None:
+        broker.stop()
+        return None
+    gcs_tx = M.MAVLink(None, srcSystem=255, srcComponent=190)
+    gcs_v1 = V1.MAVLink(None, srcSystem=255, srcComponent=191)
+    signed_tx = M.MAVLink(None, srcSystem=254, srcComponent=1)
+    signed_tx.signing.secret_key, signed_tx.signing.link_id = KEY, 9
+    signed_tx.signing.sign_outgoing, signed_tx.signing.timestamp = True, ri.signing_now()
+    plain = [
+        bytes(M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0).pack(gcs_tx)),
+        bytes(V1.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(gcs_v1)),
+    ]
+    signed = [bytes(M.MAVLink_param_request_list_message(2, 1).pack(signed_tx))]
+    try:
+        # Each vehicle makes itself known (the router learns where 1/1 and 2/1 are).
+        # The plain one in MAVLink 1: its auto link carries what comes in the framing it came in.
+        veh.send(heartbeat(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA), v1=True)
+        sveh.send(heartbeat(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA))
+        time.sleep(0.3)
+        for raw in plain + signed:
+            pub.publish("%s/in" % PREFIX, raw)
+        want = [(veh, raw) for raw in plain] + [(sveh, raw) for raw in signed]
+        deadline = time.monotonic() + 3
+        while time.monotonic() < deadline and not all(any(f.raw == raw for f in p.frames()) for p, raw in want):
+            time.sleep(0.05)
+        for p, raw in want:
+            check(any(f.raw == raw for f in p.frames()), "frame %s from mav/F/V/in never reached the %s byte for byte; "
+                  "it got %s" % (raw.hex(), p.name, p.frames()[:5]))
+        echoed = [t for t, p, *_ in sub.messages() if p in plain + signed and not t.endswith("/in")]
+        check(not echoed, "frames from the broker were published back on %s" % echoed)
+        return ("%d frames from mav/F/V/in reached the vehicles byte for byte (v2, v1, and a signed one through a "
+                "key= link), none published back" % len(want))
+    finally:
+        veh.close()
+        sveh.close()
+        router.stop()
+        sub.close()
+        pub.close()
+        broker.stop()
+
+
+def request(client, topic, raw, corr):
+    props = Properties(PacketTypes.PUBLISH)
+    props.ResponseTopic = "replies/%s" % corr
+    props.CorrelationData = corr.encode()
+    client.publish(topic, raw, props=props)
+    return props.ResponseTopic
+
+
+def user_props(props):
+    return dict(getattr(props, "UserProperty", None) or [])
+
+
+def command(bin_):
+    broker = Broker()
+    cli = Client(broker, ["replies/#"], "cloud")
+    vport = free_port()
+    vehicle = subprocess.Popen([bin_, "vehicle", "udpout:127.0.0.1:%d" % vport], stdin=subprocess.DEVNULL,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    router = with_router(bin_, broker, lambda: "udpin:127.0.0.1:%d" % vport)
+    if router is None:
+        vehicle.kill()
+        broker.stop()
+        return None
+    gcs = M.MAVLink(None, srcSystem=255, srcComponent=190)
+    try:
+        time.sleep(1.5)  # the vehicle's first HEARTBEAT teaches the router its route
+        arm = bytes(M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0).pack(gcs))
+        t0 = time.monotonic()
+        reply_topic = request(cli, "%s/1/1/@cmd" % PREFIX, arm, "arm-1")
+        got = cli.wait(lambda t, p: t == reply_topic, 5)
+        check(got is not None, "no reply to the ARM request within 5 s")
+        summary = []
+        if got:
+            t, payload, qos, _, props, at = got
+            msgs = M.MAVLink(None).parse_buffer(payload) or []
+            check(len(msgs) == 1 and msgs[0].get_type() == "COMMAND_ACK", "the reply is not one COMMAND_ACK frame: %s" % payload.hex())
+            if msgs and msgs[0].get_type() == "COMMAND_ACK":
+                ack = msgs[0]
+                check(ack.command == M.MAV_CMD_COMPONENT_ARM_DISARM, "ACK for command %d" % ack.command)
+                check(ack.result == M.MAV_RESULT_ACCEPTED, "ARM result %d, expected ACCEPTED" % ack.result)
+                check(ack.get_srcSystem() == 1, "ACK from system %d" % ack.get_srcSystem())
+                summary.append("ARM -> COMMAND_ACK ACCEPTED in %.0f ms" % ((at - t0) * 1000))
+            check(getattr(props, "CorrelationData", None) == b"arm-1", "correlation data %r, expected b'arm-1'" %
+                  getattr(props, "CorrelationData", None))
+            check(qos == 1, "reply at QoS %d" % qos)
+        # Nobody is system 9: the bridge resends, then answers timeout.
+        lost = bytes(M.MAVLink_command_long_message(9, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0).pack(gcs))
+        t0 = time.monotonic()
+        reply_topic = request(cli, "%s/9/1/@cmd" % PREFIX, lost, "lost-1")
+        got = cli.wait(lambda t, p: t == reply_topic, 6)
+        check(got is not None, "no timeout reply for a command to nobody within 6 s")
+        if got:
+            waited = got[5] - t0
+            check(got[1] == b"timeout" and user_props(got[4]).get("error") == "timeout",
+                  "reply %r %r, expected b'timeout' with error=timeout" % (got[1], user_props(got[4])))
+            check(1.5 <= waited <= 4.0, "the timeout came after %.1f s (4 sends 0.5 s apart expected)" % waited)
+            check(getattr(got[4], "CorrelationData", None) == b"lost-1", "timeout reply's correlation data")
+            summary.append("no one -> timeout after %.1f s" % waited)
+        # Key 1/2, frame to 1/1: refused at once.
+        reply_topic = request(cli, "%s/1/2/@cmd" % PREFIX, arm, "bad-1")
+        got = cli.wait(lambda t, p: t == reply_topic, 3)
+        check(got is not None and user_props(got[4]).get("error") == "target_mismatch",
+              "a key that does not match the target: %r" % ((got and (got[1], user_props(got[4]))),))
+        summary.append("mismatched key -> target_mismatch")
+        return "; ".join(summary)
+    finally:
+        router.stop()
+        vehicle.send_signal(signal.SIGINT)
+        try:
+            vehicle.wait(5)
+        except subprocess.TimeoutExpired:
+            vehicle.kill()
+        cli.close()
+        broker.stop()
+
+
+def alive(bin_):
+    broker = Broker()
+    try:
+        port = free_port()
+        router = with_router(bin_, broker, lambda: "udpin:127.0.0.1:%d" % port)
+        if router is None:
+            return None
+        time.sleep(0.5)
+        watch = Client(broker, ["%s/@alive" % PREFIX], "watch")
+        first = watch.wait(lambda t, p: True, 3)
+        check(first is not None and first[1] == b"online" and first[3], "retained @alive while running: %r" % (first,))
+        router.stop()
+        off = watch.wait(lambda t, p: p == b"offline", 3)
+        check(off is not None, "no offline on @alive after SIGTERM")
+        late = Client(broker, ["%s/@alive" % PREFIX], "late")
+        r = late.wait(lambda t, p: True, 3)
+        check(r is not None and r[1] == b"offline" and r[3], "retained @alive after exit: %r" % (r,))
+        late.close()
+        # SIGKILL: the broker's last will says offline.
+        router2 = with_router(bin_, broker, lambda: "udpin:127.0.0.1:%d" % free_port())
+        if router2 is None:
+            return None
+        t_on = watch.wait(lambda t, p: p == b"online" and t == "%s/@alive" % PREFIX, 3)
+        online_at = len(watch.messages())
+        router2.kill()
+        deadline = time.monotonic() + 10
+        will = None
+        while time.monotonic() < deadline and will is None:
+            later = watch.messages()[online_at:]
+            will = next((m for m in later if m[1] == b"offline"), None)
+            time.sleep(0.05)
+        check(t_on is not None, "second router never said online")
+        check(will is not None, "no last will (offline) within 10 s of SIGKILL")
+        watch.close()
+        return "online (retained) -> offline on SIGTERM -> online -> offline by the last will on SIGKILL"
+    finally:
+        broker.stop()
+
+
+SCENARIOS = {"telemetry": telemetry, "inbound": inbound, "command": command, "alive": alive}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("scenario", choices=sorted(SCENARIOS))
+    ap.add_argument("--mavstack", required=True)
+    a = ap.parse_args()
+    t0 = time.monotonic()
+    try:
+        summary = SCENARIOS[a.scenario](a.mavstack)
+    except Exception as e:  # a crash of the harness is a failure, never a pass
+        import traceback
+
+        traceback.print_exc()
+        fail("%s crashed: %r" % (a.scenario, e))
+        summary = None
+    if failures:
+        print("%s: %d failures" % (a.scenario, len(failures)), file=sys.stderr)
+        sys.exit(1)
+    if summary is None:
+        print("FAIL: %s ended early without a failure" % a.scenario, file=sys.stderr)
+        sys.exit(1)
+    print("%s: %s (%.1f s) ok" % (a.scenario, summary, time.monotonic() - t0))
+
+
+if __name__ == "__main__":
+    main()
