@@ -24,23 +24,28 @@ Scenarios:
              correlation data; a request to a system nobody has seen gets the payload
              `timeout` and error=timeout after the resends; a key that does not match the
              frame's target gets error=target_mismatch at once
+  ground     two vehicle routers (truck-1, truck-2), each with a pymavlink vehicle that is system
+             1, and a ground router subscribed to the whole fleet (vid=*) with a pymavlink
+             ground station: truck-1's frames arrive byte for byte as system 1, truck-2's as
+             system 2 (exactly pymavlink's packing of its message as system 2, same seq); the
+             ground station's COMMAND_LONG to system 2 reaches truck-2 as pymavlink's packing of
+             the command to system 1, and truck-1 never gets it
   alive      @alive is retained `online` while the router runs, `offline` after SIGTERM
              (published by the router), and `offline` by the last will after SIGKILL
 """
 
 import argparse
 import os
-import shutil
 import signal
 import socket
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
+import mqtt_broker  # noqa: E402
 import router_interop as ri  # noqa: E402
 from router_interop import KEY, M, V1, Peer, decode, heartbeat, start_router  # noqa: E402
 from scenario import check, fail, failures, free_port  # noqa: E402
@@ -57,41 +62,11 @@ FLEET, VID = "fleet1", "veh-7"
 PREFIX = "mav/%s/%s" % (FLEET, VID)
 
 
-class Broker:
-    """mosquitto on a free loopback port, anonymous, no persistence."""
-
-    def __init__(self):
-        exe = shutil.which("mosquitto") or ("/usr/sbin/mosquitto" if os.path.exists("/usr/sbin/mosquitto") else None)
-        if exe is None:
-            fail("mosquitto is not installed (Debian package mosquitto; scripts/setup-system.sh installs it)")
-            raise SystemExit(1)
-        self.dir = tempfile.mkdtemp(prefix="bridge-mosquitto-")
-        self.port = free_port(socket.SOCK_STREAM)
-        conf = os.path.join(self.dir, "mosquitto.conf")
-        with open(conf, "w") as f:
-            f.write("listener %d 127.0.0.1\nallow_anonymous true\npersistence false\n" % self.port)
-        self.log = open(os.path.join(self.dir, "log"), "wb")
-        self.proc = subprocess.Popen([exe, "-c", conf], stdout=self.log, stderr=subprocess.STDOUT)
-        deadline = time.monotonic() + 5
-        while time.monotonic() < deadline:
-            try:
-                socket.create_connection(("127.0.0.1", self.port), 0.2).close()
-                return
-            except OSError:
-                time.sleep(0.05)
-        fail("mosquitto did not listen on %d within 5 s" % self.port)
+class Broker(mqtt_broker.Broker):
+    """mosquitto for one scenario, with this script's fleet and vehicle in its URL."""
 
     def url(self, extra=""):
-        return "mqtt://127.0.0.1:%d?fleet=%s&vid=%s%s" % (self.port, FLEET, VID, extra)
-
-    def stop(self):
-        self.proc.terminate()
-        try:
-            self.proc.wait(5)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-        self.log.close()
-        shutil.rmtree(self.dir, ignore_errors=True)
+        return super().url(FLEET, VID, extra)
 
 
 class Client:
@@ -377,7 +352,61 @@ def alive(bin_):
         broker.stop()
 
 
-SCENARIOS = {"telemetry": telemetry, "inbound": inbound, "command": command, "alive": alive}
+def ground(bin_):
+    broker = Broker()
+    url = lambda vid: mqtt_broker.Broker.url(broker, FLEET, vid)  # noqa: E731
+    vports = (free_port(), free_port())
+    routers = []
+    peers = []
+    try:
+        for vid, port in zip(("truck-1", "truck-2"), vports):
+            r, _ = start_router(bin_, lambda vid=vid, port=port: ["udpin:127.0.0.1:%d" % port, url(vid)])
+            if r is None:
+                return None
+            routers.append(r)
+        gport = free_port()
+        g, _ = start_router(bin_, lambda: [url("*"), "udpin:127.0.0.1:%d?name=gcs" % gport])
+        if g is None:
+            return None
+        routers.append(g)
+        a = Peer("truck-1", M, 1, 1, dest=vports[0])
+        b = Peer("truck-2", M, 1, 1, dest=vports[1])
+        gcs = Peer("gcs", M, 255, 190, dest=gport)
+        peers += [a, b, gcs]
+        gcs.send(heartbeat())
+        for p in (a, b):
+            p.send(heartbeat(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA))
+        time.sleep(0.5)
+        fa = a.send(M.MAVLink_attitude_message(111, 0.1, 0, 0, 0, 0, 0))
+        fb = b.send(M.MAVLink_attitude_message(222, 0.2, 0, 0, 0, 0, 0))
+        got_a = gcs.wait_for(lambda f: f.type == "ATTITUDE" and f.msg.time_boot_ms == 111, 3)
+        got_b = gcs.wait_for(lambda f: f.type == "ATTITUDE" and f.msg.time_boot_ms == 222, 3)
+        check(got_a is not None and got_a.raw == fa.raw,
+              "truck-1's ATTITUDE at the ground station byte for byte as system 1: %r" % got_a)
+        # The expectation is pymavlink's packing of truck-2's message as system 2, same seq.
+        want_b = ri.repack(M, fb.msg, (2, 1, fb.seq))
+        check(got_b is not None and got_b.sysid == 2, "truck-2's ATTITUDE as system 2 at the ground station: %r" % got_b)
+        if got_b is not None:
+            check(got_b.raw == want_b, "truck-2's remapped ATTITUDE %s, pymavlink packs %s" % (got_b.raw.hex(), want_b.hex()))
+        # A command to system 2 reaches truck-2 as a command to its own system 1, and not truck-1.
+        t = time.monotonic()
+        cmd = gcs.send(M.MAVLink_command_long_message(2, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0))
+        arrived = b.wait_for(lambda f: f.type == "COMMAND_LONG", 3, since=t)
+        want = ri.repack(M, M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0),
+                         (255, 190, cmd.seq))
+        check(arrived is not None and arrived.raw == want,
+              "truck-2 got %r for the command to system 2; pymavlink packs %s" % (arrived, want.hex()))
+        check(not [f for f in a.frames(t) if f.type == "COMMAND_LONG"], "truck-1 got the command meant for truck-2")
+        return "two vehicles with sysid 1 seen as systems 1 and 2 (pymavlink's packing), a command to 2 reaches truck-2 as 1"
+    finally:
+        for p in peers:
+            p.close()
+        for r in routers:
+            r.stop()
+        broker.stop()
+
+
+SCENARIOS = {"telemetry": telemetry, "inbound": inbound, "command": command, "alive": alive, "ground": ground}
 
 
 def main():

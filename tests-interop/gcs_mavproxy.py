@@ -36,6 +36,12 @@ MAVProxy on a plain one: fetch, set + read back, wp load/save compared, arm/disa
 the router's conversion (its stats show the versions and conversions). The router is stopped
 with SIGTERM and must exit 0; its stats (per link frames, conversions, drops) are in the JSON.
 
+--via-broker: the same session (checks 1-6) across an MQTT broker (mosquitto, started on a free
+port): the vehicle sends to a vehicle-side `mavstack router` (`udpin:...?name=vehicle` and
+`mqtt://...?fleet=interop&vid=truck-1`), a ground-side `mavstack router`
+(`mqtt://...?fleet=interop&vid=*` and `udpout:...?name=gcs`) serves MAVProxy; both routers
+must exit 0 on SIGTERM and their stats show frames both ways on the vehicle and gcs links.
+
 Prints one JSON line with timings on success, exits 1 with the reason (and MAVProxy's and the
 vehicle's last output) on any failure.
 
@@ -56,8 +62,11 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+import mqtt_broker  # noqa: E402
+
 from gcs_common import (  # noqa: E402
     Failure,
+    Router,
     Timer,
     check_router_carried,
     link_dropped,
@@ -85,6 +94,7 @@ except ImportError as e:  # never skip: a missing client is a failure
 
 MODULES = "signing,wp,param,arm,mode,cmdlong"
 PASSPHRASE = "mavstack-interop"
+FLEET = "interop"  # --via-broker: the fleet; the vehicle is truck-1
 # defaults of the ArduPilot flavour that the fetch must show
 ARDUPILOT_PARAMS = {"SYSID_THISMAV": 1, "ARMING_CHECK": 1, "WPNAV_SPEED": 500.0, "RTL_ALT": 1500}
 
@@ -323,12 +333,24 @@ def heartbeat_armed(tlog):
     return False
 
 
-def full(binary, keep, via=False):
+def full(binary, keep, via=None):
     timer = Timer()
     work = keep or tempfile.mkdtemp(prefix="gcs-mavproxy-")
     os.makedirs(work, exist_ok=True)
     router = None
-    if via:
+    broker = ground = None
+    if via == "broker":
+        try:
+            broker = mqtt_broker.Broker()
+        except RuntimeError as e:
+            fail(str(e))
+        port, gport = free_udp_port(), free_udp_port()
+        router = Router(binary, [f"udpin:127.0.0.1:{port}?name=vehicle", broker.url(FLEET, "truck-1")],
+                        work, name="vehicle-router")
+        ground = Router(binary, [broker.url(FLEET, "*"), f"udpout:127.0.0.1:{gport}?name=gcs"], work,
+                        name="ground-router")
+        master = f"udpin:127.0.0.1:{gport}"
+    elif via == "router":
         key_hex = hashlib.sha256(PASSPHRASE.encode()).hexdigest()
         router, port, gcs_ports = via_router(
             binary, work, [("gcs", ""), ("gcs_signed", f"key={key_hex}")], "trusted=true")
@@ -421,6 +443,18 @@ def full(binary, keep, via=False):
         mp.expect(r"DISARMED", 10, "disarm: disarmed HEARTBEAT")
 
         # 7. signing
+        if ground is not None:
+            mp.close()
+            if not heartbeat_armed(mp.tlog()):
+                fail("arm: no HEARTBEAT with MAV_MODE_FLAG_SAFETY_ARMED in MAVProxy's log")
+            mp = None
+            stats = ground.stop()
+            summary["ground_router"] = router_summary(stats, ["gcs"])
+            check_router_carried(stats, ["gcs"], "the ground router")
+            stats = router.stop()
+            summary["vehicle_router"] = router_summary(stats, ["vehicle"])
+            check_router_carried(stats, ["vehicle"], "the vehicle's router")
+            return summary
         if router is not None:
             mp.close()
             if not heartbeat_armed(mp.tlog()):
@@ -458,8 +492,11 @@ def full(binary, keep, via=False):
         if mp is not None:
             mp.close()
         vehicle.stop()
-        if router is not None:
-            router.kill()
+        for r in (router, ground):
+            if r is not None:
+                r.kill()
+        if broker is not None:
+            broker.stop()
     return summary
 
 
@@ -682,15 +719,19 @@ def main():
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--via-router", action="store_true",
                     help="the session through `mavstack router` (and a MAVLink 1 hop)")
+    ap.add_argument("--via-broker", action="store_true",
+                    help="the session through an MQTT broker: the vehicle's router bridges onto "
+                         "mosquitto, a ground router subscribed to the fleet serves MAVProxy")
     args = ap.parse_args()
-    if args.bench and args.via_router:
-        ap.error("--via-router runs the session, not --bench")
+    if args.bench and (args.via_router or args.via_broker):
+        ap.error("--via-router and --via-broker run the session, not --bench")
 
     def body():
         binary = mavstack_bin(args.mavstack)
         if args.bench:
             return bench(binary, *args.bench, args.loss or [0.0, 0.2], args.seed, args.keep)
-        return full(binary, args.keep, args.via_router)
+        via = "router" if args.via_router else "broker" if args.via_broker else None
+        return full(binary, args.keep, via)
 
     run_main("gcs_mavproxy", body)
 

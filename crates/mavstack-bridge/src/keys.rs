@@ -47,6 +47,55 @@ pub enum Topic {
     },
 }
 
+/// What a ground bridge hears about a vehicle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FleetTopic<'a> {
+    /// A frame of its network (`mav/F/V/{sysid}/{compid}/{NAME}`).
+    Frame {
+        /// The vehicle id.
+        vid: &'a str,
+    },
+    /// Its `@alive` key.
+    Alive {
+        /// The vehicle id.
+        vid: &'a str,
+    },
+}
+
+/// What `topic` is for a ground bridge of `fleet`: a vehicle's frame or liveliness (its
+/// `in` and `@cmd` keys, and anything else, are not).
+///
+/// ```
+/// use mavstack_bridge::keys::{FleetTopic, fleet_topic};
+/// assert_eq!(fleet_topic("f", "mav/f/v9/1/1/ATTITUDE"), Some(FleetTopic::Frame { vid: "v9" }));
+/// assert_eq!(fleet_topic("f", "mav/f/v9/@alive"), Some(FleetTopic::Alive { vid: "v9" }));
+/// assert_eq!(fleet_topic("f", "mav/f/v9/1/1/@cmd"), None);
+/// ```
+#[must_use]
+pub fn fleet_topic<'a>(fleet: &str, topic: &'a str) -> Option<FleetTopic<'a>> {
+    let rest = topic
+        .strip_prefix("mav/")?
+        .strip_prefix(fleet)?
+        .strip_prefix('/')?;
+    let (vid, rest) = rest.split_once('/')?;
+    if check("vid", vid).is_err() {
+        return None;
+    }
+    if rest == "@alive" {
+        return Some(FleetTopic::Alive { vid });
+    }
+    let mut parts = rest.split('/');
+    let (sysid, compid, name) = (parts.next()?, parts.next()?, parts.next()?);
+    if parts.next().is_some()
+        || name.starts_with('@')
+        || sysid.parse::<u8>().is_err()
+        || compid.parse::<u8>().is_err()
+    {
+        return None;
+    }
+    Some(FleetTopic::Frame { vid })
+}
+
 /// The keys of vehicle `vid` in fleet `fleet`.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Keys {
@@ -129,6 +178,12 @@ impl Keys {
     #[must_use]
     pub fn command(&self, sysid: u8, compid: u8) -> String {
         format!("{}/{sysid}/{compid}/@cmd", self.prefix)
+    }
+
+    /// The MQTT filter of every frame of the vehicle's network: `mav/F/V/+/+/+`.
+    #[must_use]
+    pub fn frames_filter(&self) -> String {
+        format!("{}/+/+/+", self.prefix)
     }
 
     /// `mav/F/V/@alive`.

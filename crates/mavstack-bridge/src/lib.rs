@@ -26,11 +26,18 @@
 //! The sans-IO parts (keys, the outbox, the command tracker) take bytes and times and give
 //! bytes back; [`mqtt`] is the tokio driver over rumqttc.
 //!
+//! The other side, a ground or cloud router, subscribes to one vehicle, a list or the whole
+//! fleet (`vid=*`, `vid=a,b`, or `side=ground` for one) and presents each vehicle as a link
+//! of its own to the local ground stations; what they send a vehicle goes to its `in` key.
+//!
 //! ```
-//! use mavstack_bridge::BridgeSpec;
+//! use mavstack_bridge::{BridgeSpec, Side};
 //! let spec = BridgeSpec::parse("mqtt://127.0.0.1:1883?fleet=demo&vid=truck-7").unwrap();
-//! assert_eq!(spec.keys.alive(), "mav/demo/truck-7/@alive");
+//! let Side::Vehicle(keys) = &spec.side else { panic!() };
+//! assert_eq!(keys.alive(), "mav/demo/truck-7/@alive");
 //! assert_eq!(spec.client_id, "mavstack-demo-truck-7");
+//! let ground = BridgeSpec::parse("mqtt://127.0.0.1:1883?fleet=demo&vid=*").unwrap();
+//! assert_eq!(ground.side, Side::Ground(vec![]));
 //! ```
 #![forbid(unsafe_code)]
 
@@ -39,8 +46,19 @@ pub mod keys;
 #[cfg(feature = "mqtt")]
 pub mod mqtt;
 pub mod outbox;
+pub mod remap;
 
 pub use keys::{KeyError, Keys, Topic};
+
+/// Which end of the broker a bridge link is.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Side {
+    /// On the vehicle: its network onto the vehicle's keys.
+    Vehicle(Keys),
+    /// On the ground: the vehicles named (every vehicle of the fleet when empty), each a
+    /// link of the router.
+    Ground(Vec<String>),
+}
 
 /// The link strings a bridge opens (the CLI sends these here instead of to the transport).
 #[must_use]
@@ -59,8 +77,10 @@ pub struct BridgeSpec {
     pub host: String,
     /// The broker's port (default 1883).
     pub port: u16,
-    /// The vehicle's keys.
-    pub keys: Keys,
+    /// The fleet.
+    pub fleet: String,
+    /// Which end it is.
+    pub side: Side,
     /// Frames from the broker may be signed onto signed links.
     pub trusted: bool,
     /// MQTT user name and password.
@@ -77,7 +97,8 @@ impl core::fmt::Debug for BridgeSpec {
         f.debug_struct("BridgeSpec")
             .field("host", &self.host)
             .field("port", &self.port)
-            .field("keys", &self.keys)
+            .field("fleet", &self.fleet)
+            .field("side", &self.side)
             .field("trusted", &self.trusted)
             .field("user", &self.credentials.as_ref().map(|(u, _)| u))
             .field("client_id", &self.client_id)
@@ -173,7 +194,7 @@ impl BridgeSpec {
             option: option.to_owned(),
             what: what.to_owned(),
         };
-        let (mut fleet, mut vid, mut trusted) = (None, None, false);
+        let (mut fleet, mut vid, mut trusted, mut ground) = (None, None, false, false);
         let (mut user, mut password, mut client_id, mut name) = (None, None, None, None);
         for opt in opts.split('&').filter(|o| !o.is_empty()) {
             let (k, v) = opt
@@ -186,6 +207,14 @@ impl BridgeSpec {
                 "password" => &mut password,
                 "client_id" => &mut client_id,
                 "name" => &mut name,
+                "side" => {
+                    ground = match v {
+                        "ground" => true,
+                        "vehicle" => false,
+                        _ => return Err(option_err(k, "expected vehicle or ground")),
+                    };
+                    continue;
+                }
                 "trusted" => {
                     trusted = match v {
                         "true" => true,
@@ -207,25 +236,42 @@ impl BridgeSpec {
             }
             *slot = Some(v.to_owned());
         }
-        let keys = Keys::new(
-            fleet.as_deref().unwrap_or_default(),
-            vid.as_deref().unwrap_or_default(),
-        )
-        .map_err(|source| BridgeSpecError::Key {
+        let key_err = |source| BridgeSpecError::Key {
             text: shown.clone(),
             source,
-        })?;
+        };
+        let fleet = fleet.unwrap_or_default();
+        let vid = vid.unwrap_or_default();
+        let side = if ground || vid == "*" || vid.contains(',') {
+            let vids: Vec<String> = if vid == "*" {
+                Vec::new()
+            } else {
+                vid.split(',').map(str::to_owned).collect()
+            };
+            for v in &vids {
+                Keys::new(&fleet, v).map_err(key_err)?;
+            }
+            if vids.is_empty() {
+                Keys::new(&fleet, "all").map_err(key_err)?;
+            }
+            Side::Ground(vids)
+        } else {
+            Side::Vehicle(Keys::new(&fleet, &vid).map_err(key_err)?)
+        };
         let credentials = match (user, password) {
             (Some(u), p) => Some((u, p.unwrap_or_default())),
             (None, Some(_)) => return Err(option_err("password", "needs user")),
             (None, None) => None,
         };
-        let client_id =
-            client_id.unwrap_or_else(|| format!("mavstack-{}-{}", keys.fleet(), keys.vid()));
+        let client_id = client_id.unwrap_or_else(|| match &side {
+            Side::Vehicle(keys) => format!("mavstack-{fleet}-{}", keys.vid()),
+            Side::Ground(_) => format!("mavstack-{fleet}-ground-{}", std::process::id()),
+        });
         Ok(Self {
             host: host.to_owned(),
             port,
-            keys,
+            fleet,
+            side,
             trusted,
             credentials,
             client_id,
@@ -233,12 +279,15 @@ impl BridgeSpec {
         })
     }
 
-    /// The router's settings for this link: transparent framing, `trusted` as given.
+    /// The router's settings for this link: transparent framing, `trusted` as given; a
+    /// vehicle's link also gets every frame of the network (a monitor), a ground link's
+    /// vehicles are routed to like any link's peers.
     #[must_use]
     pub fn link_config(&self) -> mavstack_router::LinkConfig {
         let mut config = mavstack_router::LinkConfig::new(self.name.clone());
         config.version = mavstack_router::VersionMode::Transparent;
         config.trusted = self.trusted;
+        config.monitor = matches!(self.side, Side::Vehicle(_));
         config
     }
 }
@@ -254,14 +303,22 @@ mod tests {
         )
         .unwrap();
         assert_eq!((s.host.as_str(), s.port), ("broker.local", 8883));
-        assert_eq!(s.keys.input(), "mav/f1/v-2/in");
+        let Side::Vehicle(keys) = &s.side else {
+            panic!("a vehicle link: {s:?}")
+        };
+        assert_eq!(keys.input(), "mav/f1/v-2/in");
         assert!(s.trusted);
         assert_eq!(s.credentials, Some(("u".into(), "secret".into())));
         assert_eq!(s.name, "mqtt://broker.local:8883");
         assert!(!format!("{s:?}").contains("secret"));
         let c = s.link_config();
         assert_eq!(c.version, mavstack_router::VersionMode::Transparent);
-        assert!(c.trusted);
+        assert!(c.trusted && c.monitor);
+        let g = BridgeSpec::parse("mqtt://h?fleet=a&vid=b,c-1").unwrap();
+        assert_eq!(g.side, Side::Ground(vec!["b".into(), "c-1".into()]));
+        assert!(!g.link_config().monitor);
+        let one = BridgeSpec::parse("mqtt://h?fleet=a&vid=b&side=ground").unwrap();
+        assert_eq!(one.side, Side::Ground(vec!["b".into()]));
         assert_eq!(
             BridgeSpec::parse("mqtt://h?fleet=a&vid=b").unwrap().port,
             1883
@@ -278,6 +335,8 @@ mod tests {
         assert!(err("mqtt://h:1?fleet=a&vid=b&key=00").contains("does not apply"));
         assert!(err("mqtt://h:1?fleet=a&vid=b&colour=red").contains("unknown option"));
         assert!(err("mqtt://h:1?fleet=a&vid=b&trusted=yes").contains("true or false"));
+        assert!(err("mqtt://h:1?fleet=a&vid=b,c/d").contains("vid \"c/d\""));
+        assert!(err("mqtt://h:1?fleet=a&vid=b&side=sky").contains("vehicle or ground"));
         assert!(err("zenoh://h:7447?fleet=a&vid=b").contains("not supported yet"));
         let e = err("mqtt://h:1?fleet=a&vid=b&password=hunter2");
         assert!(e.contains("needs user") && !e.contains("hunter2"));

@@ -27,9 +27,15 @@ use rumqttc::v5::{AsyncClient, Event, EventLoop, MqttOptions};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 
+use std::collections::HashMap;
+
+use mavstack_transport::PeerId;
+
 use crate::command::{CommandTiming, Commands, Reply};
+use crate::keys::{FleetTopic, fleet_topic};
 use crate::outbox::{Lane, Outbox};
-use crate::{BridgeSpec, Keys, Topic};
+use crate::remap::{Remapped, SysidMap};
+use crate::{BridgeSpec, Keys, Side, Topic};
 
 /// Publishes waiting in rumqttc's request queue at most.
 const CLIENT_QUEUE: usize = 1024;
@@ -96,38 +102,60 @@ impl BridgeHandle {
 /// drops): opening never waits for it.
 #[must_use]
 pub fn open(spec: &BridgeSpec, dialect: InfoFn) -> Bridge {
-    let keys = spec.keys.clone();
     let mut options = MqttOptions::new(spec.client_id.clone(), spec.host.clone(), spec.port);
     options.set_keep_alive(Duration::from_secs(5));
     options.set_clean_start(true);
-    options.set_last_will(LastWill::new(
-        keys.alive(),
-        "offline",
-        QoS::AtLeastOnce,
-        true,
-        None,
-    ));
+    if let Side::Vehicle(keys) = &spec.side {
+        options.set_last_will(LastWill::new(
+            keys.alive(),
+            "offline",
+            QoS::AtLeastOnce,
+            true,
+            None,
+        ));
+    }
     if let Some((user, password)) = &spec.credentials {
         options.set_credentials(user.clone(), password.clone());
     }
     let (client, events) = AsyncClient::new(options, CLIENT_QUEUE);
-    let (link, peer) = Link::external(format!("mqtt {}:{}", spec.host, spec.port), LINK_QUEUE);
+    let first = match &spec.side {
+        Side::Vehicle(_) => Some(format!("mqtt {}:{}", spec.host, spec.port)),
+        Side::Ground(_) => None,
+    };
+    let (link, peer) = Link::external(first, LINK_QUEUE);
     let stats = Arc::new(BridgeStats::default());
     let (tx, rx) = mpsc::channel(CLIENT_QUEUE);
     let pump = tokio::spawn(pump(events, tx, Arc::clone(&stats)));
-    let task = tokio::spawn(
-        Driver {
-            client,
-            keys,
-            dialect,
-            peer,
-            incoming: rx,
-            outbox: Outbox::new(OUTBOX_CONTROL, OUTBOX_KEYS),
-            commands: Commands::new(CommandTiming::default()),
-            stats: Arc::clone(&stats),
-        }
-        .run(pump),
-    );
+    let io = Io {
+        client,
+        peer,
+        incoming: rx,
+        outbox: Outbox::new(OUTBOX_CONTROL, OUTBOX_KEYS),
+        stats: Arc::clone(&stats),
+    };
+    let task = match &spec.side {
+        Side::Vehicle(keys) => tokio::spawn(
+            Driver {
+                io,
+                keys: keys.clone(),
+                dialect,
+                commands: Commands::new(CommandTiming::default()),
+            }
+            .run(pump),
+        ),
+        Side::Ground(vids) => tokio::spawn(
+            Ground {
+                io,
+                fleet: spec.fleet.clone(),
+                vids: vids.clone(),
+                dialect,
+                vehicles: HashMap::new(),
+                by_peer: HashMap::new(),
+                sysids: SysidMap::default(),
+            }
+            .run(pump),
+        ),
+    };
     Bridge {
         config: spec.link_config(),
         link,
@@ -191,15 +219,93 @@ struct ReplyTo {
     correlation: Option<Vec<u8>>,
 }
 
-struct Driver {
+/// What both ends share: the client, the link's far end, the broker's messages, the outbox.
+struct Io {
     client: AsyncClient,
-    keys: Keys,
-    dialect: InfoFn,
     peer: ExternalPeer,
     incoming: mpsc::Receiver<FromBroker>,
     outbox: Outbox,
-    commands: Commands<ReplyTo>,
     stats: Arc<BridgeStats>,
+}
+
+impl Io {
+    /// Queues a publish of `frame` on `topic` (latest-wins by `key` for telemetry).
+    fn queue(&mut self, frame: &[u8], msg_id: u32, key: String, topic: Option<String>) {
+        let lane = if is_control(msg_id) {
+            Lane::Control
+        } else {
+            Lane::Telemetry
+        };
+        if !self.outbox.push(lane, key, topic, frame.to_vec()) {
+            let counter = match lane {
+                Lane::Control => &self.stats.dropped_control,
+                Lane::Telemetry => &self.stats.dropped_telemetry,
+            };
+            counter.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// Hands what waits to the client until its queue is full.
+    fn drain(&mut self) {
+        while let Some(out) = self.outbox.pop() {
+            let qos = match out.lane {
+                Lane::Control => QoS::AtLeastOnce,
+                Lane::Telemetry => QoS::AtMostOnce,
+            };
+            match self
+                .client
+                .try_publish(out.topic().to_owned(), qos, false, out.payload.clone())
+            {
+                Ok(()) => {
+                    self.stats.published.fetch_add(1, Ordering::Relaxed);
+                }
+                Err(_) => {
+                    self.outbox.unpop(out);
+                    break;
+                }
+            }
+        }
+        self.stats
+            .replaced
+            .store(self.outbox.replaced(), Ordering::Relaxed);
+    }
+
+    async fn subscribe(&self, filters: &[String]) {
+        for f in filters {
+            if let Err(e) = self.client.subscribe(f.clone(), QoS::AtLeastOnce).await {
+                tracing::warn!("mqtt: subscribing to {f}: {e}");
+            }
+        }
+    }
+
+    /// The link has closed: what waits goes, `alive` (the vehicle's key) says `offline`,
+    /// then a clean disconnect (which the broker does not answer with the last will).
+    async fn close(mut self, pump: JoinHandle<()>, alive: Option<String>) {
+        self.drain();
+        if let Some(alive) = alive {
+            let offline = self
+                .client
+                .publish(alive, QoS::AtLeastOnce, true, "offline");
+            let _ = tokio::time::timeout(CLOSE_TIMEOUT, offline).await;
+        }
+        // Let the event loop write what is queued before the DISCONNECT.
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        let _ = self.client.disconnect().await;
+        let _ = tokio::time::timeout(CLOSE_TIMEOUT, pump).await;
+        tracing::debug!(
+            "mqtt: closed ({} published, {} replaced)",
+            self.stats.published.load(Ordering::Relaxed),
+            self.outbox.replaced()
+        );
+    }
+}
+
+/// The vehicle's end: its network onto its keys, frames in, commands run here.
+struct Driver {
+    io: Io,
+    keys: Keys,
+    dialect: InfoFn,
+    commands: Commands<ReplyTo>,
 }
 
 impl Driver {
@@ -208,23 +314,23 @@ impl Driver {
         let mut resend = Vec::new();
         loop {
             let wake = self.commands.poll_timeout().map(clock::to_tokio);
-            let retry = !self.outbox.is_empty();
+            let retry = !self.io.outbox.is_empty();
             tokio::select! {
-                frame = self.peer.recv() => {
-                    let Some(frame) = frame else { break };
+                frame = self.io.peer.recv() => {
+                    let Some((_, frame)) = frame else { break };
                     self.outgoing(&frame, &mut replies);
-                    while let Some(frame) = self.peer.try_recv() {
+                    while let Some((_, frame)) = self.io.peer.try_recv() {
                         self.outgoing(&frame, &mut replies);
                     }
                 }
-                msg = self.incoming.recv() => match msg {
+                msg = self.io.incoming.recv() => match msg {
                     Some(msg) => self.handle_broker(msg).await,
                     None => break,
                 },
                 () = sleep_until(wake) => {
                     self.commands.handle_timeout(clock::now(), &mut resend, &mut replies);
                     for frame in resend.drain(..) {
-                        self.peer.deliver(frame).await;
+                        self.deliver(frame).await;
                     }
                 }
                 () = tokio::time::sleep(RETRY), if retry => {}
@@ -232,9 +338,17 @@ impl Driver {
             for reply in replies.drain(..) {
                 self.reply(reply);
             }
-            self.drain();
+            self.io.drain();
         }
-        self.close(pump).await;
+        let alive = self.keys.alive();
+        self.io.close(pump, Some(alive)).await;
+    }
+
+    async fn deliver(&self, frame: Vec<u8>) {
+        if let Some(first) = self.io.peer.first() {
+            self.io.stats.received.fetch_add(1, Ordering::Relaxed);
+            self.io.peer.deliver(first, frame).await;
+        }
     }
 
     /// A frame the router sends to the broker.
@@ -246,36 +360,16 @@ impl Driver {
         let id = view.msg_id();
         let name = (self.dialect.0)(id).map(|i| i.name);
         let key = self.keys.message(view.sysid(), view.compid(), name, id);
-        let lane = if is_control(id) {
-            Lane::Control
-        } else {
-            Lane::Telemetry
-        };
-        if !self
-            .outbox
-            .push(lane, key, frame[..view.frame_len()].to_vec())
-        {
-            let counter = match lane {
-                Lane::Control => &self.stats.dropped_control,
-                Lane::Telemetry => &self.stats.dropped_telemetry,
-            };
-            counter.fetch_add(1, Ordering::Relaxed);
-        }
+        self.io.queue(&frame[..view.frame_len()], id, key, None);
     }
 
     async fn handle_broker(&mut self, msg: FromBroker) {
         match msg {
             FromBroker::Connected => {
-                let subs = [
-                    (self.keys.input(), QoS::AtLeastOnce),
-                    (self.keys.commands_filter(), QoS::AtLeastOnce),
-                ];
-                for (topic, qos) in subs {
-                    if let Err(e) = self.client.subscribe(topic, qos).await {
-                        tracing::warn!("mqtt: subscribing: {e}");
-                    }
-                }
+                let filters = [self.keys.input(), self.keys.commands_filter()];
+                self.io.subscribe(&filters).await;
                 if let Err(e) = self
+                    .io
                     .client
                     .publish(self.keys.alive(), QoS::AtLeastOnce, true, "online")
                     .await
@@ -288,10 +382,7 @@ impl Driver {
                 payload,
                 properties,
             } => match self.keys.parse(&topic) {
-                Some(Topic::In) => {
-                    self.stats.received.fetch_add(1, Ordering::Relaxed);
-                    self.peer.deliver(payload).await;
-                }
+                Some(Topic::In) => self.deliver(payload).await,
                 Some(Topic::Command { sysid, compid }) => {
                     let props = properties.unwrap_or_default();
                     let Some(topic) = props.response_topic else {
@@ -308,10 +399,7 @@ impl Driver {
                         &payload,
                         to.clone(),
                     ) {
-                        Ok(frame) => {
-                            self.stats.received.fetch_add(1, Ordering::Relaxed);
-                            self.peer.deliver(frame).await;
-                        }
+                        Ok(frame) => self.deliver(frame).await,
                         Err(e) => self.answer(&to, e.to_string().into_bytes(), e.code(), true),
                     }
                 }
@@ -343,8 +431,8 @@ impl Driver {
                 .user_properties
                 .push((name.to_owned(), code.to_owned()));
         }
-        self.stats.replies.fetch_add(1, Ordering::Relaxed);
-        if let Err(e) = self.client.try_publish_with_properties(
+        self.io.stats.replies.fetch_add(1, Ordering::Relaxed);
+        if let Err(e) = self.io.client.try_publish_with_properties(
             to.topic.clone(),
             QoS::AtLeastOnce,
             false,
@@ -354,52 +442,123 @@ impl Driver {
             tracing::warn!("mqtt: a command reply could not be queued: {e}");
         }
     }
+}
 
-    /// Hands what waits to the client until its queue is full.
-    fn drain(&mut self) {
-        while let Some(out) = self.outbox.pop() {
-            let qos = match out.lane {
-                Lane::Control => QoS::AtLeastOnce,
-                Lane::Telemetry => QoS::AtMostOnce,
-            };
-            match self
-                .client
-                .try_publish(out.key.clone(), qos, false, out.payload.clone())
-            {
-                Ok(()) => {
-                    self.stats.published.fetch_add(1, Ordering::Relaxed);
+/// The ground's end: each vehicle heard (or named) a peer of the link, so a router link of
+/// its own; what the router sends a vehicle goes to its `in` key.
+struct Ground {
+    io: Io,
+    fleet: String,
+    /// The vehicles wanted (all when empty).
+    vids: Vec<String>,
+    dialect: InfoFn,
+    vehicles: HashMap<String, PeerId>,
+    by_peer: HashMap<PeerId, Keys>,
+    /// Vehicles that share a sysid get distinct ones here.
+    sysids: SysidMap,
+}
+
+impl Ground {
+    async fn run(mut self, pump: JoinHandle<()>) {
+        loop {
+            let retry = !self.io.outbox.is_empty();
+            tokio::select! {
+                frame = self.io.peer.recv() => {
+                    let Some((peer, frame)) = frame else { break };
+                    self.outgoing(peer, &frame);
+                    while let Some((peer, frame)) = self.io.peer.try_recv() {
+                        self.outgoing(peer, &frame);
+                    }
                 }
-                Err(_) => {
-                    self.outbox.unpop(out);
-                    break;
-                }
+                msg = self.io.incoming.recv() => match msg {
+                    Some(msg) => self.handle_broker(msg).await,
+                    None => break,
+                },
+                () = tokio::time::sleep(RETRY), if retry => {}
             }
+            self.io.drain();
         }
-        self.stats
-            .replaced
-            .store(self.outbox.replaced(), Ordering::Relaxed);
+        self.io.close(pump, None).await;
     }
 
-    /// The link has closed: `offline`, then a clean disconnect (which the broker does not
-    /// answer with the last will).
-    async fn close(mut self, pump: JoinHandle<()>) {
-        self.drain();
-        let offline = self
-            .client
-            .publish(self.keys.alive(), QoS::AtLeastOnce, true, "offline");
-        let _ = tokio::time::timeout(CLOSE_TIMEOUT, offline).await;
-        // Let the event loop send it (a QoS 1 publish waits for its PUBACK only in the
-        // broker's bookkeeping; a short pause before disconnecting is enough on a live
-        // connection).
-        tokio::time::sleep(Duration::from_millis(100)).await;
-        let _ = self.client.disconnect().await;
-        let _ = tokio::time::timeout(CLOSE_TIMEOUT, pump).await;
-        tracing::debug!(
-            "mqtt {}: closed ({} published, {} replaced)",
-            self.keys.vid(),
-            self.stats.published.load(Ordering::Relaxed),
-            self.outbox.replaced()
-        );
+    /// A frame from a local ground station for vehicle `peer`: onto its `in` key
+    /// (latest-wins per source and message for telemetry, in order for control).
+    fn outgoing(&mut self, peer: PeerId, frame: &[u8]) {
+        let (Some(keys), Ok(view)) = (self.by_peer.get(&peer), Frame::new_checked(frame)) else {
+            return;
+        };
+        let id = view.msg_id();
+        let topic = keys.input();
+        let key = format!("{topic}/{}/{}/{id}", view.sysid(), view.compid());
+        let frame = &frame[..view.frame_len()];
+        match self.sysids.to_vehicle(keys.vid(), frame, self.dialect.0) {
+            Remapped::Same => self.io.queue(frame, id, key, Some(topic)),
+            Remapped::Rewritten(f) => self.io.queue(&f, id, key, Some(topic)),
+            Remapped::Dropped => {}
+        }
+    }
+
+    async fn handle_broker(&mut self, msg: FromBroker) {
+        match msg {
+            FromBroker::Connected => {
+                let wanted: Vec<&str> = if self.vids.is_empty() {
+                    vec!["+"]
+                } else {
+                    self.vids.iter().map(String::as_str).collect()
+                };
+                let mut filters = Vec::new();
+                for v in wanted {
+                    filters.push(format!("mav/{}/{v}/+/+/+", self.fleet));
+                    filters.push(format!("mav/{}/{v}/@alive", self.fleet));
+                }
+                self.io.subscribe(&filters).await;
+            }
+            FromBroker::Publish { topic, payload, .. } => match fleet_topic(&self.fleet, &topic) {
+                Some(FleetTopic::Frame { vid }) => {
+                    if let Some(peer) = self.vehicle(vid).await {
+                        let frame = match self.sysids.from_vehicle(vid, &payload, self.dialect.0) {
+                            Remapped::Same => payload,
+                            Remapped::Rewritten(f) => f,
+                            Remapped::Dropped => return,
+                        };
+                        self.io.stats.received.fetch_add(1, Ordering::Relaxed);
+                        self.io.peer.deliver(peer, frame).await;
+                    }
+                }
+                Some(FleetTopic::Alive { vid }) => {
+                    if payload == b"offline" {
+                        if let Some(peer) = self.vehicles.remove(vid) {
+                            self.by_peer.remove(&peer);
+                            self.io.peer.remove_peer(peer).await;
+                            tracing::info!("mqtt: vehicle {vid} went offline");
+                        }
+                    } else {
+                        let _ = self.vehicle(vid).await;
+                    }
+                }
+                None => {}
+            },
+        }
+    }
+
+    /// The peer of vehicle `vid`, added when first heard.
+    async fn vehicle(&mut self, vid: &str) -> Option<PeerId> {
+        if let Some(&peer) = self.vehicles.get(vid) {
+            return Some(peer);
+        }
+        if !self.vids.is_empty() && !self.vids.iter().any(|v| v == vid) {
+            return None;
+        }
+        let keys = Keys::new(&self.fleet, vid).ok()?;
+        let peer = self
+            .io
+            .peer
+            .add_peer(format!("mqtt {}/{vid}", self.fleet))
+            .await?;
+        tracing::info!("mqtt: vehicle {vid} is {peer}");
+        self.vehicles.insert(vid.to_owned(), peer);
+        self.by_peer.insert(peer, keys);
+        Some(peer)
     }
 }
 

@@ -9,9 +9,9 @@
 //! ```
 //! use mavstack_bridge::outbox::{Lane, Outbox};
 //! let mut out = Outbox::new(16, 16);
-//! out.push(Lane::Telemetry, "k/ATTITUDE".into(), vec![1]);
-//! out.push(Lane::Telemetry, "k/ATTITUDE".into(), vec![2]);
-//! out.push(Lane::Control, "k/COMMAND_ACK".into(), vec![3]);
+//! out.push(Lane::Telemetry, "k/ATTITUDE".into(), None, vec![1]);
+//! out.push(Lane::Telemetry, "k/ATTITUDE".into(), None, vec![2]);
+//! out.push(Lane::Control, "k/COMMAND_ACK".into(), None, vec![3]);
 //! assert_eq!(out.pop().map(|m| m.payload), Some(vec![3]));
 //! assert_eq!(out.pop().map(|m| m.payload), Some(vec![2]));
 //! assert_eq!(out.replaced(), 1);
@@ -33,10 +33,20 @@ pub enum Lane {
 pub struct Outgoing {
     /// Its lane.
     pub lane: Lane,
-    /// The key (topic).
+    /// The key latest-wins goes by (and the topic, unless `topic` says otherwise).
     pub key: String,
+    /// The topic, when several keys share one (frames from many sources into one `in`).
+    pub topic: Option<String>,
     /// The bytes.
     pub payload: Vec<u8>,
+}
+
+impl Outgoing {
+    /// Where it is published.
+    #[must_use]
+    pub fn topic(&self) -> &str {
+        self.topic.as_deref().unwrap_or(&self.key)
+    }
 }
 
 /// The two lanes (see the module's documentation).
@@ -45,7 +55,7 @@ pub struct Outbox {
     control: VecDeque<Outgoing>,
     /// Telemetry keys in the order they first waited, and the frame waiting on each.
     order: VecDeque<String>,
-    waiting: HashMap<String, Vec<u8>>,
+    waiting: HashMap<String, (Option<String>, Vec<u8>)>,
     control_cap: usize,
     telemetry_cap: usize,
     replaced: u64,
@@ -71,19 +81,31 @@ impl Outbox {
         }
     }
 
-    /// Queues a publish. False when it was dropped (its lane is full; counted).
-    pub fn push(&mut self, lane: Lane, key: String, payload: Vec<u8>) -> bool {
+    /// Queues a publish on `key` (published on `topic` when given). False when it was
+    /// dropped (its lane is full; counted).
+    pub fn push(
+        &mut self,
+        lane: Lane,
+        key: String,
+        topic: Option<String>,
+        payload: Vec<u8>,
+    ) -> bool {
         match lane {
             Lane::Control => {
                 if self.control.len() >= self.control_cap {
                     self.dropped_control += 1;
                     return false;
                 }
-                self.control.push_back(Outgoing { lane, key, payload });
+                self.control.push_back(Outgoing {
+                    lane,
+                    key,
+                    topic,
+                    payload,
+                });
             }
             Lane::Telemetry => {
                 if let Some(slot) = self.waiting.get_mut(&key) {
-                    *slot = payload;
+                    *slot = (topic, payload);
                     self.replaced += 1;
                     *self.replaced_by_key.entry(key).or_default() += 1;
                     return true;
@@ -93,7 +115,7 @@ impl Outbox {
                     return false;
                 }
                 self.order.push_back(key.clone());
-                self.waiting.insert(key, payload);
+                self.waiting.insert(key, (topic, payload));
             }
         }
         true
@@ -105,10 +127,11 @@ impl Outbox {
             return Some(c);
         }
         let key = self.order.pop_front()?;
-        let payload = self.waiting.remove(&key)?;
+        let (topic, payload) = self.waiting.remove(&key)?;
         Some(Outgoing {
             lane: Lane::Telemetry,
             key,
+            topic,
             payload,
         })
     }
@@ -120,7 +143,7 @@ impl Outbox {
             Lane::Telemetry => {
                 if !self.waiting.contains_key(&out.key) {
                     self.order.push_front(out.key.clone());
-                    self.waiting.insert(out.key, out.payload);
+                    self.waiting.insert(out.key, (out.topic, out.payload));
                 }
             }
         }
@@ -159,9 +182,9 @@ mod tests {
     fn control_keeps_order_and_is_never_replaced() {
         let mut out = Outbox::new(3, 8);
         for i in 0..3 {
-            assert!(out.push(Lane::Control, "k".into(), vec![i]));
+            assert!(out.push(Lane::Control, "k".into(), None, vec![i]));
         }
-        assert!(!out.push(Lane::Control, "k".into(), vec![9]));
+        assert!(!out.push(Lane::Control, "k".into(), None, vec![9]));
         assert_eq!(out.dropped(), (1, 0));
         let got: Vec<u8> = core::iter::from_fn(|| out.pop())
             .map(|o| o.payload[0])
@@ -172,12 +195,12 @@ mod tests {
     #[test]
     fn telemetry_keeps_the_newest_per_key_in_first_come_order() {
         let mut out = Outbox::new(4, 2);
-        out.push(Lane::Telemetry, "a".into(), vec![1]);
-        out.push(Lane::Telemetry, "b".into(), vec![2]);
-        out.push(Lane::Telemetry, "a".into(), vec![3]);
-        assert!(!out.push(Lane::Telemetry, "c".into(), vec![4]));
+        out.push(Lane::Telemetry, "a".into(), Some("in".into()), vec![1]);
+        out.push(Lane::Telemetry, "b".into(), None, vec![2]);
+        out.push(Lane::Telemetry, "a".into(), Some("in".into()), vec![3]);
+        assert!(!out.push(Lane::Telemetry, "c".into(), None, vec![4]));
         let first = out.pop().unwrap();
-        assert_eq!((first.key.as_str(), first.payload[0]), ("a", 3));
+        assert_eq!((first.topic(), first.payload[0]), ("in", 3));
         out.unpop(first);
         assert_eq!(out.pop().map(|o| o.payload), Some(vec![3]));
         assert_eq!(out.pop().map(|o| o.payload), Some(vec![2]));

@@ -11,6 +11,8 @@
 //! - `command`: an MQTT 5 request to `@cmd` gets `mavstack vehicle`'s COMMAND_ACK with the
 //!   request's correlation data; no answer gives `timeout` after the resends; a key that does
 //!   not match the target is refused at once;
+//! - `ground`: a ground router on `vid=*` shows two vehicles that are both system 1 as
+//!   systems 1 and 2, and a command to 2 reaches the second as a command to its own 1;
 //! - `alive`: `@alive` retained `online`, `offline` on SIGTERM, and by the last will on
 //!   SIGKILL.
 //!
@@ -56,4 +58,11 @@ fn bridge_answers_mqtt5_command_requests_with_the_vehicles_ack() {
 #[test]
 fn bridge_says_offline_on_exit_and_by_last_will() {
     scenario("alive");
+}
+
+/// The ground side: a ground router subscribed to the whole fleet (`vid=*`) presents two
+/// vehicles that are both system 1 as systems 1 and 2, both ways (pymavlink's packing).
+#[test]
+fn ground_router_remaps_vehicles_that_share_a_sysid() {
+    scenario("ground");
 }

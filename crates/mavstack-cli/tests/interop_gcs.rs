@@ -43,7 +43,7 @@
 //!   the router inside the script's own network namespace (`unshare -n`) next to the vehicle
 //!   and mavsdk_server.
 //!
-//! time (they time a flying vehicle against the wall clock).
+//! And across an MQTT broker: `gcs_mavproxy.py --via-broker` (see its test).
 
 mod support;
 
@@ -154,6 +154,20 @@ fn mavsdk_grpc_with_mavsdk_server_flies_a_session() {
 #[test]
 fn mavproxy_params_mission_arm_signed_link_and_mavlink1_hop_through_the_router() {
     run_with("gcs_mavproxy.py", &[], true);
+}
+
+/// Across an MQTT broker (mosquitto): the vehicle's router bridges its network onto
+/// `mqtt://...?fleet=interop&vid=truck-1`, a ground router subscribed to the fleet (`vid=*`)
+/// serves MAVProxy on UDP: parameter fetch, set and read back, mission download, upload and
+/// download again, arm and disarm (shared/DESIGN.md "Fleet bridge").
+#[test]
+fn mavproxy_params_mission_and_arm_across_an_mqtt_broker() {
+    let out = run("gcs_mavproxy.py", &["--via-broker"]);
+    let last = out.lines().last().unwrap_or_default();
+    assert!(
+        last.contains("\"ground_router\"") && last.contains("\"vehicle_router\""),
+        "no router stats in the summary: {last}"
+    );
 }
 
 #[test]

@@ -385,6 +385,23 @@ impl<T: AsRef<[u8]> + AsMut<[u8]>> Frame<T> {
         self.buffer.as_mut()[at] = seq;
     }
 
+    /// Sets the sender's system id (the checksum must then be recomputed; a signature no
+    /// longer verifies).
+    pub fn set_sysid(&mut self, sysid: u8) {
+        let at = match self.version() {
+            Version::V1 => field::V1_SYSID,
+            Version::V2 => field::V2_SYSID,
+        };
+        self.buffer.as_mut()[at] = sysid;
+    }
+
+    /// The payload, to change in place (the checksum must then be recomputed).
+    pub fn payload_mut(&mut self) -> &mut [u8] {
+        let start = self.version().header_len();
+        let len = self.payload_len();
+        &mut self.buffer.as_mut()[start..start + len]
+    }
+
     /// Writes the checksum for `crc_extra`.
     pub fn fill_checksum(&mut self, crc_extra: u8) {
         let crc = self.compute_checksum(crc_extra);

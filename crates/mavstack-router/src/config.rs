@@ -45,8 +45,8 @@ pub enum VersionMode {
     Auto,
     /// A fleet bridge's link (no link option spells it): every frame goes out byte for byte
     /// in the framing it arrived in, signature kept, never converted, so that what crosses
-    /// the broker is what the vehicle sent; and it gets every frame of the network, targeted
-    /// ones included, wherever their target is.
+    /// the broker is what the vehicle sent. (With [`LinkConfig::monitor`] it also gets every
+    /// frame of the network, as a vehicle's bridge link does.)
     Transparent,
 }
 
@@ -163,6 +163,9 @@ pub struct LinkConfig {
     /// The transport may pack several frames into one UDP datagram (the `pack` option, read
     /// by the driver, not the router; default off).
     pub pack: bool,
+    /// The link gets every frame of the network, targeted ones included wherever their target
+    /// is (a vehicle's fleet bridge link: the broker sees the whole network). Default off.
+    pub monitor: bool,
 }
 
 impl LinkConfig {
@@ -182,6 +185,7 @@ impl LinkConfig {
             limits: RateLimits::default(),
             queue_frames: 1024,
             pack: false,
+            monitor: false,
         }
     }
 

@@ -507,10 +507,10 @@ impl<D: Dialect> Router<D> {
             let known = self
                 .routes
                 .links_to(now, self.config.route_ttl, tsys, tcomp, &mut dests);
-            // A fleet bridge's link carries every frame of the network, targeted or not.
+            // A monitor (a vehicle's fleet bridge link) gets every frame, targeted or not.
             for (i, l) in self.links.iter().enumerate() {
                 if let Some(l) = l
-                    && l.config.version == VersionMode::Transparent
+                    && l.config.monitor
                 {
                     let id = LinkId(u32::try_from(i).unwrap_or(u32::MAX));
                     if !dests.contains(&id) {

@@ -779,11 +779,14 @@ fn with_forwarding_off_links_carry_only_the_routers_own_traffic() {
 }
 
 #[test]
-fn a_transparent_link_gets_every_frame_as_it_arrived() {
+fn a_transparent_monitor_link_gets_every_frame_as_it_arrived() {
     let mut r = router();
     let vehicle = link(&mut r, "vehicle", |c| c.version = VersionMode::Mavlink2);
     let gcs = link(&mut r, "gcs", |_| {});
-    let bridge = link(&mut r, "bridge", |c| c.version = VersionMode::Transparent);
+    let bridge = link(&mut r, "bridge", |c| {
+        c.version = VersionMode::Transparent;
+        c.monitor = true;
+    });
     let legacy = link(&mut r, "legacy", |c| c.version = VersionMode::Mavlink1);
     // A MAVLink 1 frame stays MAVLink 1 on the bridge (the vehicle's link converts it).
     let v1 = frame(&hb(), Version::V1, (9, 1), 0, None);

@@ -135,31 +135,86 @@ pub(crate) enum LinkMsg {
 /// The far end of a [`Link::external`]: the code that carries its frames.
 #[derive(Debug)]
 pub struct ExternalPeer {
-    id: PeerId,
+    ids: PeerIds,
+    first: Option<PeerId>,
     input: mpsc::Sender<LinkMsg>,
-    output: mpsc::Receiver<Vec<u8>>,
+    output_tx: mpsc::Sender<(PeerId, Vec<u8>)>,
+    output: mpsc::Receiver<(PeerId, Vec<u8>)>,
 }
 
 impl ExternalPeer {
-    /// Hands `bytes` (whole frames) to the link as one datagram from this peer, waiting
-    /// while the link's queue is full. False once the link has closed.
-    pub async fn deliver(&self, bytes: Vec<u8>) -> bool {
+    /// The peer the link started with, if it did.
+    #[must_use]
+    pub const fn first(&self) -> Option<PeerId> {
+        self.first
+    }
+
+    /// Hands `bytes` (whole frames) to the link as one datagram from `peer`, waiting while
+    /// the link's queue is full. False once the link has closed.
+    pub async fn deliver(&self, peer: PeerId, bytes: Vec<u8>) -> bool {
         let msg = LinkMsg::Data {
-            peer: self.id,
+            peer,
             time: clock::now(),
             bytes,
         };
         self.input.send(msg).await.is_ok()
     }
 
-    /// The next frame the link sends to this peer; `None` once the link has closed.
-    pub async fn recv(&mut self) -> Option<Vec<u8>> {
-        self.output.recv().await
+    /// A new peer named `what` (a router link of its own); `None` once the link has closed.
+    pub async fn add_peer(&self, what: impl Into<String>) -> Option<PeerId> {
+        let id = self.ids.next();
+        let info = PeerInfo {
+            id,
+            addr: PeerAddr::External(what.into()),
+            framing: Framing::Datagram,
+        };
+        let writer = PeerWriter {
+            queue: WriterQueue::Tagged(id, self.output_tx.clone()),
+            task: None,
+        };
+        let msg = LinkMsg::PeerAdded {
+            info,
+            writer: Some(writer),
+        };
+        self.input.send(msg).await.ok().map(|()| id)
+    }
+
+    /// `peer` went away (its router link goes with it).
+    pub async fn remove_peer(&self, peer: PeerId) {
+        let _ = self.input.send(LinkMsg::PeerRemoved(peer)).await;
+    }
+
+    /// The next frame the link sends, and to which peer; `None` once the link has closed
+    /// (and what it sent before has been taken).
+    pub async fn recv(&mut self) -> Option<(PeerId, Vec<u8>)> {
+        // This end keeps a sender for the peers it adds, so the queue alone never ends:
+        // the link's end is its input queue closing.
+        tokio::select! {
+            biased;
+            frame = self.output.recv() => frame,
+            () = self.input.closed() => self.output.try_recv().ok(),
+        }
     }
 
     /// A frame the link has sent, if one is waiting.
-    pub fn try_recv(&mut self) -> Option<Vec<u8>> {
+    pub fn try_recv(&mut self) -> Option<(PeerId, Vec<u8>)> {
         self.output.try_recv().ok()
+    }
+}
+
+/// Where a peer's frames go: its writer task, or an external link's one queue (tagged).
+#[derive(Debug)]
+enum WriterQueue {
+    Plain(mpsc::Sender<Vec<u8>>),
+    Tagged(PeerId, mpsc::Sender<(PeerId, Vec<u8>)>),
+}
+
+impl WriterQueue {
+    fn try_send(&self, data: &[u8]) -> Result<(), ()> {
+        match self {
+            Self::Plain(q) => q.try_send(data.to_vec()).map_err(|_| ()),
+            Self::Tagged(id, q) => q.try_send((*id, data.to_vec())).map_err(|_| ()),
+        }
     }
 }
 
@@ -167,7 +222,7 @@ impl ExternalPeer {
 /// that what was queued is written).
 #[derive(Debug)]
 pub(crate) struct PeerWriter {
-    queue: mpsc::Sender<Vec<u8>>,
+    queue: WriterQueue,
     task: Option<JoinHandle<()>>,
 }
 
@@ -310,33 +365,38 @@ impl Link {
         })
     }
 
-    /// A link whose one peer is code of the caller's (a fleet bridge): what the link sends
-    /// comes out of [`ExternalPeer::recv`], one frame (or datagram) each, and what
-    /// [`ExternalPeer::deliver`] is given comes in as datagrams from that peer. The link
-    /// ends when the [`ExternalPeer`] is dropped.
+    /// A link whose peers are code of the caller's (a fleet bridge's broker connection):
+    /// what the link sends to them comes out of [`ExternalPeer::recv`], one frame each,
+    /// tagged with the peer; what [`ExternalPeer::deliver`] is given comes in as a datagram
+    /// from a peer. The link starts with one peer named `first` when given (known before the
+    /// link starts, so nothing sent right away is lost); more come and go with
+    /// [`ExternalPeer::add_peer`] and [`ExternalPeer::remove_peer`] (each a router link of
+    /// its own). The link ends when the [`ExternalPeer`] is dropped.
     ///
-    /// `queue` bounds the frames waiting for the peer (more are dropped and counted as
+    /// `queue` bounds the frames waiting for the caller (more are dropped and counted as
     /// [`LinkStats::tx_dropped`], like a full writer queue).
     #[must_use]
-    pub fn external(what: impl Into<String>, queue: usize) -> (Self, ExternalPeer) {
+    pub fn external(first: Option<String>, queue: usize) -> (Self, ExternalPeer) {
         let ids = PeerIds::default();
-        let id = ids.next();
         let (tx, rx) = mpsc::channel(LINK_QUEUE);
         let (wtx, wrx) = mpsc::channel(queue.max(1));
         let mut tasks = Tasks::new(rx);
-        let info = PeerInfo {
-            id,
-            addr: PeerAddr::External(what.into()),
-            framing: Framing::Datagram,
-        };
-        tasks.writers.insert(
-            id,
-            PeerWriter {
-                queue: wtx,
-                task: None,
-            },
-        );
-        tasks.initial.push(info);
+        let first = first.map(|what| {
+            let id = ids.next();
+            tasks.writers.insert(
+                id,
+                PeerWriter {
+                    queue: WriterQueue::Tagged(id, wtx.clone()),
+                    task: None,
+                },
+            );
+            tasks.initial.push(PeerInfo {
+                id,
+                addr: PeerAddr::External(what),
+                framing: Framing::Datagram,
+            });
+            id
+        });
         let link = Self {
             kind: Kind::Tasks(tasks),
             stats: LinkStats::default(),
@@ -347,8 +407,10 @@ impl Link {
         (
             link,
             ExternalPeer {
-                id,
+                ids,
+                first,
                 input: tx,
+                output_tx: wtx,
                 output: wrx,
             },
         )
@@ -954,7 +1016,7 @@ impl Tasks {
     }
 
     fn transmit(&mut self, dest: Dest, data: &[u8], stats: &mut LinkStats) {
-        let mut send = |writer: &PeerWriter| match writer.queue.try_send(data.to_vec()) {
+        let mut send = |writer: &PeerWriter| match writer.queue.try_send(data) {
             Ok(()) => {
                 stats.tx_chunks += 1;
                 stats.tx_bytes += data.len() as u64;
@@ -1042,7 +1104,7 @@ where
 {
     let (wtx, wrx) = mpsc::channel(queue.max(1));
     PeerWriter {
-        queue: wtx,
+        queue: WriterQueue::Plain(wtx),
         task: Some(tokio::spawn(write_stream(writer, wrx, what))),
     }
 }
@@ -1269,7 +1331,7 @@ fn open_file(
             tasks.writers.insert(
                 id,
                 PeerWriter {
-                    queue: wtx,
+                    queue: WriterQueue::Plain(wtx),
                     task: None,
                 },
             );

@@ -1,0 +1,58 @@
+"""mosquitto (Debian's MQTT broker) on a free loopback port for one test: anonymous, no
+persistence, its log in its own temporary directory. Used by bridge_interop.py and
+gcs_mavproxy.py --via-broker."""
+
+import os
+import shutil
+import socket
+import subprocess
+import tempfile
+import time
+
+
+def _free_tcp_port():
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Broker:
+    """mosquitto listening on 127.0.0.1:port; RuntimeError when it is missing or does not
+    listen within 5 s (a missing broker is a failure, never a skip)."""
+
+    def __init__(self):
+        exe = shutil.which("mosquitto") or ("/usr/sbin/mosquitto" if os.path.exists("/usr/sbin/mosquitto") else None)
+        if exe is None:
+            raise RuntimeError("mosquitto is not installed (Debian package mosquitto; scripts/setup-system.sh installs it)")
+        self.dir = tempfile.mkdtemp(prefix="mosquitto-")
+        self.port = _free_tcp_port()
+        conf = os.path.join(self.dir, "mosquitto.conf")
+        with open(conf, "w") as f:
+            f.write("listener %d 127.0.0.1\nallow_anonymous true\npersistence false\n" % self.port)
+        self.log = open(os.path.join(self.dir, "log"), "wb")
+        self.proc = subprocess.Popen([exe, "-c", conf], stdout=self.log, stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline:
+            try:
+                socket.create_connection(("127.0.0.1", self.port), 0.2).close()
+                return
+            except OSError:
+                if self.proc.poll() is not None:
+                    break
+                time.sleep(0.05)
+        self.stop()
+        raise RuntimeError("mosquitto did not listen on port %d within 5 s" % self.port)
+
+    def url(self, fleet, vid, extra=""):
+        """A bridge link string to this broker."""
+        return "mqtt://127.0.0.1:%d?fleet=%s&vid=%s%s" % (self.port, fleet, vid, extra)
+
+    def stop(self):
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+        self.log.close()
+        shutil.rmtree(self.dir, ignore_errors=True)
