@@ -63,6 +63,14 @@ example companion "companion ← ATTITUDE from 1/1" "ground station ← MAV_SYS_
     "companion link fc" "companion link gcs"
 example vehicle_in_test "RTL_ALT set to 3000, arming MAV_RESULT_ACCEPTED"
 
+step "fleet test: 1,000 vehicles through their bridges and mosquitto (about 60 s)"
+# tests-interop/fleet_test.py --check: every command answered (with telemetry and without),
+# nothing lost on the control lane and under 1 % of telemetry while the broker is up, traffic
+# again after the broker is killed and restarted. Counts are checked, never timings.
+cargo build --release --locked -q -p mavstack-bridge --example fleet
+"$MAVSTACK_PYTHON" tests-interop/fleet_test.py --fleet target/release/examples/fleet --count 1000 \
+    --out target/fleet-results.json --check | tail -12
+
 step "fuzz: every target for ${FUZZ_SECONDS:-6} s on nightly (a crash fails, kept as a regression seed)"
 # Without the address sanitizer: quicker to build and to run, and the code under test is safe
 # Rust (long campaigns by hand use it: scripts/fuzz.sh 480).

@@ -39,6 +39,9 @@ use crate::{BridgeSpec, Keys, Side, Topic};
 
 /// Publishes waiting in rumqttc's request queue at most.
 const CLIENT_QUEUE: usize = 1024;
+/// QoS 1 publishes in flight (unacknowledged) at most. rumqttc's default, 65,535, sizes a
+/// table of that many publishes per client (13 MB); a fleet router holds many clients.
+const INFLIGHT: u16 = 256;
 /// Frames from the router waiting for the bridge.
 const LINK_QUEUE: usize = 4096;
 /// Control frames and telemetry keys waiting for a slow broker.
@@ -105,6 +108,11 @@ pub fn open(spec: &BridgeSpec, dialect: InfoFn) -> Bridge {
     let mut options = MqttOptions::new(spec.client_id.clone(), spec.host.clone(), spec.port);
     options.set_keep_alive(Duration::from_secs(5));
     options.set_clean_start(true);
+    options.set_outgoing_inflight_upper_limit(INFLIGHT);
+    // A frame goes when it comes (rumqttc leaves Nagle on: up to 40 ms more per publish).
+    let mut network = rumqttc::NetworkOptions::new();
+    network.set_tcp_nodelay(true);
+    options.set_network_options(network);
     if let Side::Vehicle(keys) = &spec.side {
         options.set_last_will(LastWill::new(
             keys.alive(),
