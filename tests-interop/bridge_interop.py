@@ -34,7 +34,6 @@ Scenarios:
              (published by the router), and `offline` by the last will after SIGKILL
 """
 
-import argparse
 import os
 import signal
 import socket
@@ -48,6 +47,7 @@ sys.path.insert(0, HERE)
 import mqtt_broker  # noqa: E402
 import router_interop as ri  # noqa: E402
 from router_interop import KEY, M, V1, Peer, decode, heartbeat, start_router  # noqa: E402
+import scenario  # noqa: E402
 from scenario import check, fail, failures, free_port  # noqa: E402
 
 try:
@@ -409,28 +409,5 @@ def ground(bin_):
 SCENARIOS = {"telemetry": telemetry, "inbound": inbound, "command": command, "alive": alive, "ground": ground}
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("scenario", choices=sorted(SCENARIOS))
-    ap.add_argument("--mavstack", required=True)
-    a = ap.parse_args()
-    t0 = time.monotonic()
-    try:
-        summary = SCENARIOS[a.scenario](a.mavstack)
-    except Exception as e:  # a crash of the harness is a failure, never a pass
-        import traceback
-
-        traceback.print_exc()
-        fail("%s crashed: %r" % (a.scenario, e))
-        summary = None
-    if failures:
-        print("%s: %d failures" % (a.scenario, len(failures)), file=sys.stderr)
-        sys.exit(1)
-    if summary is None:
-        print("FAIL: %s ended early without a failure" % a.scenario, file=sys.stderr)
-        sys.exit(1)
-    print("%s: %s (%.1f s) ok" % (a.scenario, summary, time.monotonic() - t0))
-
-
 if __name__ == "__main__":
-    main()
+    scenario.main(SCENARIOS, __doc__)

@@ -63,7 +63,6 @@ Scenarios:
                   with a last stats object; the key never printed
 """
 
-import argparse
 import hashlib
 import json
 import os
@@ -91,6 +90,7 @@ REQUEST_MESSAGE = M.MAV_CMD_REQUEST_MESSAGE  # 512
 PROTOCOL_VERSION_ID = M.MAVLINK_MSG_ID_PROTOCOL_VERSION  # 300
 SETTLE = 0.4  # s for frames in flight through the router to arrive
 
+import scenario  # noqa: E402
 from scenario import check, fail, failures, free_port, signing_now  # noqa: E402
 
 
@@ -1313,31 +1313,5 @@ SCENARIOS = {
 }
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("scenario", choices=sorted(SCENARIOS))
-    ap.add_argument("--mavstack", required=True)
-    a = ap.parse_args()
-    if not (os.path.isfile(a.mavstack) and os.access(a.mavstack, os.X_OK)):
-        print("FAIL: mavstack binary %s is not an executable file" % a.mavstack, file=sys.stderr)
-        sys.exit(1)
-    t0 = time.monotonic()
-    try:
-        summary = SCENARIOS[a.scenario](a.mavstack)
-    except Exception as e:  # a crash of the harness is a failure with its reason, never a pass
-        import traceback
-
-        traceback.print_exc()
-        fail("%s crashed: %r" % (a.scenario, e))
-        summary = None
-    if failures:
-        print("%s: %d failures" % (a.scenario, len(failures)), file=sys.stderr)
-        sys.exit(1)
-    if summary is None:
-        print("FAIL: %s ended early without a failure" % a.scenario, file=sys.stderr)
-        sys.exit(1)
-    print("%s: %s (%.1f s) ok" % (a.scenario, summary, time.monotonic() - t0))
-
-
 if __name__ == "__main__":
-    main()
+    scenario.main(SCENARIOS, __doc__)

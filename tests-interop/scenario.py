@@ -47,3 +47,35 @@ def free_port(kind=socket.SOCK_DGRAM, host="127.0.0.1"):
 def signing_now():
     """The signing timestamp of now: 10 us units since 2015-01-01 (as mavutil.setup_signing)."""
     return int((time.time() - EPOCH_2015) * 100 * 1000)
+
+
+def main(scenarios, doc):
+    """The command line of a scenario script: `SCENARIO --mavstack BIN`; runs it, prints
+    "<scenario>: <summary> (<seconds> s) ok" and exits 0, or exits 1 after the FAIL lines (a
+    crash of the harness is a failure with its reason, never a pass)."""
+    import argparse
+    import os
+
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("scenario", choices=sorted(scenarios))
+    ap.add_argument("--mavstack", required=True)
+    a = ap.parse_args()
+    if not (os.path.isfile(a.mavstack) and os.access(a.mavstack, os.X_OK)):
+        print("FAIL: mavstack binary %s is not an executable file" % a.mavstack, file=sys.stderr)
+        sys.exit(1)
+    t0 = time.monotonic()
+    try:
+        summary = scenarios[a.scenario](a.mavstack)
+    except Exception as e:
+        import traceback
+
+        traceback.print_exc()
+        fail("%s crashed: %r" % (a.scenario, e))
+        summary = None
+    if failures:
+        print("%s: %d failures" % (a.scenario, len(failures)), file=sys.stderr)
+        sys.exit(1)
+    if summary is None:
+        print("FAIL: %s ended early without a failure" % a.scenario, file=sys.stderr)
+        sys.exit(1)
+    print("%s: %s (%.1f s) ok" % (a.scenario, summary, time.monotonic() - t0))

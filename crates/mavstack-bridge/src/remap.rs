@@ -101,12 +101,9 @@ impl SysidMap {
             self.dropped += 1;
             return Remapped::Dropped;
         };
-        let mut out = frame[..view.frame_len()].to_vec();
-        let mut f = Frame::new_unchecked(&mut out[..]);
-        f.set_sysid(local);
-        f.fill_checksum(info.crc_extra);
-        self.remapped += 1;
-        Remapped::Rewritten(out)
+        self.rewrite(&frame[..view.frame_len()], info.crc_extra, |f| {
+            f.set_sysid(local)
+        })
     }
 
     /// A frame for vehicle `vid`: its target system back to the vehicle's own id.
@@ -135,10 +132,22 @@ impl SysidMap {
         if view.is_signed() {
             return Remapped::Same;
         }
-        let mut out = frame[..view.frame_len()].to_vec();
+        self.rewrite(&frame[..view.frame_len()], info.crc_extra, |f| {
+            f.payload_mut()[at] = own;
+        })
+    }
+
+    /// A copy of `frame` changed by `change`, its checksum written again.
+    fn rewrite(
+        &mut self,
+        frame: &[u8],
+        crc_extra: u8,
+        change: impl FnOnce(&mut Frame<&mut [u8]>),
+    ) -> Remapped {
+        let mut out = frame.to_vec();
         let mut f = Frame::new_unchecked(&mut out[..]);
-        f.payload_mut()[at] = own;
-        f.fill_checksum(info.crc_extra);
+        change(&mut f);
+        f.fill_checksum(crc_extra);
         self.remapped += 1;
         Remapped::Rewritten(out)
     }

@@ -22,22 +22,9 @@
 mod pymavlink_dialect;
 mod support;
 
-use std::ffi::OsStr;
-
-use support::{require_pymavlink, run_script};
-
 fn scenario(name: &str) {
-    require_pymavlink();
     pymavlink_dialect::dialect_ready();
-    let bin = env!("CARGO_BIN_EXE_mavstack");
-    let out = run_script(
-        "bridge_interop.py",
-        &[OsStr::new(name), OsStr::new("--mavstack"), OsStr::new(bin)],
-    );
-    assert!(
-        out.starts_with(&format!("{name}: ")) && out.trim_end().ends_with(" ok"),
-        "{name}: {out}"
-    );
+    support::scenario("bridge_interop.py", name, env!("CARGO_BIN_EXE_mavstack"));
 }
 
 #[test]
