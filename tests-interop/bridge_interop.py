@@ -167,12 +167,17 @@ def telemetry(bin_):
         check(signed and all(mi_verify(p) for p in signed),
               "signed frames on the broker: %d, all verify with the key: %s" % (len(signed), signed and all(mi_verify(p) for p in signed)))
         nframes = len([1 for t, *_ in sub.messages() if not t.endswith("@alive")])
-        return "%d frames on their keys byte for byte (v1, v2, signed, unknown id), %d messages in all" % (
-            len(sent), nframes)
+        stats = router.stop()
+        bridges = (stats or {}).get("bridges") or [{}]
+        check(bridges[0].get("published", 0) >= len(sent) and bridges[0].get("connections") == 1,
+              "the router's last stats line: bridge counters %r (published >= %d, one connection)" % (bridges, len(sent)))
+        return "%d frames on their keys byte for byte (v1, v2, signed, unknown id), %d messages in all; %s" % (
+            len(sent), nframes, "bridge stats: %d published" % bridges[0].get("published", 0))
     finally:
         for p in (veh, signer, v1):
             p.close()
-        router.stop()
+        if router.running():
+            router.stop()
         sub.close()
         broker.stop()
 

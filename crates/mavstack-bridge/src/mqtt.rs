@@ -71,6 +71,52 @@ pub struct BridgeStats {
     pub replies: AtomicU64,
     /// Connections made to the broker (the first included).
     pub connections: AtomicU64,
+    /// [`BridgeStats::replaced`] per key.
+    pub replaced_by_key: std::sync::Mutex<std::collections::BTreeMap<String, u64>>,
+}
+
+impl BridgeStats {
+    /// The counters now.
+    #[must_use]
+    pub fn snapshot(&self) -> BridgeCounters {
+        let n = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        BridgeCounters {
+            published: n(&self.published),
+            received: n(&self.received),
+            replaced: n(&self.replaced),
+            replaced_by_key: self
+                .replaced_by_key
+                .lock()
+                .map(|m| m.clone())
+                .unwrap_or_default(),
+            dropped_control: n(&self.dropped_control),
+            dropped_telemetry: n(&self.dropped_telemetry),
+            replies: n(&self.replies),
+            connections: n(&self.connections),
+        }
+    }
+}
+
+/// A snapshot of [`BridgeStats`] (the router's `--stats` lines carry one per bridge link).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct BridgeCounters {
+    /// Frames published.
+    pub published: u64,
+    /// Frames from the broker let into the network.
+    pub received: u64,
+    /// Telemetry frames replaced by a newer one on their key.
+    pub replaced: u64,
+    /// The same per key.
+    pub replaced_by_key: std::collections::BTreeMap<String, u64>,
+    /// Control frames dropped with the outbox full.
+    pub dropped_control: u64,
+    /// Telemetry dropped with the outbox full.
+    pub dropped_telemetry: u64,
+    /// Command replies published.
+    pub replies: u64,
+    /// Connections made to the broker.
+    pub connections: u64,
 }
 
 /// An open bridge link: give `config` and `link` to a node, keep `handle`.
@@ -273,9 +319,12 @@ impl Io {
                 }
             }
         }
-        self.stats
-            .replaced
-            .store(self.outbox.replaced(), Ordering::Relaxed);
+        let replaced = self.outbox.replaced();
+        if self.stats.replaced.swap(replaced, Ordering::Relaxed) != replaced
+            && let Ok(mut by_key) = self.stats.replaced_by_key.lock()
+        {
+            by_key.clone_from(self.outbox.replaced_by_key());
+        }
     }
 
     async fn subscribe(&self, filters: &[String]) {

@@ -5,12 +5,14 @@
 
 use core::time::Duration;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use anyhow::anyhow;
 use clap::Args;
 use mavstack::core::MessageSet as _;
 use mavstack::router::{InfoFn, RouterConfig};
 use mavstack::{InputModeration, LinkSpec, Node, NodeReport, router_conf};
+use mavstack_bridge::mqtt::BridgeStats;
 
 use crate::Failure;
 use crate::link_cmd::interrupted;
@@ -243,9 +245,11 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
             builder = builder.link(spec);
         }
         let mut handles = Vec::new();
+        let mut bridge_stats = Vec::new();
         for spec in &bridges {
             let bridge = mavstack_bridge::mqtt::open(spec, dialect);
             builder = builder.opened_link(bridge.config, bridge.link);
+            bridge_stats.push((spec.name.clone(), Arc::clone(&bridge.handle.stats)));
             handles.push(bridge.handle);
         }
         if let Some(dir) = &log {
@@ -269,7 +273,7 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
                     () = &mut stop => break,
                     _ = tick.tick() => {
                         match node.report().await {
-                            Some(report) => print_stats(&report),
+                            Some(report) => print_stats(&report, &bridge_stats),
                             None => break,
                         }
                     }
@@ -283,13 +287,31 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
             handle.finish().await;
         }
         if stats_every.is_some() {
-            print_stats(&report);
+            print_stats(&report, &bridge_stats);
         }
         Ok(())
     })
 }
 
 /// One `--stats` line (shared/DESIGN.md, "Router").
-fn print_stats(report: &NodeReport) {
-    println!("{}", mavstack::status::status_json(report));
+fn print_stats(report: &NodeReport, bridges: &[(String, Arc<BridgeStats>)]) {
+    let mut line = mavstack::status::status_json(report);
+    if !bridges.is_empty()
+        && let Some(obj) = line.as_object_mut()
+    {
+        let list = bridges
+            .iter()
+            .map(|(name, stats)| {
+                let c = stats.snapshot();
+                serde_json::json!({
+                    "name": name, "published": c.published, "received": c.received,
+                    "replaced": c.replaced, "replaced_by_key": c.replaced_by_key,
+                    "dropped": {"control": c.dropped_control, "telemetry": c.dropped_telemetry},
+                    "replies": c.replies, "connections": c.connections,
+                })
+            })
+            .collect();
+        obj.insert("bridges".to_owned(), serde_json::Value::Array(list));
+    }
+    println!("{line}");
 }
