@@ -29,6 +29,10 @@ import mqtt_broker  # noqa: E402
 TELEMETRY_S, RUN_S, SLOW_FROM = 40, 52, 5
 COMMANDS_AT = (12, 46)
 KILL_AT, RESTART_AT = 24, 26
+# mosquitto keeps at most 1,000 QoS 1 messages queued per subscriber by default and drops the
+# rest: the wildcard subscriber (17 k messages/s on a busy 2-core machine) must not lose the
+# control lane to its own slowness, so the queue is made long enough for the whole run.
+BROKER_CONF = "max_queued_messages 1000000\n"
 LANES = {"telemetry": ("ATTITUDE", "GLOBAL_POSITION_INT", "SYS_STATUS"), "control": ("HEARTBEAT",)}
 
 
@@ -51,7 +55,7 @@ def main():
     want = hard if hard != resource.RLIM_INFINITY else max(soft, 65536)
     if soft != resource.RLIM_INFINITY and soft < want:
         resource.setrlimit(resource.RLIMIT_NOFILE, (want, hard))
-    broker = mqtt_broker.Broker()
+    broker = mqtt_broker.Broker(extra=BROKER_CONF)
     port = broker.port
     start_us = int(time.time() * 1e6) + 3_000_000  # every client connected before t=0
     common = ["--port", str(port), "--count", str(a.count), "--start-us", str(start_us)]
@@ -72,7 +76,7 @@ def main():
     broker.proc.kill()
     broker.proc.wait()
     at(RESTART_AT)
-    broker2 = mqtt_broker.Broker(port=port)
+    broker2 = mqtt_broker.Broker(port=port, extra=BROKER_CONF)
     try:
         vout, verr = veh.communicate(timeout=RUN_S + 20)
         wout, werr = watch.communicate(timeout=30)

@@ -20,7 +20,7 @@ class Broker:
     """mosquitto listening on 127.0.0.1:port; RuntimeError when it is missing or does not
     listen within 5 s (a missing broker is a failure, never a skip)."""
 
-    def __init__(self, port=None):
+    def __init__(self, port=None, extra=""):
         exe = shutil.which("mosquitto") or ("/usr/sbin/mosquitto" if os.path.exists("/usr/sbin/mosquitto") else None)
         if exe is None:
             raise RuntimeError("mosquitto is not installed (Debian package mosquitto; scripts/setup-system.sh installs it)")
@@ -30,7 +30,7 @@ class Broker:
         with open(conf, "w") as f:
             # set_tcp_nodelay: a message goes when it comes (Nagle's delay would add up to 40 ms).
             f.write("listener %d 127.0.0.1\nallow_anonymous true\npersistence false\nset_tcp_nodelay true\n"
-                    "max_connections -1\n" % self.port)
+                    "max_connections -1\n%s" % (self.port, extra))
         self.log = open(os.path.join(self.dir, "log"), "wb")
         self.proc = subprocess.Popen([exe, "-c", conf], stdout=self.log, stderr=subprocess.STDOUT)
         deadline = time.monotonic() + 5

@@ -13,8 +13,8 @@
 //! sent per message and per second, CPU seconds and peak RSS.
 //!
 //! `watch`: one wildcard subscriber (`mav/load/+/+/+/+`), ten per-vehicle ones, a slow one
-//! (10 ms per message from C s on), and a command client that sends one MQTT 5 request per
-//! vehicle at each time of `--commands-at`. Prints one JSON object: frames received per
+//! (10 ms per message from C s on), and ten command clients that send one MQTT 5 request per
+//! vehicle between them at each time of `--commands-at`. Prints one JSON object: frames received per
 //! message and per send second, latency percentiles per lane (of frames sent before
 //! `--steady-until`), command reply latencies.
 
@@ -396,6 +396,47 @@ async fn subscriber(
     }
 }
 
+/// Command clients of `watch`.
+const COMMAND_CLIENTS: usize = 10;
+
+/// Command client `k`: its replies (on `replies/c{k}/#`) recorded by correlation data.
+fn command_client(
+    port: u16,
+    k: usize,
+    replies: Arc<Mutex<HashMap<Vec<u8>, u64>>>,
+    start_us: u64,
+) -> AsyncClient {
+    let mut opts = MqttOptions::new(format!("watch-commands-{k}"), "127.0.0.1", port);
+    opts.set_keep_alive(Duration::from_secs(5));
+    opts.set_outgoing_inflight_upper_limit(1024);
+    let mut network = rumqttc::NetworkOptions::new();
+    network.set_tcp_nodelay(true);
+    opts.set_network_options(network);
+    let (client, mut events) = AsyncClient::new(opts, 4096);
+    let resubscribe = client.clone();
+    tokio::spawn(async move {
+        loop {
+            match events.poll().await {
+                Ok(Event::Incoming(Packet::ConnAck(_))) => {
+                    // A clean session after each (re)connection: subscribe again.
+                    let _ = resubscribe.try_subscribe(format!("replies/c{k}/#"), QoS::AtLeastOnce);
+                }
+                Ok(Event::Incoming(Packet::Publish(p))) => {
+                    if let Some(c) = p.properties.and_then(|pr| pr.correlation_data) {
+                        replies
+                            .lock()
+                            .unwrap_or_else(std::sync::PoisonError::into_inner)
+                            .insert(c.to_vec(), now_us().saturating_sub(start_us));
+                    }
+                }
+                Ok(_) => {}
+                Err(_) => tokio::time::sleep(Duration::from_millis(200)).await,
+            }
+        }
+    });
+    client
+}
+
 fn percentiles(v: &mut [u64]) -> serde_json::Value {
     if v.is_empty() {
         return serde_json::Value::Null;
@@ -439,37 +480,12 @@ async fn watch(a: Args) -> Result<(), Failure> {
         a.steady_until,
         Arc::clone(&slow),
     ));
-    // The command client.
+    // The command clients: ten, each sending a tenth of every burst, as a fleet's back end
+    // would (one client alone serializes 1,000 requests on its one connection).
     let replies: Arc<Mutex<HashMap<Vec<u8>, u64>>> = Arc::default();
-    let mut opts = MqttOptions::new("watch-commands", "127.0.0.1", a.port);
-    opts.set_keep_alive(Duration::from_secs(5));
-    opts.set_outgoing_inflight_upper_limit(1024);
-    let mut network = rumqttc::NetworkOptions::new();
-    network.set_tcp_nodelay(true);
-    opts.set_network_options(network);
-    let (client, mut events) = AsyncClient::new(opts, 4096);
-    let r2 = Arc::clone(&replies);
-    let start_us = a.start_us;
-    let resubscribe = client.clone();
-    tokio::spawn(async move {
-        loop {
-            match events.poll().await {
-                Ok(Event::Incoming(Packet::ConnAck(_))) => {
-                    // A clean session after each (re)connection: subscribe again.
-                    let _ = resubscribe.try_subscribe("replies/#", QoS::AtLeastOnce);
-                }
-                Ok(Event::Incoming(Packet::Publish(p))) => {
-                    if let Some(c) = p.properties.and_then(|pr| pr.correlation_data) {
-                        r2.lock()
-                            .unwrap_or_else(std::sync::PoisonError::into_inner)
-                            .insert(c.to_vec(), now_us().saturating_sub(start_us));
-                    }
-                }
-                Ok(_) => {}
-                Err(_) => tokio::time::sleep(Duration::from_millis(200)).await,
-            }
-        }
-    });
+    let clients: Vec<AsyncClient> = (0..COMMAND_CLIENTS)
+        .map(|k| command_client(a.port, k, Arc::clone(&replies), a.start_us))
+        .collect();
     let mut bursts = Vec::new();
     for (b, &at) in a.commands_at.iter().enumerate() {
         until(a.start_us, at).await;
@@ -495,13 +511,14 @@ async fn watch(a: Args) -> Result<(), Failure> {
             let mut buf = [0u8; 280];
             let n = mavstack::core::wire::emit_message(&header, &cmd, &mut buf)?;
             let corr = format!("b{b}-v{i:04}").into_bytes();
+            let k = i % COMMAND_CLIENTS;
             let props = PublishProperties {
-                response_topic: Some(format!("replies/v{i:04}")),
+                response_topic: Some(format!("replies/c{k}/v{i:04}")),
                 correlation_data: Some(corr.clone().into()),
                 ..Default::default()
             };
             sent_at.insert(corr, now_us().saturating_sub(a.start_us));
-            client
+            clients[k]
                 .publish_with_properties(
                     format!("mav/load/v{i:04}/{sysid}/1/@cmd"),
                     QoS::AtLeastOnce,
