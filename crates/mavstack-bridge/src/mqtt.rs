@@ -347,7 +347,8 @@ impl Io {
         }
         // Let the event loop write what is queued before the DISCONNECT.
         tokio::time::sleep(Duration::from_millis(100)).await;
-        let _ = self.client.disconnect().await;
+        // Bounded too: with the broker down the client's queue may be full.
+        let _ = tokio::time::timeout(CLOSE_TIMEOUT, self.client.disconnect()).await;
         let _ = tokio::time::timeout(CLOSE_TIMEOUT, pump).await;
         tracing::debug!(
             "mqtt: closed ({} published, {} replaced)",
