@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Writes the seed corpora of the fuzz targets whose seeds come from pymavlink (the peer):
-json_frames, tlog and services. Run with the project's virtualenv (scripts/setup-peers.sh):
+json_frames, tlog, services and bridge. Run with the project's virtualenv (scripts/setup-peers.sh):
 
     .venv/bin/python fuzz/make_seeds.py
 
@@ -151,11 +151,58 @@ def services_seeds(rng):
         write("services", "random_%d" % i, bytes(rng.randrange(256) for _ in range(300)))
 
 
+def bridge_seeds(rng):
+    """mavstack_bridge::fuzzing::fuzz_bridge: a part byte, then its input. Link strings and
+    topics as users and brokers write them; command and remap records (op byte, then six
+    bytes, or for raw frames a length byte and the frame) around frames pymavlink packed."""
+    links = [
+        "mqtt://127.0.0.1:1883?fleet=demo&vid=truck-7",
+        "mqtt://broker:1883?fleet=f&vid=*&user=ops&password=s3cret-pass",
+        "mqtt://[::1]:1883?fleet=f&vid=a,b&trusted=true&name=cloud",
+        "mqtt://h?fleet=f&vid=v&side=ground&client_id=c1",
+        "mqtt://h:0?fleet=f&vid=v",
+        "mqtts://h:8883?fleet=f&vid=v",
+        "zenoh://127.0.0.1:7447?fleet=f&vid=v",
+        "zenoh:?fleet=f&vid=v",
+        "mqtt://h:1883?fleet=f&vid=v&key=00&password=p",
+    ]
+    for i, text in enumerate(links):
+        write("bridge", "link_%d" % i, b"\x00" + text.encode())
+    topics = ["mav/f/v/in", "mav/f/v/1/1/@cmd", "mav/f/v/255/190/@cmd", "mav/f/v/01/1/@cmd",
+              "mav/f/v9/1/1/ATTITUDE", "mav/f/v9/@alive", "mav/f/v9/1/1/99999", "mav/f/+/1/1/X"]
+    for i, text in enumerate(topics):
+        write("bridge", "topic_%d" % i, b"\x01" + text.encode())
+    m = packer()
+    raw = [
+        m.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0).pack(m),
+        m.command_int_encode(1, 1, 0, 400, 0, 0, 0, 0, 0, 0, 0, 0, 0).pack(m),
+        m.command_ack_encode(400, 0).pack(m),
+        m.heartbeat_encode(2, 3, 0, 0, 4, 3).pack(m),
+    ]
+
+    def raw_record(op, frame):
+        return bytes([op, len(frame) - 1]) + frame
+
+    # Requests, acks and time, as the tracker meets them: a request and its ack, a request
+    # left to time out, raw frames.
+    write("bridge", "commands_ack", b"\x02" + bytes([0, 1, 1, 1, 1, 0, 0, 2, 1, 1, 1, 0, 0, 0]))
+    write("bridge", "commands_timeout", b"\x02" + bytes([0, 1, 1, 1, 1, 0, 0] + [4, 60, 0, 0, 0, 0, 0] * 6))
+    write("bridge", "commands_in_progress", b"\x02" + bytes([1, 1, 1, 1, 1, 1, 0, 2, 1, 1, 1, 0, 0, 5, 4, 100, 0, 0, 0, 0, 0]))
+    write("bridge", "commands_raw", b"\x02" + raw_record(6, raw[0]) + raw_record(7, raw[2]) + raw_record(6, raw[1]))
+    # Vehicles sharing sysid 1, frames to them, raw frames.
+    write("bridge", "remap_shared", b"\x03" + bytes([0, 0, 1, 0, 1, 0, 0, 0, 1, 1, 1, 0, 0, 0, 0, 2, 1, 2, 1, 0, 0]))
+    write("bridge", "remap_to", b"\x03" + bytes([0, 0, 1, 0, 1, 0, 0, 0, 1, 1, 1, 0, 0, 0, 0x83, 1, 1, 2, 1, 0, 0]))
+    write("bridge", "remap_raw", b"\x03" + b"".join(raw_record(6 + (i % 2), f) for i, f in enumerate(raw)))
+    for i in range(2):
+        write("bridge", "random_%d" % i, bytes([2 + i]) + bytes(rng.randrange(256) for _ in range(200)))
+
+
 def main():
     rng = random.Random(20261202)
     json_frame_seeds(rng)
     tlog_seeds(rng)
     services_seeds(rng)
+    bridge_seeds(rng)
 
 
 if __name__ == "__main__":

@@ -26,7 +26,7 @@ pins=(
     "pandas==3.1.1" "numpy==2.4.6" "python-dateutil==4.0.0" "tzdata==2026.6"
     "matplotlib==3.11.2" "contourpy==1.3.3" "cycler==0.12.1" "fonttools==4.68.0"
     "kiwisolver==1.5.1" "pillow==13.0.0" "pyparsing==3.3.3"
-    "paho-mqtt==2.2.0"
+    "paho-mqtt==2.2.0" "eclipse-zenoh==1.10.2"
 )
 nodeps=("MAVProxy==1.8.75")
 if ! command -v python3 >/dev/null; then

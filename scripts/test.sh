@@ -82,6 +82,7 @@ cargo check -p mavstack --locked
 cargo check -p mavstack-core --no-default-features --locked
 cargo check -p mavstack-dialects --no-default-features --features minimal --locked
 cargo check -p mavstack-dialects --locked
+cargo check -p mavstack-bridge --no-default-features --features zenoh --locked
 cargo test -p mavstack-dialects --no-default-features --features common --locked --doc
 
 step "cargo doc (-D warnings)"

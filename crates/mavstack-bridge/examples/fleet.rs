@@ -143,7 +143,7 @@ async fn vehicles(a: Args) -> Result<(), Failure> {
             "mqtt://127.0.0.1:{}?fleet=load&vid=v{i:04}",
             a.port
         ))?;
-        let bridge = mavstack_bridge::mqtt::open(&spec, dialect());
+        let bridge = mavstack_bridge::open(&spec, dialect())?;
         let sysid = sysid_of(i);
         let node = Node::builder()
             .identity(sysid, 1)

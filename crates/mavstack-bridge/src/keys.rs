@@ -87,13 +87,23 @@ pub fn fleet_topic<'a>(fleet: &str, topic: &'a str) -> Option<FleetTopic<'a>> {
     let mut parts = rest.split('/');
     let (sysid, compid, name) = (parts.next()?, parts.next()?, parts.next()?);
     if parts.next().is_some()
-        || name.starts_with('@')
-        || sysid.parse::<u8>().is_err()
-        || compid.parse::<u8>().is_err()
+        || name.is_empty()
+        || !name.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_')
+        || segment_id(sysid).is_none()
+        || segment_id(compid).is_none()
     {
         return None;
     }
     Some(FleetTopic::Frame { vid })
+}
+
+/// A sysid or compid segment as the keys write it: decimal, no sign, no leading zero (so
+/// that one component has one key: `01` and `+1` are not `1`).
+fn segment_id(text: &str) -> Option<u8> {
+    let canonical = !text.is_empty()
+        && text.bytes().all(|b| b.is_ascii_digit())
+        && (text == "0" || !text.starts_with('0'));
+    canonical.then(|| text.parse().ok()).flatten()
 }
 
 /// The keys of vehicle `vid` in fleet `fleet`.
@@ -207,8 +217,8 @@ impl Keys {
             return None;
         }
         Some(Topic::Command {
-            sysid: sysid.parse().ok()?,
-            compid: compid.parse().ok()?,
+            sysid: segment_id(sysid)?,
+            compid: segment_id(compid)?,
         })
     }
 }
@@ -243,6 +253,8 @@ mod tests {
             "mav/f/v/1/1/ATTITUDE",
             "mav/f/v/1/1/@cmd/x",
             "mav/f/v/256/1/@cmd",
+            "mav/f/v/01/1/@cmd",
+            "mav/f/v/+1/1/@cmd",
             "mav/f/v/@alive",
         ] {
             assert_eq!(k.parse(other), None, "{other}");

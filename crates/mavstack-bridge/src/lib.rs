@@ -1,5 +1,5 @@
-//! Fleet links: a vehicle's MAVLink network onto an MQTT 5 broker, as one more link of a
-//! `mavstack` router or node.
+//! Fleet links: a vehicle's MAVLink network onto an MQTT 5 broker (feature `mqtt`) or a
+//! Zenoh network (feature `zenoh`), as one more link of a `mavstack` router or node.
 //!
 //! A bridge link is a router link whose far end is a broker connection instead of a
 //! socket. Every frame the router sends to it is published on its own key, raw and byte for
@@ -12,19 +12,19 @@
 //! | --- | --- |
 //! | `mav/F/V/{sysid}/{compid}/{MSG_NAME}` | every frame from the vehicle's network (unknown ids: the number) |
 //! | `mav/F/V/in` | raw frames into the vehicle's network |
-//! | `mav/F/V/{sysid}/{compid}/@cmd` | COMMAND_LONG/INT in (MQTT 5 response topic + correlation data), COMMAND_ACK out |
-//! | `mav/F/V/@alive` | `online` / `offline`, retained, with a last will |
+//! | `mav/F/V/{sysid}/{compid}/@cmd` | COMMAND_LONG/INT in (MQTT 5 response topic + correlation data; Zenoh: a query), COMMAND_ACK out |
+//! | `mav/F/V/@alive` | MQTT: `online` / `offline`, retained, with a last will; Zenoh: a liveliness token |
 //!
 //! `V` is a stable vehicle id, not the sysid: a fleet reuses sysids. Telemetry goes at
-//! QoS 0 and is latest-wins per key when the broker is slow ([`outbox`]); control traffic
-//! (commands, parameters, missions) goes at QoS 1 and is never dropped without being
-//! counted. Commands sent to `@cmd` are run by the bridge itself ([`command`]): it
+//! QoS 0 (Zenoh: `Drop`) and is latest-wins per key when the broker is slow ([`outbox`]);
+//! control traffic (commands, parameters, missions) goes at QoS 1 (Zenoh: `Block` on a
+//! priority of its own) and is never dropped without being counted. Commands sent to `@cmd` are run by the bridge itself ([`command`]): it
 //! resends them as a ground station does, matches the COMMAND_ACK by command and sender,
 //! and answers each request once (intermediate IN_PROGRESS acks aside), with the ACK or a
 //! timeout error.
 //!
 //! The sans-IO parts (keys, the outbox, the command tracker) take bytes and times and give
-//! bytes back; [`mqtt`] is the tokio driver over rumqttc.
+//! bytes back; [`open`] starts the tokio driver over rumqttc or the zenoh crate.
 //!
 //! The other side, a ground or cloud router, subscribes to one vehicle, a list or the whole
 //! fleet (`vid=*`, `vid=a,b`, or `side=ground` for one) and presents each vehicle as a link
@@ -42,13 +42,71 @@
 #![forbid(unsafe_code)]
 
 pub mod command;
+#[cfg(any(feature = "mqtt", feature = "zenoh"))]
+mod driver;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod keys;
 #[cfg(feature = "mqtt")]
-pub mod mqtt;
+mod mqtt;
 pub mod outbox;
 pub mod remap;
+#[cfg(feature = "zenoh")]
+mod zenoh;
 
+#[cfg(any(feature = "mqtt", feature = "zenoh"))]
+pub use driver::{Bridge, BridgeCounters, BridgeHandle, BridgeStats};
 pub use keys::{KeyError, Keys, Topic};
+
+/// A bridge link that could not be opened.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum OpenError {
+    /// This build carries no links of that kind.
+    #[error("link \"{name}\": this build has no {scheme} links (cargo feature \"{feature}\")")]
+    NotBuilt {
+        /// The link's name.
+        name: String,
+        /// `mqtt`, `zenoh`.
+        scheme: &'static str,
+        /// The feature that carries them.
+        feature: &'static str,
+    },
+    /// The Zenoh session's settings were refused (a bad `listen` endpoint).
+    #[error("link \"{name}\": {reason}")]
+    Zenoh {
+        /// The link's name.
+        name: String,
+        /// What Zenoh said.
+        reason: String,
+    },
+}
+
+/// Opens the bridge link `spec` describes (MQTT or Zenoh); `dialect` names the messages
+/// in the keys. The broker or Zenoh router is connected in the background, and again
+/// whenever the connection drops: opening never waits for it. Needs a tokio runtime.
+///
+/// # Errors
+/// [`OpenError`]: a kind of link this build does not carry, or Zenoh settings refused.
+#[cfg(any(feature = "mqtt", feature = "zenoh"))]
+pub fn open(spec: &BridgeSpec, dialect: mavstack_router::InfoFn) -> Result<Bridge, OpenError> {
+    #[cfg(not(all(feature = "mqtt", feature = "zenoh")))]
+    let not_built = |scheme, feature| OpenError::NotBuilt {
+        name: spec.name.clone(),
+        scheme,
+        feature,
+    };
+    match spec.transport {
+        #[cfg(feature = "mqtt")]
+        Transport::Mqtt => Ok(mqtt::open(spec, dialect)),
+        #[cfg(not(feature = "mqtt"))]
+        Transport::Mqtt => Err(not_built("mqtt", "mqtt")),
+        #[cfg(feature = "zenoh")]
+        Transport::ZenohClient | Transport::ZenohPeer => zenoh::open(spec, dialect),
+        #[cfg(not(feature = "zenoh"))]
+        Transport::ZenohClient | Transport::ZenohPeer => Err(not_built("zenoh", "zenoh")),
+    }
+}
 
 /// Which end of the broker a bridge link is.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -68,15 +126,33 @@ pub fn is_bridge_link(text: &str) -> bool {
         .any(|p| text.starts_with(p))
 }
 
+/// What carries a bridge link.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Transport {
+    /// An MQTT 5 broker (`mqtt://HOST:PORT`, default port 1883).
+    Mqtt,
+    /// A client of a Zenoh router (`zenoh://HOST:PORT`, default port 7447).
+    ZenohClient,
+    /// A Zenoh peer in this process (`zenoh:`): it finds other peers by scouting and can
+    /// listen itself (`listen=tcp/ADDR:PORT`).
+    ZenohPeer,
+}
+
 /// A parsed bridge link string: `mqtt://HOST:PORT?fleet=F&vid=V[&trusted=true][&user=U]
-/// [&password=P][&client_id=C][&name=N]`.
+/// [&password=P][&client_id=C][&name=N]`, `zenoh://HOST:PORT?fleet=F&vid=V[&trusted=true]
+/// [&name=N]` or `zenoh:?fleet=F&vid=V[&listen=ENDPOINT]...`.
 #[derive(Clone, PartialEq, Eq)]
 #[non_exhaustive]
 pub struct BridgeSpec {
-    /// The broker's host.
+    /// What carries it.
+    pub transport: Transport,
+    /// The broker's (or Zenoh router's) host; empty for a Zenoh peer.
     pub host: String,
-    /// The broker's port (default 1883).
+    /// The broker's port (default 1883 for MQTT, 7447 for Zenoh; 0 for a Zenoh peer).
     pub port: u16,
+    /// Zenoh peer: the endpoint it listens on (`tcp/127.0.0.1:7448`), if any.
+    pub listen: Option<String>,
     /// The fleet.
     pub fleet: String,
     /// Which end it is.
@@ -95,8 +171,10 @@ impl core::fmt::Debug for BridgeSpec {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         // The password never shows.
         f.debug_struct("BridgeSpec")
+            .field("transport", &self.transport)
             .field("host", &self.host)
             .field("port", &self.port)
+            .field("listen", &self.listen)
             .field("fleet", &self.fleet)
             .field("side", &self.side)
             .field("trusted", &self.trusted)
@@ -111,14 +189,16 @@ impl core::fmt::Debug for BridgeSpec {
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[non_exhaustive]
 pub enum BridgeSpecError {
-    /// Not `mqtt://HOST:PORT`.
-    #[error("link \"{text}\": expected mqtt://HOST:PORT?fleet=F&vid=V")]
+    /// Not `mqtt://HOST:PORT`, `zenoh://HOST:PORT` nor `zenoh:`.
+    #[error(
+        "link \"{text}\": expected mqtt://HOST:PORT?fleet=F&vid=V, zenoh://HOST:PORT?... or zenoh:?..."
+    )]
     Syntax {
         /// The link string (options left out).
         text: String,
     },
     /// A scheme this build does not carry.
-    #[error("link \"{text}\": {scheme} links are not supported yet (mqtt:// is)")]
+    #[error("link \"{text}\": {scheme} links are not supported (mqtt:// and zenoh:// are)")]
     Unsupported {
         /// The link string (options left out).
         text: String,
@@ -167,12 +247,22 @@ impl BridgeSpec {
             .ok_or_else(|| BridgeSpecError::Syntax {
                 text: shown.clone(),
             })?;
-        if scheme != "mqtt" {
-            return Err(BridgeSpecError::Unsupported {
-                text: shown,
-                scheme: scheme.to_owned(),
-            });
-        }
+        let transport = match (scheme, rest) {
+            ("mqtt", _) if conn.starts_with("mqtt://") => Transport::Mqtt,
+            ("zenoh", _) if conn.starts_with("zenoh://") => Transport::ZenohClient,
+            ("zenoh", "") => Transport::ZenohPeer,
+            ("mqtt" | "zenoh", _) => return Err(BridgeSpecError::Syntax { text: shown }),
+            _ => {
+                return Err(BridgeSpecError::Unsupported {
+                    text: shown,
+                    scheme: scheme.to_owned(),
+                });
+            }
+        };
+        let default_port = match transport {
+            Transport::Mqtt => 1883,
+            _ => 7447,
+        };
         let (host, port) = match rest.rsplit_once(':') {
             Some((h, p)) => {
                 let port = p.parse::<u16>().ok().filter(|&p| p > 0).ok_or_else(|| {
@@ -183,10 +273,12 @@ impl BridgeSpec {
                 })?;
                 (h, port)
             }
-            None => (rest, 1883),
+            None if transport == Transport::ZenohPeer => ("", 0),
+            None => (rest, default_port),
         };
         let host = host.trim_start_matches('[').trim_end_matches(']');
-        if host.is_empty() || host.contains(['/', '?', '&', ' ']) {
+        let peer = transport == Transport::ZenohPeer;
+        if (host.is_empty() && !peer) || host.contains(['/', '?', '&', ' ']) {
             return Err(BridgeSpecError::Syntax { text: shown });
         }
         let option_err = |option: &str, what: &str| BridgeSpecError::Option {
@@ -196,11 +288,20 @@ impl BridgeSpec {
         };
         let (mut fleet, mut vid, mut trusted, mut ground) = (None, None, false, false);
         let (mut user, mut password, mut client_id, mut name) = (None, None, None, None);
+        let mut listen = None;
         for opt in opts.split('&').filter(|o| !o.is_empty()) {
             let (k, v) = opt
                 .split_once('=')
                 .ok_or_else(|| option_err(opt, "expected name=value"))?;
             let slot = match k {
+                "listen" if peer => &mut listen,
+                "user" | "password" | "client_id" | "listen" if transport != Transport::Mqtt => {
+                    return Err(option_err(
+                        k,
+                        "does not apply to this link (Zenoh access control is the Zenoh \
+                         router's configuration; listen is for zenoh: peers)",
+                    ));
+                }
                 "fleet" => &mut fleet,
                 "vid" => &mut vid,
                 "user" => &mut user,
@@ -268,8 +369,10 @@ impl BridgeSpec {
             Side::Ground(_) => format!("mavstack-{fleet}-ground-{}", std::process::id()),
         });
         Ok(Self {
+            transport,
             host: host.to_owned(),
             port,
+            listen,
             fleet,
             side,
             trusted,
@@ -323,6 +426,15 @@ mod tests {
             BridgeSpec::parse("mqtt://h?fleet=a&vid=b").unwrap().port,
             1883
         );
+        let z = BridgeSpec::parse("zenoh://10.0.0.2?fleet=a&vid=b").unwrap();
+        assert_eq!(
+            (z.transport, z.host.as_str(), z.port),
+            (Transport::ZenohClient, "10.0.0.2", 7447)
+        );
+        let p = BridgeSpec::parse("zenoh:?fleet=a&vid=b&listen=tcp/127.0.0.1:7448").unwrap();
+        assert_eq!(p.transport, Transport::ZenohPeer);
+        assert_eq!(p.listen.as_deref(), Some("tcp/127.0.0.1:7448"));
+        assert_eq!(p.name, "zenoh:");
     }
 
     #[test]
@@ -337,7 +449,10 @@ mod tests {
         assert!(err("mqtt://h:1?fleet=a&vid=b&trusted=yes").contains("true or false"));
         assert!(err("mqtt://h:1?fleet=a&vid=b,c/d").contains("vid \"c/d\""));
         assert!(err("mqtt://h:1?fleet=a&vid=b&side=sky").contains("vehicle or ground"));
-        assert!(err("zenoh://h:7447?fleet=a&vid=b").contains("not supported yet"));
+        assert!(err("mqtts://h:8883?fleet=a&vid=b").contains("not supported"));
+        assert!(err("zenoh://h:7447?fleet=a&vid=b&user=u").contains("does not apply"));
+        assert!(err("zenoh://h?fleet=a&vid=b&listen=tcp/0.0.0.0:1").contains("does not apply"));
+        assert!(err("zenoh:?fleet=a&vid=b&password=p").contains("does not apply"));
         let e = err("mqtt://h:1?fleet=a&vid=b&password=hunter2");
         assert!(e.contains("needs user") && !e.contains("hunter2"));
         assert!(is_bridge_link("mqtt://x") && !is_bridge_link("udpin:0.0.0.0:14550"));

@@ -12,7 +12,7 @@ use clap::Args;
 use mavstack::core::MessageSet as _;
 use mavstack::router::{InfoFn, RouterConfig};
 use mavstack::{InputModeration, LinkSpec, Node, NodeReport, router_conf};
-use mavstack_bridge::mqtt::BridgeStats;
+use mavstack_bridge::BridgeStats;
 
 use crate::Failure;
 use crate::link_cmd::interrupted;
@@ -247,7 +247,8 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         let mut handles = Vec::new();
         let mut bridge_stats = Vec::new();
         for spec in &bridges {
-            let bridge = mavstack_bridge::mqtt::open(spec, dialect);
+            let bridge =
+                mavstack_bridge::open(spec, dialect).map_err(|e| Failure::Input(anyhow!("{e}")))?;
             builder = builder.opened_link(bridge.config, bridge.link);
             bridge_stats.push((spec.name.clone(), Arc::clone(&bridge.handle.stats)));
             handles.push(bridge.handle);

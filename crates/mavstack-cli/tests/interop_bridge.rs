@@ -16,7 +16,13 @@
 //! - `alive`: `@alive` retained `online`, `offline` on SIGTERM, and by the last will on
 //!   SIGKILL.
 //!
-//! Never skipped: without mosquitto, paho-mqtt or pymavlink they fail.
+//! The same over Zenoh (`zenoh://HOST:PORT?fleet=F&vid=V`, `tests-interop/bridge_zenoh.py`)
+//! with eclipse-zenoh (PyPI) as the independent peer, its session the Zenoh router the link
+//! connects to: frames on their keys byte for byte, frames on `in` into the network, a query
+//! on `@cmd` answered with the vehicle's COMMAND_ACK (or the error `timeout`), the liveliness
+//! token gone on SIGTERM and on SIGKILL, and the link as an in-process peer (`zenoh:`).
+//!
+//! Never skipped: without mosquitto, paho-mqtt, eclipse-zenoh or pymavlink they fail.
 
 #[path = "support/pymavlink_dialect.rs"]
 mod pymavlink_dialect;
@@ -25,6 +31,11 @@ mod support;
 fn scenario(name: &str) {
     pymavlink_dialect::dialect_ready();
     support::scenario("bridge_interop.py", name, env!("CARGO_BIN_EXE_mavstack"));
+}
+
+fn zenoh(name: &str) {
+    pymavlink_dialect::dialect_ready();
+    support::scenario("bridge_zenoh.py", name, env!("CARGO_BIN_EXE_mavstack"));
 }
 
 #[test]
@@ -52,4 +63,35 @@ fn bridge_says_offline_on_exit_and_by_last_will() {
 #[test]
 fn ground_router_remaps_vehicles_that_share_a_sysid() {
     scenario("ground");
+}
+
+#[test]
+fn zenoh_bridge_puts_every_frame_on_its_key_byte_for_byte() {
+    zenoh("telemetry");
+}
+
+#[test]
+fn zenoh_bridge_lets_frames_from_zenoh_into_the_network() {
+    zenoh("inbound");
+}
+
+#[test]
+fn zenoh_bridge_answers_queries_on_cmd_with_the_vehicles_ack() {
+    zenoh("command");
+}
+
+#[test]
+fn zenoh_bridge_liveliness_token_goes_on_exit_and_on_crash() {
+    zenoh("alive");
+}
+
+#[test]
+fn zenoh_bridge_runs_as_an_in_process_peer() {
+    zenoh("peer");
+}
+
+/// The ground side over Zenoh: liveliness with history and the fleet's frames, remapped.
+#[test]
+fn zenoh_ground_router_remaps_vehicles_that_share_a_sysid() {
+    zenoh("ground");
 }
