@@ -2,7 +2,9 @@
 # Installs, idempotently, the Debian packages the tests need beyond the Rust toolchain:
 #   chromium, chromium-driver  the browser the status page test drives (headless, WebDriver);
 #   fonts-dejavu-core          the font `mavstack log plot` labels its images with;
-#   mosquitto                  the MQTT broker the fleet bridge's tests run (on a port of their own).
+#   mosquitto                  the MQTT broker the fleet bridge's tests run (on a port of their own);
+#   openssl                    makes the throwaway certificates of the mqtts:// test;
+#   libssl-dev, pkg-config     OpenSSL for the build (mqtts:// goes through native-tls).
 # Quiet when everything is in place.
 set -euo pipefail
 need=()
@@ -10,6 +12,9 @@ command -v chromium >/dev/null || need+=(chromium)
 command -v chromedriver >/dev/null || need+=(chromium-driver)
 [ -f /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || need+=(fonts-dejavu-core)
 command -v mosquitto >/dev/null || [ -x /usr/sbin/mosquitto ] || need+=(mosquitto)
+command -v openssl >/dev/null || need+=(openssl)
+command -v pkg-config >/dev/null || need+=(pkg-config)
+pkg-config --exists openssl 2>/dev/null || need+=(libssl-dev)
 if [ ${#need[@]} -eq 0 ]; then
     exit 0
 fi

@@ -15,7 +15,7 @@ if [ "${CI:-}" = "true" ]; then
     export CARGO_INCREMENTAL=0
 fi
 
-step "system packages (chromium, chromium-driver, fonts-dejavu-core, mosquitto)"
+step "system packages (chromium, chromium-driver, fonts-dejavu-core, mosquitto, openssl, libssl-dev)"
 bash scripts/setup-system.sh
 
 step "peers (pymavlink 2.4.50 in .venv)"

@@ -30,6 +30,9 @@ Scenarios:
              system 2 (exactly pymavlink's packing of its message as system 2, same seq); the
              ground station's COMMAND_LONG to system 2 reaches truck-2 as pymavlink's packing of
              the command to system 1, and truck-1 never gets it
+  tls        mosquitto with a TLS listener that asks for client certificates (a CA, server and client
+             certificates made with openssl): a mqtts:// link with ca=, client_cert= and client_key=
+             carries frames both ways; one without ca= (the system's roots) never connects
   alive      @alive is retained `online` while the router runs, `offline` after SIGTERM
              (published by the router), and `offline` by the last will after SIGKILL
 """
@@ -72,7 +75,7 @@ class Broker(mqtt_broker.Broker):
 class Client:
     """A paho MQTT 5 client that records every message: (topic, payload, qos, retain, properties)."""
 
-    def __init__(self, broker, subs=(), name="paho"):
+    def __init__(self, broker, subs=(), name="paho"):  # TLS (with a client certificate) if broker.tls
         self.got = []
         self.lock = threading.Lock()
         self.c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="%s-%d" % (name, os.getpid()),
@@ -82,6 +85,8 @@ class Client:
         self.subs = list(subs)
         self.c.on_connect = self._on_connect
         self.c.on_subscribe = lambda *a: self.ready.set()
+        if getattr(broker, "tls", None):
+            self.c.tls_set(ca_certs=broker.tls.ca, certfile=broker.tls.client_cert, keyfile=broker.tls.client_key)
         self.c.connect("127.0.0.1", broker.port)
         self.c.loop_start()
         if self.subs and not self.ready.wait(5):
@@ -418,7 +423,55 @@ def ground_through(bin_, url):
             r.stop()
 
 
-SCENARIOS = {"telemetry": telemetry, "inbound": inbound, "command": command, "alive": alive, "ground": ground}
+def tls(bin_):
+    certs = mqtt_broker.Certs()
+    broker = Broker(tls=certs)
+    sub = Client(broker, ["%s/#" % PREFIX], "sub")
+    pub = Client(broker, [], "pub")
+    port, port2 = free_port(), free_port()
+    opts = "&ca=%s&client_cert=%s&client_key=%s" % (certs.ca, certs.client_cert, certs.client_key)
+    url = "mqtts://127.0.0.1:%d?fleet=%s&vid=%s" % (broker.port, FLEET, VID)
+    router, _ = start_router(bin_, lambda: ["udpin:127.0.0.1:%d" % port, url + opts])
+    # Without the test CA the broker's certificate does not verify (the system's roots).
+    untrusting, _ = start_router(bin_, lambda: ["udpin:127.0.0.1:%d" % port2, url.replace(VID, "other") +
+                                                "&client_cert=%s&client_key=%s" % (certs.client_cert, certs.client_key)])
+    veh = Peer("vehicle", M, 1, 1, dest=port)
+    try:
+        if router is None or untrusting is None:
+            return None
+        veh.send(heartbeat(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA))
+        time.sleep(0.5)
+        f = veh.send(M.MAVLink_attitude_message(1000, 0.1, -0.2, 0.3, 0.01, 0.02, 0.03))
+        got = sub.wait(lambda t, p: p == f.raw, 3)
+        check(got is not None and got[0] == "%s/1/1/ATTITUDE" % PREFIX,
+              "ATTITUDE over TLS on its key byte for byte: %r" % (got and got[:2],))
+        gcs = M.MAVLink(None, srcSystem=255, srcComponent=190)
+        raw = bytes(M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0).pack(gcs))
+        pub.publish("%s/in" % PREFIX, raw)
+        arrived = veh.wait_for(lambda fr: fr.raw == raw, 3)
+        check(arrived is not None, "a frame published on in over TLS never reached the vehicle")
+        stats = router.stop()
+        bridges = (stats or {}).get("bridges") or [{}]
+        check(bridges[0].get("connections") == 1, "the TLS link's connections: %r" % (bridges,))
+        stats2 = untrusting.stop()
+        b2 = (stats2 or {}).get("bridges") or [{}]
+        check(b2[0].get("connections") == 0, "a link without the CA connected anyway: %r" % (b2,))
+        check(not sub.messages(lambda t, p: "/other/" in t), "frames from the link without the CA reached the broker")
+        return ("mqtts:// with a client certificate: ATTITUDE byte for byte, a frame on in reached the vehicle; "
+                "without the CA the broker's certificate is refused (0 connections)")
+    finally:
+        veh.close()
+        for r in (router, untrusting):
+            if r is not None and r.running():
+                r.stop()
+        sub.close()
+        pub.close()
+        broker.stop()
+        certs.close()
+
+
+SCENARIOS = {"telemetry": telemetry, "inbound": inbound, "command": command, "alive": alive, "ground": ground,
+             "tls": tls}
 
 
 if __name__ == "__main__":

@@ -72,6 +72,18 @@ pub enum OpenError {
         /// The feature that carries them.
         feature: &'static str,
     },
+    /// A TLS file that cannot be read or used (`ca`, `client_cert`, `client_key`).
+    #[error("link \"{name}\": {option} \"{path}\": {reason}")]
+    Tls {
+        /// The link's name.
+        name: String,
+        /// The option that named the file.
+        option: &'static str,
+        /// The file.
+        path: String,
+        /// What is wrong with it.
+        reason: String,
+    },
     /// The Zenoh session's settings were refused (a bad `listen` endpoint).
     #[error("link \"{name}\": {reason}")]
     Zenoh {
@@ -90,7 +102,7 @@ pub enum OpenError {
 /// [`OpenError`]: a kind of link this build does not carry, or Zenoh settings refused.
 #[cfg(any(feature = "mqtt", feature = "zenoh"))]
 pub fn open(spec: &BridgeSpec, dialect: mavstack_router::InfoFn) -> Result<Bridge, OpenError> {
-    #[cfg(not(all(feature = "mqtt", feature = "zenoh")))]
+    #[cfg(not(all(feature = "mqtt", feature = "zenoh", feature = "tls")))]
     let not_built = |scheme, feature| OpenError::NotBuilt {
         name: spec.name.clone(),
         scheme,
@@ -98,7 +110,11 @@ pub fn open(spec: &BridgeSpec, dialect: mavstack_router::InfoFn) -> Result<Bridg
     };
     match spec.transport {
         #[cfg(feature = "mqtt")]
-        Transport::Mqtt => Ok(mqtt::open(spec, dialect)),
+        #[cfg(feature = "tls")]
+        Transport::Mqtts => mqtt::open(spec, dialect),
+        #[cfg(not(feature = "tls"))]
+        Transport::Mqtts => Err(not_built("mqtts", "tls")),
+        Transport::Mqtt => mqtt::open(spec, dialect),
         #[cfg(not(feature = "mqtt"))]
         Transport::Mqtt => Err(not_built("mqtt", "mqtt")),
         #[cfg(feature = "zenoh")]
@@ -132,6 +148,10 @@ pub fn is_bridge_link(text: &str) -> bool {
 pub enum Transport {
     /// An MQTT 5 broker (`mqtt://HOST:PORT`, default port 1883).
     Mqtt,
+    /// An MQTT 5 broker over TLS (`mqtts://HOST:PORT`, default port 8883): the server's
+    /// certificate checked against the system's roots or `ca=FILE`, and a client
+    /// certificate (`client_cert=FILE&client_key=FILE`) when the broker asks for one.
+    Mqtts,
     /// A client of a Zenoh router (`zenoh://HOST:PORT`, default port 7447).
     ZenohClient,
     /// A Zenoh peer in this process (`zenoh:`): it finds other peers by scouting and can
@@ -153,6 +173,11 @@ pub struct BridgeSpec {
     pub port: u16,
     /// Zenoh peer: the endpoint it listens on (`tcp/127.0.0.1:7448`), if any.
     pub listen: Option<String>,
+    /// `mqtts://`: the CA certificate (PEM) the broker's certificate must chain to, instead
+    /// of the system's roots.
+    pub ca: Option<std::path::PathBuf>,
+    /// `mqtts://`: the client certificate and its private key (PEM files).
+    pub client_cert: Option<(std::path::PathBuf, std::path::PathBuf)>,
     /// The fleet.
     pub fleet: String,
     /// Which end it is.
@@ -175,6 +200,8 @@ impl core::fmt::Debug for BridgeSpec {
             .field("host", &self.host)
             .field("port", &self.port)
             .field("listen", &self.listen)
+            .field("ca", &self.ca)
+            .field("client_cert", &self.client_cert)
             .field("fleet", &self.fleet)
             .field("side", &self.side)
             .field("trusted", &self.trusted)
@@ -249,9 +276,12 @@ impl BridgeSpec {
             })?;
         let transport = match (scheme, rest) {
             ("mqtt", _) if conn.starts_with("mqtt://") => Transport::Mqtt,
+            ("mqtts", _) if conn.starts_with("mqtts://") => Transport::Mqtts,
             ("zenoh", _) if conn.starts_with("zenoh://") => Transport::ZenohClient,
             ("zenoh", "") => Transport::ZenohPeer,
-            ("mqtt" | "zenoh", _) => return Err(BridgeSpecError::Syntax { text: shown }),
+            ("mqtt" | "mqtts" | "zenoh", _) => {
+                return Err(BridgeSpecError::Syntax { text: shown });
+            }
             _ => {
                 return Err(BridgeSpecError::Unsupported {
                     text: shown,
@@ -261,6 +291,7 @@ impl BridgeSpec {
         };
         let default_port = match transport {
             Transport::Mqtt => 1883,
+            Transport::Mqtts => 8883,
             _ => 7447,
         };
         let (host, port) = match rest.rsplit_once(':') {
@@ -289,13 +320,22 @@ impl BridgeSpec {
         let (mut fleet, mut vid, mut trusted, mut ground) = (None, None, false, false);
         let (mut user, mut password, mut client_id, mut name) = (None, None, None, None);
         let mut listen = None;
+        let (mut ca, mut client_cert, mut client_key) = (None, None, None);
+        let mqtt = matches!(transport, Transport::Mqtt | Transport::Mqtts);
+        let tls = transport == Transport::Mqtts;
         for opt in opts.split('&').filter(|o| !o.is_empty()) {
             let (k, v) = opt
                 .split_once('=')
                 .ok_or_else(|| option_err(opt, "expected name=value"))?;
             let slot = match k {
                 "listen" if peer => &mut listen,
-                "user" | "password" | "client_id" | "listen" if transport != Transport::Mqtt => {
+                "ca" if tls => &mut ca,
+                "client_cert" if tls => &mut client_cert,
+                "client_key" if tls => &mut client_key,
+                "ca" | "client_cert" | "client_key" if !tls => {
+                    return Err(option_err(k, "applies to mqtts:// links only"));
+                }
+                "user" | "password" | "client_id" | "listen" if !mqtt => {
                     return Err(option_err(
                         k,
                         "does not apply to this link (Zenoh access control is the Zenoh \
@@ -364,6 +404,18 @@ impl BridgeSpec {
             (None, Some(_)) => return Err(option_err("password", "needs user")),
             (None, None) => None,
         };
+        if let Some(l) = &listen {
+            let port = l.strip_prefix("tcp/").and_then(|a| a.rsplit_once(':'));
+            if !port.is_some_and(|(h, p)| !h.is_empty() && p.parse::<u16>().is_ok()) {
+                return Err(option_err("listen", "expected tcp/ADDRESS:PORT"));
+            }
+        }
+        let client_cert = match (client_cert, client_key) {
+            (Some(c), Some(k)) => Some((c.into(), k.into())),
+            (None, None) => None,
+            (Some(_), None) => return Err(option_err("client_cert", "needs client_key")),
+            (None, Some(_)) => return Err(option_err("client_key", "needs client_cert")),
+        };
         let client_id = client_id.unwrap_or_else(|| match &side {
             Side::Vehicle(keys) => format!("mavstack-{fleet}-{}", keys.vid()),
             Side::Ground(_) => format!("mavstack-{fleet}-ground-{}", std::process::id()),
@@ -373,6 +425,8 @@ impl BridgeSpec {
             host: host.to_owned(),
             port,
             listen,
+            ca: ca.map(Into::into),
+            client_cert,
             fleet,
             side,
             trusted,
@@ -449,10 +503,18 @@ mod tests {
         assert!(err("mqtt://h:1?fleet=a&vid=b&trusted=yes").contains("true or false"));
         assert!(err("mqtt://h:1?fleet=a&vid=b,c/d").contains("vid \"c/d\""));
         assert!(err("mqtt://h:1?fleet=a&vid=b&side=sky").contains("vehicle or ground"));
-        assert!(err("mqtts://h:8883?fleet=a&vid=b").contains("not supported"));
+        assert!(err("mqtt://h?fleet=a&vid=b&ca=/x.pem").contains("mqtts:// links only"));
+        assert!(err("mqtts://h?fleet=a&vid=b&client_cert=/c.pem").contains("needs client_key"));
+        let t = BridgeSpec::parse("mqtts://h?fleet=a&vid=b&ca=/ca.pem&client_cert=c&client_key=k")
+            .unwrap();
+        assert_eq!((t.transport, t.port), (Transport::Mqtts, 8883));
+        assert_eq!(t.ca.as_deref(), Some(std::path::Path::new("/ca.pem")));
+        assert!(t.client_cert.is_some());
+        assert!(err("mqttx://h:8883?fleet=a&vid=b").contains("not supported"));
         assert!(err("zenoh://h:7447?fleet=a&vid=b&user=u").contains("does not apply"));
         assert!(err("zenoh://h?fleet=a&vid=b&listen=tcp/0.0.0.0:1").contains("does not apply"));
         assert!(err("zenoh:?fleet=a&vid=b&password=p").contains("does not apply"));
+        assert!(err("zenoh:?fleet=a&vid=b&listen=udp/h:1").contains("tcp/ADDRESS:PORT"));
         let e = err("mqtt://h:1?fleet=a&vid=b&password=hunter2");
         assert!(e.contains("needs user") && !e.contains("hunter2"));
         assert!(is_bridge_link("mqtt://x") && !is_bridge_link("udpin:0.0.0.0:14550"));

@@ -29,7 +29,7 @@ use tokio::task::JoinHandle;
 
 use crate::driver::{Answer, Bridge, BridgeStats, Broker, Incoming, Interest, start};
 use crate::outbox::{Lane, Outgoing};
-use crate::{BridgeSpec, Side};
+use crate::{BridgeSpec, OpenError, Side};
 
 /// Publishes waiting in rumqttc's request queue at most.
 const CLIENT_QUEUE: usize = 1024;
@@ -43,8 +43,8 @@ const CLOSE_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// Opens the MQTT link `spec` describes; `dialect` names the messages in the keys. The
 /// broker is connected in the background (and reconnected, with back-off, whenever it
-/// drops): opening never waits for it.
-pub(crate) fn open(spec: &BridgeSpec, dialect: InfoFn) -> Bridge {
+/// drops): opening never waits for it. `mqtts://` reads its certificate files here.
+pub(crate) fn open(spec: &BridgeSpec, dialect: InfoFn) -> Result<Bridge, OpenError> {
     let mut options = MqttOptions::new(spec.client_id.clone(), spec.host.clone(), spec.port);
     options.set_keep_alive(Duration::from_secs(5));
     options.set_clean_start(true);
@@ -65,6 +65,13 @@ pub(crate) fn open(spec: &BridgeSpec, dialect: InfoFn) -> Bridge {
     if let Some((user, password)) = &spec.credentials {
         options.set_credentials(user.clone(), password.clone());
     }
+    #[cfg(feature = "tls")]
+    if spec.transport == crate::Transport::Mqtts {
+        let connector = tls::connector(spec)?;
+        options.set_transport(rumqttc::Transport::tls_with_config(
+            rumqttc::TlsConfiguration::NativeConnector(connector),
+        ));
+    }
     let (client, events) = AsyncClient::new(options, CLIENT_QUEUE);
     let stats = Arc::new(BridgeStats::default());
     let (tx, rx) = mpsc::channel(CLIENT_QUEUE);
@@ -74,7 +81,53 @@ pub(crate) fn open(spec: &BridgeSpec, dialect: InfoFn) -> Bridge {
         incoming: rx,
         pump,
     };
-    start(spec, dialect, broker, stats)
+    Ok(start(spec, dialect, broker, stats))
+}
+
+/// `mqtts://`: OpenSSL (through native-tls) checks the broker's certificate and name.
+#[cfg(feature = "tls")]
+mod tls {
+    use crate::{BridgeSpec, OpenError};
+
+    /// The TLS connector of `spec`: its CA (or the system's roots), its client certificate.
+    pub(super) fn connector(spec: &BridgeSpec) -> Result<native_tls::TlsConnector, OpenError> {
+        let err = |option, path: &std::path::Path, reason: String| OpenError::Tls {
+            name: spec.name.clone(),
+            option,
+            path: path.display().to_string(),
+            reason,
+        };
+        let read = |option, path: &std::path::Path| {
+            std::fs::read(path).map_err(|e| err(option, path, e.to_string()))
+        };
+        let mut builder = native_tls::TlsConnector::builder();
+        if let Some(ca) = &spec.ca {
+            let cert = native_tls::Certificate::from_pem(&read("ca", ca)?)
+                .map_err(|e| err("ca", ca, format!("not a PEM certificate: {e}")))?;
+            builder.add_root_certificate(cert);
+        }
+        if let Some((cert, key)) = &spec.client_cert {
+            let identity = native_tls::Identity::from_pkcs8(
+                &read("client_cert", cert)?,
+                &read("client_key", key)?,
+            )
+            .map_err(|e| {
+                err(
+                    "client_cert",
+                    cert,
+                    format!("with client_key: not a PEM certificate and PKCS#8 key: {e}"),
+                )
+            })?;
+            builder.identity(identity);
+        }
+        builder.build().map_err(|e| {
+            err(
+                "ca",
+                spec.ca.as_deref().unwrap_or("(system roots)".as_ref()),
+                e.to_string(),
+            )
+        })
+    }
 }
 
 /// Runs rumqttc's event loop (which also reconnects) and hands on what the bridge needs.

@@ -95,3 +95,10 @@ fn zenoh_bridge_runs_as_an_in_process_peer() {
 fn zenoh_ground_router_remaps_vehicles_that_share_a_sysid() {
     zenoh("ground");
 }
+
+/// `mqtts://` against mosquitto's TLS listener that asks for client certificates: frames
+/// both ways with `ca=`, `client_cert=`, `client_key=`; without the CA, no connection.
+#[test]
+fn mqtts_bridge_with_client_certificate_and_a_refused_server() {
+    scenario("tls");
+}
