@@ -30,6 +30,8 @@ Scenarios:
              are both system 1 and a ground router on vid=* (a liveliness subscriber with
              history and a subscriber on the fleet's frames): seen as systems 1 and 2, a
              command to 2 reaches the second vehicle as pymavlink's packing of it to 1
+  restart    this script's Zenoh router closed for 2 s and opened again on the same port: the
+             link's session reconnects by itself and frames reach the new subscriber
   peer       the link as an in-process Zenoh peer (zenoh:?...&listen=tcp/127.0.0.1:P) and this
              script's session a peer connected to it: frames reach the subscriber byte for
              byte, and a frame put on `in` reaches the vehicle
@@ -64,7 +66,7 @@ class Session:
     """This script's Zenoh session: a router listening on a free loopback port (or a peer
     connecting to `connect`), recording every sample of its subscriptions."""
 
-    def __init__(self, connect=None):
+    def __init__(self, connect=None, port=None):
         conf = zenoh.Config()
         conf.insert_json5("scouting/multicast/enabled", "false")
         if connect:
@@ -72,7 +74,7 @@ class Session:
             conf.insert_json5("connect/endpoints", '["%s"]' % connect)
             self.port = None
         else:
-            self.port = free_port()
+            self.port = port or free_port()
             conf.insert_json5("mode", '"router"')
             conf.insert_json5("listen/endpoints", '["tcp/127.0.0.1:%d"]' % self.port)
         self.s = zenoh.open(conf)
@@ -345,6 +347,43 @@ def ground(bin_):
         z.close()
 
 
+def restart(bin_):
+    z = Session()
+    z.subscribe("%s/**" % PREFIX)
+    port = free_port()
+    router, _ = start_router(bin_, lambda: ["udpin:127.0.0.1:%d" % port, z.url()])
+    if router is None:
+        z.close()
+        return None
+    veh = Peer("vehicle", M, 1, 1, dest=port)
+    try:
+        check(wait_subscribed(z, "%s/in" % PREFIX), "the link never subscribed")
+        first = veh.send(M.MAVLink_attitude_message(1, 0, 0, 0, 0, 0, 0))
+        check(z.wait(lambda k, p: p == first.raw, 3) is not None, "no frame before the restart")
+        zport = z.port
+        z.close()
+        time.sleep(2.0)
+        z = Session(port=zport)
+        z.subscribe("%s/**" % PREFIX)
+        back_at = time.monotonic()
+        got = None
+        n = 2
+        while got is None and time.monotonic() < back_at + 10:
+            f = veh.send(M.MAVLink_attitude_message(n, 0, 0, 0, 0, 0, 0))
+            n += 1
+            got = z.wait(lambda k, p, raw=f.raw: p == raw, 0.1)
+        check(got is not None, "no frame within 10 s of the Zenoh router's restart")
+        stats = router.stop()
+        check(stats is not None, "the router's last stats line after the restart")
+        return "Zenoh router stopped for 2 s: frames again %.2f s after it came back" % (
+            (got[3] - back_at) if got else -1)
+    finally:
+        veh.close()
+        if router.running():
+            router.stop()
+        z.close()
+
+
 def peer(bin_):
     port, zport = free_port(), free_port()
     link = "zenoh:?fleet=%s&vid=%s&listen=tcp/127.0.0.1:%d" % (FLEET, VID, zport)
@@ -374,7 +413,7 @@ def peer(bin_):
 
 
 SCENARIOS = {"telemetry": telemetry, "inbound": inbound, "command": command, "alive": alive, "ground": ground,
-             "peer": peer}
+             "restart": restart, "peer": peer}
 
 
 if __name__ == "__main__":

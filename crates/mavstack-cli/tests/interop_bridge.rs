@@ -20,7 +20,9 @@
 //! with eclipse-zenoh (PyPI) as the independent peer, its session the Zenoh router the link
 //! connects to: frames on their keys byte for byte, frames on `in` into the network, a query
 //! on `@cmd` answered with the vehicle's COMMAND_ACK (or the error `timeout`), the liveliness
-//! token gone on SIGTERM and on SIGKILL, and the link as an in-process peer (`zenoh:`).
+//! token gone on SIGTERM and on SIGKILL, the ground side's remapping, reconnection after the
+//! Zenoh router restarts, and the link as an in-process peer (`zenoh:`). And `mqtts://`
+//! against mosquitto's TLS listener with client certificates (`tls`).
 //!
 //! Never skipped: without mosquitto, paho-mqtt, eclipse-zenoh or pymavlink they fail.
 
@@ -101,4 +103,10 @@ fn zenoh_ground_router_remaps_vehicles_that_share_a_sysid() {
 #[test]
 fn mqtts_bridge_with_client_certificate_and_a_refused_server() {
     scenario("tls");
+}
+
+/// The Zenoh router gone for 2 s and back on its port: the link's session reconnects.
+#[test]
+fn zenoh_bridge_reconnects_after_the_zenoh_router_restarts() {
+    zenoh("restart");
 }
