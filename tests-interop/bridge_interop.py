@@ -142,26 +142,8 @@ def telemetry(bin_):
     veh = Peer("vehicle", M, 1, 1, dest=port)
     signer = Peer("signed", M, 1, 2, dest=port, key=KEY, link_id=3)
     v1 = Peer("v1", V1, 2, 1, dest=port)
-    sent = []  # (topic, raw, qos)
     try:
-        veh.send(heartbeat(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA))
-        time.sleep(0.3)  # the route to the broker link exists from the start; the UDP peer is learned
-        msgs = [
-            (veh, M.MAVLink_attitude_message(1000, 0.1, -0.2, 0.3, 0.01, 0.02, 0.03), 0),
-            (veh, M.MAVLink_global_position_int_message(2000, -353632610, 1491652380, 584000, 10000, 1, 2, 3, 9000), 0),
-            (veh, M.MAVLink_command_ack_message(M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 255, 190), 1),
-            (signer, M.MAVLink_sys_status_message(1, 1, 1, 500, 11000, 10, 90, 0, 0, 0, 0, 0, 0), 0),
-            (v1, V1.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3), 1),
-            (v1, V1.MAVLink_vfr_hud_message(10.0, 11.0, 90, 50, 100.0, 1.0), 0),
-        ]
-        for peer, m, qos in msgs:
-            f = peer.send(m)
-            sent.append(("%s/%d/%d/%s" % (PREFIX, f.sysid, f.compid, f.type), f.raw, qos))
-        # An id no dialect has (MAVLink 2 frame, id 60001, valid header and CRC bytes as sent).
-        unknown = bytes([0xFD, 3, 0, 0, 9, 1, 1]) + (60001).to_bytes(3, "little") + b"\x01\x02\x03\xaa\xbb"
-        veh.write(unknown)
-        sent.append(("%s/1/1/60001" % PREFIX, unknown, 0))
-        time.sleep(1.0)
+        sent = send_telemetry(veh, signer, v1, PREFIX)  # (topic, raw, qos)
         for topic, raw, qos in sent:
             got = sub.messages(lambda t, p, raw=raw: p == raw)
             check(got, "%s: frame %s never reached the subscriber" % (topic, raw.hex()))
@@ -187,6 +169,57 @@ def telemetry(bin_):
         broker.stop()
 
 
+def send_telemetry(veh, signer, v1, prefix):
+    """The telemetry scenario's frames (MAVLink 2 from 1/1, signed from 1/2, MAVLink 1 from
+    2/1, an id no dialect has), sent through the peers: [(key, raw, MQTT QoS)]."""
+    veh.send(heartbeat(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA))
+    time.sleep(0.3)  # the route to the bridge link exists from the start; the UDP peer is learned
+    msgs = [
+        (veh, M.MAVLink_attitude_message(1000, 0.1, -0.2, 0.3, 0.01, 0.02, 0.03), 0),
+        (veh, M.MAVLink_global_position_int_message(2000, -353632610, 1491652380, 584000, 10000, 1, 2, 3, 9000), 0),
+        (veh, M.MAVLink_command_ack_message(M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 255, 190), 1),
+        (signer, M.MAVLink_sys_status_message(1, 1, 1, 500, 11000, 10, 90, 0, 0, 0, 0, 0, 0), 0),
+        (v1, V1.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3), 1),
+        (v1, V1.MAVLink_vfr_hud_message(10.0, 11.0, 90, 50, 100.0, 1.0), 0),
+    ]
+    sent = []
+    for peer, m, qos in msgs:
+        f = peer.send(m)
+        sent.append(("%s/%d/%d/%s" % (prefix, f.sysid, f.compid, f.type), f.raw, qos))
+    # An id no dialect has (MAVLink 2 frame, id 60001, valid header and CRC bytes as sent).
+    unknown = bytes([0xFD, 3, 0, 0, 9, 1, 1]) + (60001).to_bytes(3, "little") + b"\x01\x02\x03\xaa\xbb"
+    veh.write(unknown)
+    sent.append(("%s/1/1/60001" % prefix, unknown, 0))
+    time.sleep(1.0)
+    return sent
+
+
+def inbound_frames():
+    """What the inbound scenario lets into the vehicle's network: (plain frames for 1/1, a
+    signed frame for 2/1), all packed by pymavlink."""
+    gcs_tx = M.MAVLink(None, srcSystem=255, srcComponent=190)
+    gcs_v1 = V1.MAVLink(None, srcSystem=255, srcComponent=191)
+    signed_tx = M.MAVLink(None, srcSystem=254, srcComponent=1)
+    signed_tx.signing.secret_key, signed_tx.signing.link_id = KEY, 9
+    signed_tx.signing.sign_outgoing, signed_tx.signing.timestamp = True, ri.signing_now()
+    plain = [
+        bytes(M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0).pack(gcs_tx)),
+        bytes(V1.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(gcs_v1)),
+    ]
+    return plain, [bytes(M.MAVLink_param_request_list_message(2, 1).pack(signed_tx))]
+
+
+def check_delivered(want, timeout=3.0):
+    """Waits until every (peer, raw) of `want` reached its peer byte for byte; a FAIL for each
+    that did not."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and not all(any(f.raw == raw for f in p.frames()) for p, raw in want):
+        time.sleep(0.05)
+    for p, raw in want:
+        check(any(f.raw == raw for f in p.frames()), "frame %s from mav/F/V/in never reached the %s byte for byte; "
+              "it got %s" % (raw.hex(), p.name, p.frames()[:5]))
+
+
 def mi_verify(raw):
     """pymavlink verifies the signature of raw with KEY."""
     mav = M.MAVLink(None)
@@ -209,16 +242,7 @@ def inbound(bin_):
     if router is None:
         broker.stop()
         return None
-    gcs_tx = M.MAVLink(None, srcSystem=255, srcComponent=190)
-    gcs_v1 = V1.MAVLink(None, srcSystem=255, srcComponent=191)
-    signed_tx = M.MAVLink(None, srcSystem=254, srcComponent=1)
-    signed_tx.signing.secret_key, signed_tx.signing.link_id = KEY, 9
-    signed_tx.signing.sign_outgoing, signed_tx.signing.timestamp = True, ri.signing_now()
-    plain = [
-        bytes(M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0).pack(gcs_tx)),
-        bytes(V1.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(gcs_v1)),
-    ]
-    signed = [bytes(M.MAVLink_param_request_list_message(2, 1).pack(signed_tx))]
+    plain, signed = inbound_frames()
     try:
         # Each vehicle makes itself known (the router learns where 1/1 and 2/1 are).
         # The plain one in MAVLink 1: its auto link carries what comes in the framing it came in.
@@ -228,12 +252,7 @@ def inbound(bin_):
         for raw in plain + signed:
             pub.publish("%s/in" % PREFIX, raw)
         want = [(veh, raw) for raw in plain] + [(sveh, raw) for raw in signed]
-        deadline = time.monotonic() + 3
-        while time.monotonic() < deadline and not all(any(f.raw == raw for f in p.frames()) for p, raw in want):
-            time.sleep(0.05)
-        for p, raw in want:
-            check(any(f.raw == raw for f in p.frames()), "frame %s from mav/F/V/in never reached the %s byte for byte; "
-                  "it got %s" % (raw.hex(), p.name, p.frames()[:5]))
+        check_delivered(want)
         echoed = [t for t, p, *_ in sub.messages() if p in plain + signed and not t.endswith("/in")]
         check(not echoed, "frames from the broker were published back on %s" % echoed)
         return ("%d frames from mav/F/V/in reached the vehicles byte for byte (v2, v1, and a signed one through a "

@@ -47,7 +47,6 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import bridge_interop  # noqa: E402
-import router_interop as ri  # noqa: E402
 from router_interop import KEY, M, V1, Peer, heartbeat, start_router  # noqa: E402
 import scenario  # noqa: E402
 from scenario import check, free_port  # noqa: E402
@@ -127,44 +126,35 @@ def wait_subscribed(session, key, timeout=5.0):
     return False
 
 
-def telemetry(bin_):
+def vehicle_router(bin_):
+    """This script's Zenoh router subscribed to the vehicle's keys, and a `mavstack router`
+    with a UDP link for the vehicle and the Zenoh link: (session, router or None, UDP port)."""
     z = Session()
     z.subscribe("%s/**" % PREFIX)
     port = free_port()
     router, _ = start_router(bin_, lambda: ["udpin:127.0.0.1:%d" % port, z.url()])
     if router is None:
         z.close()
+    return z, router, port
+
+
+def telemetry(bin_):
+    z, router, port = vehicle_router(bin_)
+    if router is None:
         return None
     veh = Peer("vehicle", M, 1, 1, dest=port)
     signer = Peer("signed", M, 1, 2, dest=port, key=KEY, link_id=3)
     v1 = Peer("v1", V1, 2, 1, dest=port)
-    sent = []
     try:
         check(wait_subscribed(z, "%s/in" % PREFIX), "the link never subscribed to %s/in" % PREFIX)
-        veh.send(heartbeat(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA))
-        time.sleep(0.3)
-        msgs = [
-            (veh, M.MAVLink_attitude_message(1000, 0.1, -0.2, 0.3, 0.01, 0.02, 0.03)),
-            (veh, M.MAVLink_global_position_int_message(2000, -353632610, 1491652380, 584000, 10000, 1, 2, 3, 9000)),
-            (veh, M.MAVLink_command_ack_message(M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 255, 190)),
-            (signer, M.MAVLink_sys_status_message(1, 1, 1, 500, 11000, 10, 90, 0, 0, 0, 0, 0, 0)),
-            (v1, V1.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3)),
-            (v1, V1.MAVLink_vfr_hud_message(10.0, 11.0, 90, 50, 100.0, 1.0)),
-        ]
-        for peer, m in msgs:
-            f = peer.send(m)
-            sent.append(("%s/%d/%d/%s" % (PREFIX, f.sysid, f.compid, f.type), f.raw))
-        unknown = bytes([0xFD, 3, 0, 0, 9, 1, 1]) + (60001).to_bytes(3, "little") + b"\x01\x02\x03\xaa\xbb"
-        veh.write(unknown)
-        sent.append(("%s/1/1/60001" % PREFIX, unknown))
-        time.sleep(1.0)
-        for key, raw in sent:
+        sent = bridge_interop.send_telemetry(veh, signer, v1, PREFIX)
+        for key, raw, _ in sent:
             got = z.samples(lambda k, p, raw=raw: p == raw)
             check(got, "%s: frame %s never reached the subscriber" % (key, raw.hex()))
             for k, *_ in got:
                 check(k == key, "frame %s on %s, expected %s" % (raw.hex()[:40], k, key))
         signed = [p for k, p, *_ in z.samples() if len(p) > 12 and p[0] == 0xFD and p[2] & 1]
-        check(signed and all(ri_verify(p) for p in signed), "signed frames reached the subscriber and verify with the key")
+        check(signed and all(bridge_interop.mi_verify(p) for p in signed), "signed frames reached the subscriber and verify with the key")
         stats = router.stop()
         bridges = (stats or {}).get("bridges") or [{}]
         check(bridges[0].get("published", 0) >= len(sent) and bridges[0].get("connections") == 1,
@@ -179,15 +169,6 @@ def telemetry(bin_):
         z.close()
 
 
-def ri_verify(raw):
-    """pymavlink verifies the signature of raw with KEY."""
-    mav = M.MAVLink(None)
-    mav.signing.secret_key = KEY
-    mav.signing.allow_unsigned_callback = None
-    msgs = mav.parse_buffer(raw) or []
-    return len(msgs) == 1 and msgs[0].get_type() != "BAD_DATA" and mav.signing.sig_count == 1
-
-
 def inbound(bin_):
     z = Session()
     z.subscribe("%s/**" % PREFIX)
@@ -199,16 +180,7 @@ def inbound(bin_):
         return None
     veh = Peer("vehicle", M, 1, 1, dest=ports[0])
     sveh = Peer("signed vehicle", M, 2, 1, dest=ports[1], key=KEY, link_id=4)
-    gcs_tx = M.MAVLink(None, srcSystem=255, srcComponent=190)
-    gcs_v1 = V1.MAVLink(None, srcSystem=255, srcComponent=191)
-    signed_tx = M.MAVLink(None, srcSystem=254, srcComponent=1)
-    signed_tx.signing.secret_key, signed_tx.signing.link_id = KEY, 9
-    signed_tx.signing.sign_outgoing, signed_tx.signing.timestamp = True, ri.signing_now()
-    plain = [
-        bytes(M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0).pack(gcs_tx)),
-        bytes(V1.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(gcs_v1)),
-    ]
-    signed = [bytes(M.MAVLink_param_request_list_message(2, 1).pack(signed_tx))]
+    plain, signed = bridge_interop.inbound_frames()
     try:
         check(wait_subscribed(z, "%s/in" % PREFIX), "the link never subscribed to %s/in" % PREFIX)
         veh.send(heartbeat(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA), v1=True)
@@ -217,12 +189,7 @@ def inbound(bin_):
         for raw in plain + signed:
             z.s.put("%s/in" % PREFIX, raw)
         want = [(veh, raw) for raw in plain] + [(sveh, raw) for raw in signed]
-        deadline = time.monotonic() + 3
-        while time.monotonic() < deadline and not all(any(f.raw == raw for f in p.frames()) for p, raw in want):
-            time.sleep(0.05)
-        for p, raw in want:
-            check(any(f.raw == raw for f in p.frames()), "frame %s from mav/F/V/in never reached the %s byte for "
-                  "byte; it got %s" % (raw.hex(), p.name, p.frames()[:5]))
+        bridge_interop.check_delivered(want)
         echoed = [k for k, p, *_ in z.samples() if p in plain + signed and not k.endswith("/in")]
         check(not echoed, "frames from Zenoh were put back on %s" % echoed)
         return "%d frames from mav/F/V/in reached the vehicles byte for byte (v2, v1, a signed one), none put back" % len(want)
@@ -348,12 +315,8 @@ def ground(bin_):
 
 
 def restart(bin_):
-    z = Session()
-    z.subscribe("%s/**" % PREFIX)
-    port = free_port()
-    router, _ = start_router(bin_, lambda: ["udpin:127.0.0.1:%d" % port, z.url()])
+    z, router, port = vehicle_router(bin_)
     if router is None:
-        z.close()
         return None
     veh = Peer("vehicle", M, 1, 1, dest=port)
     try:
