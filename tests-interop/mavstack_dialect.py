@@ -65,7 +65,9 @@ def load():
         with open(wrapper, "w", encoding="utf-8") as f:
             f.write('<?xml version="1.0"?>\n<mavlink>\n  <include>ardupilotmega.xml</include>\n'
                     "  <messages>%s</messages>\n</mavlink>\n" % _extra_messages())
-        tmp = os.path.join(out, NAME + "_tmp")  # mavgen appends ".py"
+        # mavgen appends ".py"; one name per process (test processes may generate at once),
+        # and the rename is atomic.
+        tmp = os.path.join(out, "%s_tmp%d" % (NAME, os.getpid()))
         opts = mavgen.Opts(tmp, wire_protocol=mavgen.mavparse.PROTOCOL_2_0, language="Python3", validate=False)
         with contextlib.redirect_stdout(sys.stderr):  # mavgen reports on stdout
             ok = mavgen.mavgen(opts, [wrapper])

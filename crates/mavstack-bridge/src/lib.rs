@@ -109,11 +109,11 @@ pub fn open(spec: &BridgeSpec, dialect: mavstack_router::InfoFn) -> Result<Bridg
         feature,
     };
     match spec.transport {
-        #[cfg(feature = "mqtt")]
         #[cfg(feature = "tls")]
         Transport::Mqtts => mqtt::open(spec, dialect),
         #[cfg(not(feature = "tls"))]
         Transport::Mqtts => Err(not_built("mqtts", "tls")),
+        #[cfg(feature = "mqtt")]
         Transport::Mqtt => mqtt::open(spec, dialect),
         #[cfg(not(feature = "mqtt"))]
         Transport::Mqtt => Err(not_built("mqtt", "mqtt")),
