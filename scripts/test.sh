@@ -30,14 +30,7 @@ step "cargo clippy (all targets, all features, -D warnings)"
 cargo clippy --workspace --all-targets --all-features --locked -- -D warnings
 
 step "cargo test (workspace, all features)"
-# cargo-nextest when the machine has it (.config/nextest.toml): the test binaries run side by
-# side (most of their time is spent waiting on peers and sockets), then the doctests.
-if cargo nextest --version >/dev/null 2>&1; then
-    cargo nextest run --workspace --all-features --locked
-    cargo test --workspace --all-features --locked --doc
-else
-    cargo test --workspace --all-features --locked
-fi
+cargo test --workspace --all-features --locked
 
 step "Python package: maturin builds the wheel, installed in .venv, pytest"
 # The same build as `pip install crates/mavstack-python` (release, abi3), then the package's
