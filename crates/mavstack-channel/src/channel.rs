@@ -303,6 +303,12 @@ impl<L: CrcExtra> Channel<L> {
         None
     }
 
+    /// Whether [`poll_transmit`](Self::poll_transmit) has a frame to give.
+    #[must_use]
+    pub const fn has_transmits(&self) -> bool {
+        self.transmits.len() > 0
+    }
+
     /// When to call [`handle_timeout`](Self::handle_timeout) next, or `None` if no timer
     /// runs.
     #[must_use]
@@ -707,8 +713,11 @@ impl<L: CrcExtra> Channel<L> {
             answered: request.is_some_and(|a| a != ProtocolVersionAnswer::Ignored),
             protocol_version_request: request,
         }));
-        for event in after.into_iter().flatten() {
-            self.push_event(event);
+        // Taken one by one (moving the whole array would copy four events' room).
+        for event in &mut after {
+            if let Some(event) = event.take() {
+                self.push_event(event);
+            }
         }
     }
 

@@ -34,8 +34,14 @@ impl<T, const N: usize> Queue<T, N> {
             return None;
         }
         let item = self.items[self.head].take();
-        self.head = (self.head + 1) % N;
         self.len -= 1;
+        // An empty queue starts again at its first place: a state machine that holds one
+        // item at a time keeps using the same (cached) memory.
+        self.head = if self.len == 0 {
+            0
+        } else {
+            (self.head + 1) % N
+        };
         item
     }
 

@@ -436,9 +436,12 @@ impl<D: Dialect> Router<D> {
     /// Queues what `id`'s channel sends on its own (a vehicle link's handshake answers) as
     /// control traffic of that link.
     fn drain_channel_transmits(&mut self, now: Instant, id: LinkId) {
+        let Some(l) = self.link_mut(id) else { return };
+        if !l.channel.has_transmits() {
+            return;
+        }
         let mut buf = [0u8; MAX_FRAME_LEN];
         let mut queued = false;
-        let Some(l) = self.link_mut(id) else { return };
         while let Some(t) = l.channel.poll_transmit(now, &mut buf) {
             if l.queue.push(true, &buf[..t.len], l.config.queue_frames) {
                 l.counters.tx_frames += 1;
@@ -597,10 +600,12 @@ impl<D: Dialect> Router<D> {
             Ok(plan) => plan,
             Err(reason) => return out.counters.dropped.count(reason),
         };
-        let mut buf = [0u8; MAX_FRAME_LEN];
+        // Set up only for a conversion: a frame that goes as it is is not copied here.
+        let mut buf;
         let bytes: &[u8] = match (plan, info) {
             (Plan::AsIs, _) => frame.as_bytes(),
             (Plan::Reframe { version, sign }, Some(info)) => {
+                buf = [0u8; MAX_FRAME_LEN];
                 let len = match convert::reframe(&frame, info, version, sign, &mut buf) {
                     Ok(len) => len,
                     Err(reason) => return out.counters.dropped.count(reason),
