@@ -58,9 +58,9 @@ pub(crate) struct RouterArgs {
     #[arg(long, default_value_t = 191)]
     compid: u8,
     /// How to read under a steady stream (above 5,000 datagrams a second): `sleep` (the
-    /// router's thread sleeps 1 ms between bursts: the least CPU), `timer` (waits on a
-    /// timer: its thread still wakes for each datagram), `off` (every datagram as it
-    /// comes: the least latency).
+    /// router's thread sleeps 1 ms after each small burst: the least CPU), `timer` (sleeps
+    /// 1 ms on the wake-up that starts a burst), `off` (every datagram as it comes: the
+    /// least latency).
     #[arg(long, value_enum, default_value = "sleep")]
     input_moderation: ModerationArg,
     #[command(flatten)]
@@ -106,7 +106,7 @@ impl HttpArgs {
 pub(crate) enum ModerationArg {
     /// The thread sleeps between bursts.
     Sleep,
-    /// A timer between bursts.
+    /// A pause when a burst starts.
     Timer,
     /// Every datagram as it comes.
     Off,
@@ -220,8 +220,9 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
     let stats_every = args.stats.map(|s| seconds(s, "--stats")).transpose()?;
     let http = args.http.addr()?;
     let dialect = dialect(&dialect_name)?;
-    // One thread: the node's task owns every socket, and a second worker would only add
-    // cross-thread wake-ups (and spin) to each datagram.
+    // The node runs on a thread of its own, waiting on its UDP sockets directly (no
+    // scheduler between a datagram's wake-up and the forwarded frames); one runtime thread
+    // beside it runs the TCP and serial links' tasks, signals and statistics.
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
@@ -230,7 +231,8 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         let mut builder = Node::builder()
             .router(config)
             .dialect(dialect)
-            .input_moderation(moderation);
+            .input_moderation(moderation)
+            .own_thread(true);
         if heartbeat {
             let hb = mavstack::dialects::common::Heartbeat {
                 r#type: mavstack::dialects::common::MavType::ONBOARD_CONTROLLER,

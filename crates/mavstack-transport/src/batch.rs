@@ -39,6 +39,9 @@ pub(crate) struct RecvBatch {
     pub(crate) truncated: u64,
     /// Batch mode (see above).
     busy: bool,
+    /// Batches whatever the reads find: the driver says the stream is steady (see
+    /// [`crate::Link::set_bulk_reads`]).
+    pub(crate) bulk: bool,
 }
 
 /// What one [`RecvBatch::recv`] found.
@@ -58,6 +61,7 @@ impl RecvBatch {
             got: Vec::with_capacity(RECV_BATCH),
             truncated: 0,
             busy: false,
+            bulk: false,
         }
     }
 
@@ -66,22 +70,33 @@ impl RecvBatch {
     ///
     /// # Errors
     /// A receive error other than "would block".
-    pub(crate) fn recv(&mut self, socket: &UdpIo) -> io::Result<Received> {
+    pub(crate) fn recv(&mut self, socket: &mut UdpIo) -> io::Result<Received> {
         self.got.clear();
-        let want = if self.busy { RECV_BATCH } else { PAIR };
+        // A socket under a level-triggered poll of the caller's is read one datagram at a
+        // time while they come one at a time: the poll reports it again if another waits.
+        let level = socket.level_triggered();
+        let want = if self.busy || self.bulk {
+            RECV_BATCH
+        } else if level {
+            1
+        } else {
+            PAIR
+        };
         let count = match socket.try_read(|s| self.recv_now(s, want)) {
             Ok(n) => n,
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => 0,
             Err(e) => return Err(e),
         };
-        let drained = BATCHED && count < want;
+        let drained = (BATCHED && count < want) || (level && want == 1);
         if drained && count > 0 {
             // Fewer than asked for: the queue was empty when the call returned. Say so to
             // the runtime now rather than with another system call (a datagram that
             // arrived meanwhile raised readiness again: the runtime's ticks see to that).
             socket.drained();
         }
-        self.busy = if self.busy { count > 1 } else { count == PAIR };
+        if !level {
+            self.busy = if self.busy { count > 1 } else { count == PAIR };
+        }
         Ok(Received {
             count,
             more: count > 0 && !drained,
@@ -99,7 +114,9 @@ impl RecvBatch {
     /// thread: no allocation).
     #[cfg(target_os = "linux")]
     fn recv_now(&mut self, socket: &std::net::UdpSocket, want: usize) -> io::Result<usize> {
-        if want <= PAIR {
+        if want == 1 {
+            self.recv_one(socket)
+        } else if want <= PAIR {
             self.recv_slots::<PAIR>(socket)
         } else {
             self.recv_slots::<RECV_BATCH>(socket)
@@ -150,6 +167,11 @@ impl RecvBatch {
     /// One datagram per call off Linux.
     #[cfg(not(target_os = "linux"))]
     fn recv_now(&mut self, socket: &std::net::UdpSocket, _want: usize) -> io::Result<usize> {
+        self.recv_one(socket)
+    }
+
+    /// One `recvfrom` into the first slot.
+    fn recv_one(&mut self, socket: &std::net::UdpSocket) -> io::Result<usize> {
         let (len, from) = socket.recv_from(&mut self.buf[..RECV_SLOT])?;
         if len >= RECV_SLOT {
             // Cut (or exactly a slot long, which no MAVLink datagram is).

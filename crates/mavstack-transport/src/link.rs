@@ -487,6 +487,42 @@ impl Link {
         }
     }
 
+    /// Takes a UDP link's socket off the runtime's reactor, for a driver on a thread of its
+    /// own that waits on its own poll (one `epoll_wait` per wake-up and no runtime between
+    /// it and the socket). Returns the descriptor that poll is to watch, level-triggered,
+    /// for reading; from then on [`Link::poll_ready`] is ready only after
+    /// [`Link::set_readable`], which the caller calls when its poll reports the descriptor.
+    /// Other links stay with the runtime (`None`): their helper tasks wake the waker given
+    /// to [`Link::poll_ready`], whatever thread it belongs to.
+    ///
+    /// # Errors
+    /// The socket's descriptor could not be duplicated; the link stays as it was.
+    #[cfg(target_os = "linux")]
+    pub fn watch_externally(&mut self) -> io::Result<Option<std::os::fd::BorrowedFd<'_>>> {
+        match &mut self.kind {
+            Kind::Udp(udp) => udp.socket.watch_externally().map(Some),
+            Kind::Tasks(_) => Ok(None),
+        }
+    }
+
+    /// Whether reads take many datagrams at once (a UDP link under a steady stream; the
+    /// driver knows the rate). Off, a link whose socket the caller watches (see
+    /// [`Link::watch_externally`]) reads one datagram per wake-up: the cheapest read, and
+    /// the frame goes on at once.
+    pub fn set_bulk_reads(&mut self, on: bool) {
+        if let Kind::Udp(udp) = &mut self.kind {
+            udp.rx.bulk = on;
+        }
+    }
+
+    /// The caller's poll reported this link's socket (see [`Link::watch_externally`]):
+    /// input may be waiting.
+    pub fn set_readable(&mut self) {
+        if let Kind::Udp(udp) = &mut self.kind {
+            udp.socket.set_readable();
+        }
+    }
+
     /// Hands whatever input is ready (a bounded batch) to `input`. Returns false when
     /// nothing was ready after all (a UDP socket that had been drained already).
     pub fn dispatch<I: Input>(&mut self, input: &mut I) -> bool {
@@ -691,13 +727,17 @@ struct Udp {
     peers: UdpPeers,
 }
 
+/// A map looked up per datagram: foldhash (seeded per process) instead of SipHash, a tenth
+/// of the cost for a socket address.
+type FastMap<K, V> = HashMap<K, V, foldhash::fast::RandomState>;
+
 /// The peers of one UDP socket.
 #[derive(Debug)]
 struct UdpPeers {
     /// `udpout`/`udpbcast`: the fixed destination, a peer that never expires.
     target: Option<(PeerId, SocketAddr)>,
-    by_addr: HashMap<SocketAddr, PeerId>,
-    learned: HashMap<PeerId, Learned>,
+    by_addr: FastMap<SocketAddr, PeerId>,
+    learned: FastMap<PeerId, Learned>,
     peer_timeout: Duration,
     next_expiry: Option<Instant>,
     ids: PeerIds,
@@ -717,8 +757,8 @@ impl Udp {
             pack: 0,
             peers: UdpPeers {
                 target,
-                by_addr: HashMap::new(),
-                learned: HashMap::new(),
+                by_addr: FastMap::default(),
+                learned: FastMap::default(),
                 peer_timeout: options.peer_timeout,
                 next_expiry: None,
                 ids,
@@ -742,7 +782,7 @@ impl Udp {
         // next call (after the caller has forwarded this one).
         let mut delivered = 0;
         for _ in 0..BATCH.div_ceil(RECV_BATCH) {
-            let got = match self.rx.recv(&self.socket) {
+            let got = match self.rx.recv(&mut self.socket) {
                 Ok(got) => got,
                 Err(e) => {
                     stats.rx_errors += 1;

@@ -111,6 +111,8 @@
 pub mod conform;
 pub mod link_spec;
 pub mod node;
+#[cfg(target_os = "linux")]
+mod own_thread;
 pub mod radio;
 pub mod router_conf;
 #[cfg(feature = "services")]

@@ -76,6 +76,12 @@ pub enum NodeError {
         /// Why.
         source: std::io::Error,
     },
+    /// The poll of a node on its own thread failed (see [`NodeBuilder::own_thread`]).
+    #[error("poll: {source}")]
+    Poll {
+        /// Why.
+        source: std::io::Error,
+    },
     /// The driver task ended abnormally.
     #[error("node stopped: {0}")]
     Stopped(String),
@@ -318,6 +324,7 @@ pub struct NodeBuilder {
     heartbeat: Option<(Vec<u8>, Duration)>,
     role: Option<LinkRole>,
     moderation: InputModeration,
+    own_thread: bool,
     http: Option<SocketAddr>,
     /// Taps and event subscribers registered before the node starts.
     taps: Vec<mpsc::Sender<Tapped>>,
@@ -409,6 +416,20 @@ impl NodeBuilder {
     #[must_use]
     pub const fn input_moderation(mut self, mode: InputModeration) -> Self {
         self.moderation = mode;
+        self
+    }
+
+    /// Runs the node on a thread of its own (default off: a task of the runtime). Its UDP
+    /// sockets are then watched by that thread's own `epoll` (through `mio`) instead of the
+    /// runtime's reactor, and a datagram goes from the wake-up to the forwarded frames'
+    /// `sendto` with no scheduler in between: the least latency and CPU per frame, for a
+    /// process whose main work is the node (the `mavstack router` daemon). TCP, serial and
+    /// file links, the handles' requests and the subscriptions stay on the runtime and wake
+    /// the thread. Both kinds of [`InputModeration`] sleep that thread between bursts.
+    /// Off unix this setting has no effect.
+    #[must_use]
+    pub const fn own_thread(mut self, on: bool) -> Self {
+        self.own_thread = on;
         self
     }
 
@@ -517,7 +538,7 @@ impl NodeBuilder {
             slots.push(Slot {
                 io,
                 template: config,
-                peers: HashMap::new(),
+                peers: PeerLinks::default(),
             });
         }
         let log = match self.log_dir {
@@ -558,6 +579,14 @@ impl NodeBuilder {
             driver.router.config().system_id,
             driver.router.config().component_id,
         );
+        #[cfg(target_os = "linux")]
+        let task = if self.own_thread {
+            let runtime = tokio::runtime::Handle::current();
+            tokio::task::spawn_blocking(move || driver.run_on_thread(&runtime))
+        } else {
+            tokio::spawn(driver.run())
+        };
+        #[cfg(not(target_os = "linux"))]
         let task = tokio::spawn(driver.run());
         let node = Node {
             commands: tx,
@@ -611,6 +640,7 @@ impl Node {
             heartbeat: None,
             role: None,
             moderation: InputModeration::Timer,
+            own_thread: false,
             http: None,
             taps: Vec::new(),
             watchers: Vec::new(),
@@ -905,11 +935,15 @@ impl NodeHandle {
     }
 }
 
+/// A link's peers: their router link, framing and address, looked up per input (foldhash
+/// instead of SipHash).
+type PeerLinks = HashMap<PeerId, (LinkId, Framing, String), foldhash::fast::RandomState>;
+
 /// One configured link and the router links of its peers.
 struct Slot {
     io: Link,
     template: LinkConfig,
-    peers: HashMap<PeerId, (LinkId, Framing, String)>,
+    peers: PeerLinks,
 }
 
 struct Driver {
@@ -986,6 +1020,15 @@ impl Moderation {
         }
     }
 
+    /// After a turn: whether [`InputModeration::Sleep`] sleeps through the next
+    /// [`Moderation::PAUSE`] (busy, something was done, and the turn's burst was small
+    /// enough for a pause to gather more; a burst of [`Moderation::BIG_BURST`] means the
+    /// stream outruns the pause: read on).
+    fn pause_after(&self, busy: bool, worked: bool, inputs_before: u64) -> bool {
+        let burst = self.inputs.saturating_sub(inputs_before);
+        busy && worked && burst < Self::BIG_BURST && self.mode == InputModeration::Sleep
+    }
+
     /// Updates the rate; whether the stream is steady enough to read in bursts.
     fn busy(&mut self, now: Instant) -> bool {
         let elapsed = now.saturating_duration_since(self.since);
@@ -1003,6 +1046,15 @@ impl Moderation {
     }
 }
 
+/// What a driver turn leaves to do.
+enum Turn {
+    /// Wait for the next input; `worked`: the turn did something (it found input, a command
+    /// or a due timer).
+    Go { worked: bool },
+    /// Shut down.
+    Stop,
+}
+
 /// The node's own HEARTBEAT: its encoded payload, period and next time.
 struct Heartbeat {
     payload: Vec<u8>,
@@ -1015,7 +1067,7 @@ struct Feed<'a> {
     router: &'a mut Router<InfoFn>,
     slot: usize,
     template: &'a LinkConfig,
-    peers: &'a mut HashMap<PeerId, (LinkId, Framing, String)>,
+    peers: &'a mut PeerLinks,
     owners: &'a mut Vec<Option<(usize, PeerId)>>,
     /// Peer events, when someone watches.
     pending: Option<&'a mut Vec<NodeEvent>>,
@@ -1107,19 +1159,23 @@ impl Driver {
         )
     }
 
-    async fn run(mut self) -> Result<NodeReport, NodeError> {
+    fn start_links(&mut self) {
         for i in 0..self.slots.len() {
             let (io, mut feed) = self.feed(i);
             io.start(&mut feed);
         }
+    }
+
+    /// The node as a task of the runtime: the runtime's reactor watches the sockets.
+    async fn run(mut self) -> Result<NodeReport, NodeError> {
+        self.start_links();
         let mut ready = vec![false; self.slots.len()];
         let sleep = tokio::time::sleep(Duration::from_secs(3600));
         tokio::pin!(sleep);
-        let mut result = Ok(());
         let mut armed: Option<Instant> = None;
         let mut timer_fired = false;
-        loop {
-            let deadline = self.next_deadline();
+        let result = loop {
+            let deadline = self.next_deadline(clock::now());
             // Re-arming the timer costs a trip through the runtime's timer wheel: only when the
             // deadline moved (or after it fired).
             if let Some(d) = deadline
@@ -1132,17 +1188,7 @@ impl Driver {
             let mut timer = false;
             let mut waited = false;
             core::future::poll_fn(|cx| {
-                let mut any = false;
-                for (slot, r) in self.slots.iter_mut().zip(ready.iter_mut()) {
-                    if slot.io.finished().is_none() && slot.io.poll_ready(cx).is_ready() {
-                        *r = true;
-                        any = true;
-                    }
-                }
-                if let core::task::Poll::Ready(c) = self.commands.poll_recv(cx) {
-                    command = Some(c);
-                    any = true;
-                }
+                let mut any = self.poll_inputs(cx, &mut ready, &mut command);
                 if deadline.is_some() && sleep.as_mut().poll(cx).is_ready() {
                     timer = true;
                     any = true;
@@ -1162,111 +1208,13 @@ impl Driver {
             if busy && waited && self.moderation.mode == InputModeration::Timer {
                 tokio::time::sleep(Moderation::PAUSE).await;
             }
-            let mut worked = command.is_some() || timer;
-            for (i, r) in ready.iter_mut().enumerate() {
-                if core::mem::take(r) {
-                    let (io, mut feed) = self.feed(i);
-                    worked |= io.dispatch(&mut feed);
-                }
-            }
-            let now = clock::now();
             timer_fired = timer;
-            if let Some(hb) = &mut self.heartbeat
-                && now >= hb.next
-            {
-                hb.next = now + hb.period;
-                self.router.send(
-                    now,
-                    SendTo::Target,
-                    mavstack_dialects::common::Heartbeat::ID,
-                    &hb.payload,
-                );
-            }
-            if timer {
-                self.router.handle_timeout(now);
-                for i in 0..self.slots.len() {
-                    if self.slots[i]
-                        .io
-                        .next_housekeeping()
-                        .is_some_and(|t| now >= t)
-                    {
-                        let (io, mut feed) = self.feed(i);
-                        io.housekeeping(&mut feed);
-                    }
-                }
-            }
-            self.drain_events()?;
-            self.flush();
-            match command {
-                Some(Some(Command::Report(tx))) => {
-                    let _ = tx.send(self.report(clock::now()));
-                }
-                Some(Some(Command::Send {
-                    to,
-                    msg_id,
-                    payload,
-                    done,
-                })) => {
-                    let queued = self.router.send(clock::now(), to, msg_id, &payload);
-                    self.flush();
-                    let _ = done.send(queued);
-                }
-                Some(Some(Command::Subscribe(tx, done))) => {
-                    self.subscribers.push(tx);
-                    let _ = done.send(());
-                }
-                Some(Some(Command::Events(tx, done))) => {
-                    self.watchers.push(tx);
-                    let _ = done.send(());
-                }
-                Some(Some(Command::Tap(tx, done))) => {
-                    self.taps.push(tx);
-                    let _ = done.send(());
-                }
-                Some(Some(Command::SendBytes { link, bytes, done })) => {
-                    let sent = match self.owners.get(link.index()) {
-                        Some(Some((slot, peer))) => {
-                            let io = &mut self.slots[*slot].io;
-                            io.send(Dest::Peer(*peer), &bytes);
-                            io.flush();
-                            true
-                        }
-                        _ => false,
-                    };
-                    let _ = done.send(sent);
-                }
-                Some(Some(Command::Handshake {
-                    link,
-                    target,
-                    method,
-                    encoding,
-                    done,
-                })) => {
-                    let started =
-                        self.router
-                            .start_handshake(clock::now(), link, target, method, encoding);
-                    self.flush();
-                    let _ = done.send(started);
-                }
-                Some(Some(Command::SetSigning {
-                    link,
-                    signing,
-                    done,
-                })) => {
-                    let set = self.router.set_signing(clock::now(), link, signing);
-                    self.drain_events()?;
-                    let _ = done.send(set);
-                }
-                Some(Some(Command::Shutdown) | None) => break,
-                None => {}
-            }
-            // A burst this big means the stream outruns a millisecond's sleep: read on.
-            let burst = self.moderation.inputs.saturating_sub(inputs_before);
-            if busy
-                && worked
-                && burst < Moderation::BIG_BURST
-                && self.moderation.mode == InputModeration::Sleep
-            {
+            let worked = match self.turn(&mut ready, command, timer) {
+                Ok(Turn::Go { worked }) => worked,
+                Ok(Turn::Stop) => break Ok(()),
+                Err(e) => break Err(e),
+            };
+            if self.moderation.pause_after(busy, worked, inputs_before) {
                 // Sleep through the next millisecond of the stream, then let the runtime
                 // look at the sockets (the yield below) and read it all in one turn.
                 std::thread::sleep(Moderation::PAUSE);
@@ -1278,19 +1226,238 @@ impl Driver {
                 // nothing, a drained socket's last look, goes straight back to waiting.)
                 tokio::task::yield_now().await;
             }
-            if let Some((i, Err(e))) = self
-                .slots
-                .iter()
-                .enumerate()
-                .find_map(|(i, s)| s.io.finished().map(|r| (i, r.clone())))
-            {
-                result = Err(NodeError::Link {
-                    name: self.slots[i].template.name.clone(),
-                    source: e,
-                });
-                break;
+            if let Some(e) = self.failed() {
+                break Err(e);
+            }
+        };
+        self.finish(result).await
+    }
+
+    /// The node on a thread of its own (see [`NodeBuilder::own_thread`]): its UDP sockets
+    /// move to an `epoll` this thread waits on; the other links' tasks, the handles' commands
+    /// and the subscribers stay on `runtime`, and wake the poll through its waker.
+    #[cfg(target_os = "linux")]
+    fn run_on_thread(mut self, runtime: &tokio::runtime::Handle) -> Result<NodeReport, NodeError> {
+        let result = self.run_polled();
+        runtime.block_on(self.finish(result))
+    }
+
+    #[cfg(target_os = "linux")]
+    fn run_polled(&mut self) -> Result<(), NodeError> {
+        let polling = |source: std::io::Error| NodeError::Poll { source };
+        let mut waiter = crate::own_thread::Waiter::new().map_err(polling)?;
+        for (i, slot) in self.slots.iter_mut().enumerate() {
+            if let Some(fd) = slot.io.watch_externally().map_err(polling)? {
+                waiter.watch(fd, i).map_err(polling)?;
             }
         }
+        let waker = waiter.waker().clone();
+        let mut cx = core::task::Context::from_waker(&waker);
+        self.start_links();
+        let mut ready = vec![false; self.slots.len()];
+        let mut bulk = false;
+        loop {
+            let mut command = None;
+            let mut waited = false;
+            // Waiting changes none of the node's deadlines: worked out once per turn.
+            let mut deadline = None;
+            let (timer, now) = loop {
+                let any = self.poll_inputs(&mut cx, &mut ready, &mut command);
+                let now = clock::now();
+                let deadline = *deadline.get_or_insert_with(|| self.next_deadline(now));
+                let due = deadline.is_some_and(|d| now >= d);
+                let slots = &mut self.slots;
+                let mut mark = |i: usize| {
+                    if let Some(slot) = slots.get_mut(i) {
+                        slot.io.set_readable();
+                    }
+                };
+                if any || due {
+                    if !waited {
+                        // Input left from the last turn: the other sockets' readiness is
+                        // looked at too, so that a link that always has more cannot starve
+                        // them (a datagram per turn at most, under a steady stream).
+                        waiter.look(&mut mark).map_err(polling)?;
+                        self.poll_inputs(&mut cx, &mut ready, &mut command);
+                    }
+                    break (due, now);
+                }
+                waited = true;
+                waiter.wait(deadline, now, mark).map_err(polling)?;
+            };
+            let input = ready.iter().any(|&r| r);
+            let busy = input && self.moderation.busy(now);
+            // Under a steady stream the sockets are read in batches (one datagram per read
+            // otherwise: the cheapest read, and the frame goes on at once).
+            if self.moderation.busy != bulk {
+                bulk = self.moderation.busy;
+                for slot in &mut self.slots {
+                    slot.io.set_bulk_reads(bulk);
+                }
+            }
+            let inputs_before = self.moderation.inputs;
+            // Under a steady stream the thread reads in bursts: nothing else runs on it, so
+            // both kinds of moderation sleep it (no wake-ups while datagrams pile up).
+            if busy && waited && self.moderation.mode == InputModeration::Timer {
+                std::thread::sleep(Moderation::PAUSE);
+            }
+            let Turn::Go { worked } = self.turn(&mut ready, command, timer)? else {
+                return Ok(());
+            };
+            if self.moderation.pause_after(busy, worked, inputs_before) {
+                std::thread::sleep(Moderation::PAUSE);
+            }
+            if let Some(e) = self.failed() {
+                return Err(e);
+            }
+        }
+    }
+
+    /// Polls every running link and the command queue with `cx`; marks the links that may
+    /// have input in `ready` and takes a command. Whether anything was ready.
+    fn poll_inputs(
+        &mut self,
+        cx: &mut core::task::Context<'_>,
+        ready: &mut [bool],
+        command: &mut Option<Option<Command>>,
+    ) -> bool {
+        let mut any = false;
+        for (slot, r) in self.slots.iter_mut().zip(ready.iter_mut()) {
+            if slot.io.finished().is_none() && slot.io.poll_ready(cx).is_ready() {
+                *r = true;
+                any = true;
+            }
+        }
+        if command.is_none()
+            && let core::task::Poll::Ready(c) = self.commands.poll_recv(cx)
+        {
+            *command = Some(c);
+            any = true;
+        }
+        any
+    }
+
+    /// One turn after a wake-up: reads the ready links, runs what is due, forwards, and
+    /// carries out `command` (`Some(None)`: every handle is gone).
+    fn turn(
+        &mut self,
+        ready: &mut [bool],
+        command: Option<Option<Command>>,
+        timer: bool,
+    ) -> Result<Turn, NodeError> {
+        let mut worked = command.is_some() || timer;
+        for (i, r) in ready.iter_mut().enumerate() {
+            if core::mem::take(r) {
+                let (io, mut feed) = self.feed(i);
+                worked |= io.dispatch(&mut feed);
+            }
+        }
+        let now = clock::now();
+        if let Some(hb) = &mut self.heartbeat
+            && now >= hb.next
+        {
+            hb.next = now + hb.period;
+            self.router.send(
+                now,
+                SendTo::Target,
+                mavstack_dialects::common::Heartbeat::ID,
+                &hb.payload,
+            );
+        }
+        if timer {
+            self.router.handle_timeout(now);
+            for i in 0..self.slots.len() {
+                if self.slots[i]
+                    .io
+                    .next_housekeeping()
+                    .is_some_and(|t| now >= t)
+                {
+                    let (io, mut feed) = self.feed(i);
+                    io.housekeeping(&mut feed);
+                }
+            }
+        }
+        self.drain_events()?;
+        self.flush();
+        match command {
+            Some(Some(Command::Report(tx))) => {
+                let _ = tx.send(self.report(clock::now()));
+            }
+            Some(Some(Command::Send {
+                to,
+                msg_id,
+                payload,
+                done,
+            })) => {
+                let queued = self.router.send(clock::now(), to, msg_id, &payload);
+                self.flush();
+                let _ = done.send(queued);
+            }
+            Some(Some(Command::Subscribe(tx, done))) => {
+                self.subscribers.push(tx);
+                let _ = done.send(());
+            }
+            Some(Some(Command::Events(tx, done))) => {
+                self.watchers.push(tx);
+                let _ = done.send(());
+            }
+            Some(Some(Command::Tap(tx, done))) => {
+                self.taps.push(tx);
+                let _ = done.send(());
+            }
+            Some(Some(Command::SendBytes { link, bytes, done })) => {
+                let sent = match self.owners.get(link.index()) {
+                    Some(Some((slot, peer))) => {
+                        let io = &mut self.slots[*slot].io;
+                        io.send(Dest::Peer(*peer), &bytes);
+                        io.flush();
+                        true
+                    }
+                    _ => false,
+                };
+                let _ = done.send(sent);
+            }
+            Some(Some(Command::Handshake {
+                link,
+                target,
+                method,
+                encoding,
+                done,
+            })) => {
+                let started =
+                    self.router
+                        .start_handshake(clock::now(), link, target, method, encoding);
+                self.flush();
+                let _ = done.send(started);
+            }
+            Some(Some(Command::SetSigning {
+                link,
+                signing,
+                done,
+            })) => {
+                let set = self.router.set_signing(clock::now(), link, signing);
+                self.drain_events()?;
+                let _ = done.send(set);
+            }
+            Some(Some(Command::Shutdown) | None) => return Ok(Turn::Stop),
+            None => {}
+        }
+        Ok(Turn::Go { worked })
+    }
+
+    /// The error of the first link that failed.
+    fn failed(&self) -> Option<NodeError> {
+        self.slots.iter().find_map(|s| match s.io.finished() {
+            Some(Err(e)) => Some(NodeError::Link {
+                name: s.template.name.clone(),
+                source: e.clone(),
+            }),
+            _ => None,
+        })
+    }
+
+    /// Sends what is queued, closes the links, writes out the log; the final report.
+    async fn finish(mut self, result: Result<(), NodeError>) -> Result<NodeReport, NodeError> {
         self.flush();
         for slot in &mut self.slots {
             if let Err(e) = slot.io.shutdown().await {
@@ -1306,7 +1473,7 @@ impl Driver {
         result.map(|()| self.report(clock::now()))
     }
 
-    fn next_deadline(&self) -> Option<Instant> {
+    fn next_deadline(&self, now: Instant) -> Option<Instant> {
         let housekeeping = self
             .slots
             .iter()
@@ -1316,7 +1483,7 @@ impl Driver {
             .log
             .as_ref()
             .and_then(|(_, w)| w.flush_deadline())
-            .map(|_| clock::now() + Duration::from_secs(1));
+            .map(|_| now + Duration::from_secs(1));
         let heartbeat = self.heartbeat.as_ref().map(|h| h.next);
         [self.router.poll_timeout(), housekeeping, log, heartbeat]
             .into_iter()

@@ -42,8 +42,20 @@ fn peer(port: u16) -> UdpSocket {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_node_receives_what_is_addressed_to_it_and_sends_in_each_links_version() {
+    receives_and_sends(false).await;
+}
+
+/// The same on a thread of its own (its UDP sockets on its own epoll, as `mavstack router`
+/// runs it).
+#[tokio::test(flavor = "current_thread")]
+async fn a_node_on_its_own_thread_receives_and_sends_in_each_links_version() {
+    receives_and_sends(true).await;
+}
+
+async fn receives_and_sends(own_thread: bool) {
     let none = |_: &str| None;
     let node = Node::builder()
+        .own_thread(own_thread)
         .identity(1, 191)
         .link(LinkSpec::parse("udpin:127.0.0.1:0?version=1&name=legacy", &none).expect("spec"))
         .link(LinkSpec::parse("udpin:127.0.0.1:0?name=gcs", &none).expect("spec"))
@@ -121,6 +133,16 @@ async fn a_node_receives_what_is_addressed_to_it_and_sends_in_each_links_version
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_node_with_a_heartbeat_announces_itself_on_every_link() {
+    announces_itself(false).await;
+}
+
+/// Its deadlines (the HEARTBEAT's period) on a thread of its own: the thread's timer.
+#[tokio::test(flavor = "current_thread")]
+async fn a_node_on_its_own_thread_keeps_its_heartbeat_period() {
+    announces_itself(true).await;
+}
+
+async fn announces_itself(own_thread: bool) {
     let none = |_: &str| None;
     let listener = UdpSocket::bind("127.0.0.1:0").expect("bind");
     listener
@@ -128,6 +150,7 @@ async fn a_node_with_a_heartbeat_announces_itself_on_every_link() {
         .expect("timeout");
     let port = listener.local_addr().expect("addr").port();
     let node = Node::builder()
+        .own_thread(own_thread)
         .identity(7, 191)
         .heartbeat(&Heartbeat::default(), Duration::from_millis(100))
         .link(LinkSpec::parse(&format!("udpout:127.0.0.1:{port}?version=2"), &none).expect("spec"))
@@ -137,5 +160,61 @@ async fn a_node_with_a_heartbeat_announces_itself_on_every_link() {
     for _ in 0..3 {
         assert_eq!(next(&listener), Some((Version::V2, 7, 191, Heartbeat::ID)));
     }
+    node.shutdown().await.expect("clean shutdown");
+}
+
+/// On a thread of its own, a node's TCP link stays with the runtime (its reader and writer
+/// are tasks) and wakes the thread: frames go both ways between a TCP client and a UDP peer,
+/// and the node stops on shutdown.
+#[tokio::test(flavor = "current_thread")]
+async fn a_node_on_its_own_thread_forwards_between_tcp_and_udp() {
+    use std::io::{Read as _, Write as _};
+
+    let none = |_: &str| None;
+    let node = Node::builder()
+        .own_thread(true)
+        .link(LinkSpec::parse("tcpin:127.0.0.1:0", &none).expect("spec"))
+        .link(LinkSpec::parse("udpin:127.0.0.1:0", &none).expect("spec"))
+        .start()
+        .await
+        .expect("starts");
+    let addrs: Vec<_> = node
+        .local_addrs()
+        .iter()
+        .map(|a| a.expect("bound"))
+        .collect();
+    let udp = peer(addrs[1].port());
+    let mut tcp = tokio::task::spawn_blocking(move || {
+        let tcp = std::net::TcpStream::connect(addrs[0]).expect("connect");
+        tcp.set_read_timeout(Some(Duration::from_secs(3)))
+            .expect("timeout");
+        tcp
+    })
+    .await
+    .expect("connected");
+
+    // The UDP peer is known once it has sent; then the TCP client's frame reaches it.
+    udp.send(&frame(&Heartbeat::default(), Version::V2, (2, 1)))
+        .expect("send");
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let from_tcp = frame(&Heartbeat::default(), Version::V2, (3, 1));
+    tcp.write_all(&from_tcp).expect("write");
+    let got = tokio::task::spawn_blocking(move || (next(&udp), udp))
+        .await
+        .expect("read");
+    assert_eq!(got.0, Some((Version::V2, 3, 1, Heartbeat::ID)));
+    let udp = got.1;
+
+    // And a UDP frame reaches the TCP client, byte for byte.
+    let from_udp = frame(&Heartbeat::default(), Version::V2, (2, 1));
+    udp.send(&from_udp).expect("send");
+    let read = tokio::task::spawn_blocking(move || {
+        let mut buf = vec![0u8; from_udp.len()];
+        tcp.read_exact(&mut buf).map(|()| (buf, from_udp))
+    })
+    .await
+    .expect("read");
+    let (buf, want) = read.expect("a frame on the TCP link");
+    assert_eq!(buf, want);
     node.shutdown().await.expect("clean shutdown");
 }
