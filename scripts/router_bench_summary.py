@@ -7,6 +7,13 @@ router and step, frames delivered to each output whether identical or converted 
 mismatch), the loss that leaves, and CPU seconds per 100 k frames so counted. Medians over
 rounds.
 
+The harness's latency table pools both outputs, but it too takes identical frames only: for the
+converting and signing variants it holds output 2 alone. A router sends a frame to its two
+outputs one after the other, and the second send waits for the first (on loopback a send
+carries the datagram all the way to the receiver: about 10 us). So the last table gives the
+latency of each output, minus direct's in the same round, medians over rounds: output 2 of a
+converting variant compares with the later-sent output of the others.
+
     python scripts/router_bench_summary.py target/router-bench/results.json
 """
 import json
@@ -30,14 +37,8 @@ def main(path):
             per100k = cpu / (min(got) / 1e5) if cpu and min(got) else None
             rows.setdefault((s["router"], st["step"]), []).append(
                 (min(got) / dur, max(0.0, 1 - min(got) / sent), sum(conv), per100k))
-    steps = []
-    for (_, step) in rows:
-        if step not in steps:
-            steps.append(step)
-    routers = []
-    for (r, _) in rows:
-        if r not in routers:
-            routers.append(r)
+    steps = first_seen(step for (_, step) in rows)
+    routers = first_seen(r for (r, _) in rows)
     print()
     print("Frames delivered per output counting converted ones (identical + converted), per second (loss); "
           "median over rounds. `conv` = frames that arrived converted (on output 1 of the v1 / signed variants).")
@@ -61,6 +62,43 @@ def main(path):
             if cpu:
                 cell += ", %.2f s/100k" % statistics.median(cpu)
             cells.append(cell)
+        print("| %s | %s |" % (r, " | ".join(cells)))
+    latency_per_output(data)
+
+
+def first_seen(items):
+    """The distinct items in the order they first appear."""
+    return list(dict.fromkeys(items))
+
+
+def latency_per_output(data):
+    """Added latency p50 / p99 per output, medians over rounds."""
+    direct = {}
+    for s in data["sessions"]:
+        if s["router"] == "direct" and s.get("latency_us"):
+            direct[s["round"]] = s["latency_us"]
+    per = {}
+    for s in data["sessions"]:
+        base = direct.get(s["round"])
+        if s["router"] == "direct" or not base:
+            continue
+        for i, lat in enumerate(s.get("latency_us_per_rx") or []):
+            if lat:
+                per.setdefault((s["router"], i), []).append(
+                    (lat["p50"] - base["p50"], lat["p99"] - base["p99"]))
+    routers = first_seen(r for (r, _) in per)
+    print()
+    print("Added latency per output at the latency step, p50 / p99 in us (minus direct's, medians "
+          "over rounds); `-` where the harness counted no identical frame (a converted output).")
+    print()
+    print("| router | output 1 | output 2 |")
+    print("|---|---|---|")
+    for r in routers:
+        cells = []
+        for i in range(2):
+            v = per.get((r, i))
+            cells.append("%.1f / %.1f" % (statistics.median(x[0] for x in v),
+                                          statistics.median(x[1] for x in v)) if v else "-")
         print("| %s | %s |" % (r, " | ".join(cells)))
 
 

@@ -3,7 +3,8 @@
 //! The MAVLink stack in one crate. A [`Node`] is one MAVLink component (a system and
 //! component id) with any number of links — UDP, TCP, serial — each with its own version and
 //! signing ([`LinkSpec`]: a connection string and link options), the router core between
-//! them, and one tokio task that owns every socket. On a node:
+//! them, and one driver that owns every socket: a tokio task, or a thread of its own for a
+//! process whose main work is the node ([`NodeBuilder::own_thread`]). On a node:
 //!
 //! - [`system::System`] is a remote system as a ground station sees it: its parameters,
 //!   missions, commands and telemetry (feature `services`);

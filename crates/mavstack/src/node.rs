@@ -1,6 +1,7 @@
 //! [`Node`]: one MAVLink component with many links, the router core between them, and one
-//! tokio task that owns every socket (the composition shared/DESIGN.md calls "One
-//! composition").
+//! driver that owns every socket (the composition shared/DESIGN.md calls "One
+//! composition"): a tokio task, or a thread of its own with its UDP sockets on its own
+//! `epoll` ([`NodeBuilder::own_thread`], what `mavstack router` runs).
 //!
 //! ```text
 //!  Node handle ── commands (stats, shutdown) ──►  driver task
@@ -420,13 +421,13 @@ impl NodeBuilder {
     }
 
     /// Runs the node on a thread of its own (default off: a task of the runtime). Its UDP
-    /// sockets are then watched by that thread's own `epoll` (through `mio`) instead of the
-    /// runtime's reactor, and a datagram goes from the wake-up to the forwarded frames'
-    /// `sendto` with no scheduler in between: the least latency and CPU per frame, for a
-    /// process whose main work is the node (the `mavstack router` daemon). TCP, serial and
-    /// file links, the handles' requests and the subscriptions stay on the runtime and wake
-    /// the thread. Both kinds of [`InputModeration`] sleep that thread between bursts.
-    /// Off unix this setting has no effect.
+    /// sockets are then watched by that thread's own level-triggered `epoll` instead of the
+    /// runtime's reactor: a datagram goes from the wake-up through one `recvfrom` to the
+    /// forwarded frames' `sendto` with no scheduler in between (the least latency and CPU per
+    /// frame), for a process whose main work is the node (the `mavstack router` daemon). TCP,
+    /// serial and file links, the handles' requests and the subscriptions stay on the runtime
+    /// and wake the thread. Both kinds of [`InputModeration`] sleep that thread between
+    /// bursts. Linux only: elsewhere the node stays a task.
     #[must_use]
     pub const fn own_thread(mut self, on: bool) -> Self {
         self.own_thread = on;
