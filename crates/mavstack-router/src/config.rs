@@ -78,7 +78,7 @@ impl IdFilter {
     #[inline]
     pub fn passes(&self, value: u32) -> bool {
         // Most links filter nothing: no search set up for empty lists.
-        if self.block.is_empty() && self.allow.is_none() {
+        if self.is_open() {
             return true;
         }
         !self.block.contains(&value) && self.allow.as_ref().is_none_or(|a| a.contains(&value))
@@ -86,6 +86,7 @@ impl IdFilter {
 
     /// Whether the filter lets everything through.
     #[must_use]
+    #[inline]
     pub fn is_open(&self) -> bool {
         self.allow.is_none() && self.block.is_empty()
     }

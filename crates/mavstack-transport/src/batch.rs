@@ -92,6 +92,7 @@ impl RecvBatch {
             // Fewer than asked for: the queue was empty when the call returned. Say so to
             // the runtime now rather than with another system call (a datagram that
             // arrived meanwhile raised readiness again: the runtime's ticks see to that).
+            // A level-triggered poll reports the socket again if one more waits.
             socket.drained();
         }
         if !level {

@@ -1277,7 +1277,7 @@ impl Driver {
                     if !waited {
                         // Input left from the last turn: the other sockets' readiness is
                         // looked at too, so that a link that always has more cannot starve
-                        // them (a datagram per turn at most, under a steady stream).
+                        // them (one `epoll_wait` more per turn, only while input is left).
                         waiter.look(&mut mark).map_err(polling)?;
                         self.poll_inputs(&mut cx, &mut ready, &mut command);
                     }
