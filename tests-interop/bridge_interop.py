@@ -6,7 +6,7 @@ pymavlink 2.4.50 plays the vehicle's network and packs and reads every frame.
 Usage: bridge_interop.py SCENARIO --mavstack BIN
 
 Topology: pymavlink peer (or `mavstack vehicle`) --udp--> router --mqtt--> mosquitto <-- paho.
-Keys as shared/DESIGN.md "Fleet bridge" gives them. Exit 0 with "<scenario>: ... ok", or 1
+Keys as docs/contracts/fleet-keys.md gives them. Exit 0 with "<scenario>: ... ok", or 1
 with FAIL lines. Never skipped: without mosquitto or paho-mqtt it fails.
 
 Scenarios:

@@ -8,7 +8,7 @@ packs and reads every frame.
 Usage: bridge_zenoh.py SCENARIO --mavstack BIN
 
 Topology: pymavlink peer (or `mavstack vehicle`) --udp--> router --zenoh--> this process.
-Keys as shared/DESIGN.md "Fleet bridge" gives them. Exit 0 with "<scenario>: ... ok", or 1
+Keys as docs/contracts/fleet-keys.md gives them. Exit 0 with "<scenario>: ... ok", or 1
 with FAIL lines. Never skipped: without eclipse-zenoh it fails.
 
 Scenarios:

@@ -21,7 +21,7 @@ and timestamp. Checks:
          so mavstack) sends the full payload, extensions included;
        - frames whose original signature was made with another key (status "invalid"):
          `encode --key` signs them correctly;
-       - MAVLink 2 objects without "signature" encoded with --key: DESIGN.md says they are
+       - MAVLink 2 objects without "signature" encoded with --key: docs/contracts/json-lines.md says they are
          signed with --link-id (default 0) and the current time; the expected bytes then use
          the timestamp found in ACTUAL (which must be within a day of now and strictly
          increasing over those frames);

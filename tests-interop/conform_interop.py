@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """`mavstack conform` against peers written here with pymavlink 2.4.50, and against MAVProxy and
-MAVSDK, over loopback UDP: each deviant peer breaks one rule of DESIGN.md's "Conformance" table
+MAVSDK, over loopback UDP: each deviant peer breaks one rule of the table in docs/contracts/conformance.md
 and conform must fail exactly that rule, with evidence a person can act on.
 
 Usage: conform_interop.py SCENARIO --mavstack BIN
@@ -145,10 +145,10 @@ KEY = hashlib.sha256(b"mavstack conform interop").digest()
 
 FIRST_TIMEOUT = 10.0  # conform's default --timeout
 REAL_PEER_TIMEOUT = 30  # --timeout for MAVProxy/MAVSDK, which take a while to start
-RUN_LIMIT = 15.0  # a whole conform run after the first frame (DESIGN.md)
+RUN_LIMIT = 15.0  # a whole conform run after the first frame (docs/contracts/conformance.md)
 MARGIN = 20.0  # for a loaded 2-core machine
 
-# DESIGN.md "Conformance": the rule ids and levels, per role (the contract).
+# docs/contracts/conformance.md: the rule ids and levels, per role (the contract).
 RULES = {
     "vehicle": {
         "heartbeat": "must",
@@ -1050,7 +1050,7 @@ def check_report(report, role, what):
         check(rid not in by_id, "%s: rule %s appears twice" % (what, rid))
         by_id[rid] = r
         want_level = RULES[role].get(rid)
-        check(want_level is not None, "%s: rule %s is not a %s rule of DESIGN.md's table" % (what, rid, role))
+        check(want_level is not None, "%s: rule %s is not a %s rule of the table in docs/contracts/conformance.md" % (what, rid, role))
         check(r.get("level") in LEVELS and (want_level is None or r.get("level") == want_level),
               "%s: rule %s has level %r, the table says %r" % (what, rid, r.get("level"), want_level))
         check(r.get("status") in STATUSES, "%s: rule %s has status %r, expected one of %s" % (

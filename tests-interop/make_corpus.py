@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Write a MAVLink byte stream with pymavlink, and pymavlink's own decoding of it as the
-expected output of `mavstack decode` (JSON lines, DESIGN.md "Frames as JSON lines").
+expected output of `mavstack decode` (JSON lines, docs/contracts/json-lines.md).
 
 Usage:
   make_corpus.py OUT_PREFIX --dialect ardupilotmega|all --seed N [--frames N] [--key HEX]

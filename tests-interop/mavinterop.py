@@ -2,10 +2,10 @@
 
 Everything that states an expectation goes through pymavlink: its generated dialect module
 (`pymavlink.dialects.v20.<dialect>`) packs, parses, checks CRCs and signatures. This module only
-converts between pymavlink's message objects and the JSON-lines format of DESIGN.md
-("Frames as JSON lines"), and describes byte-level differences between two frames.
+converts between pymavlink's message objects and the JSON-lines format of
+docs/contracts/json-lines.md, and describes byte-level differences between two frames.
 
-JSON conventions (DESIGN.md):
+JSON conventions (docs/contracts/json-lines.md):
 - integers (enums and bitmasks too) are JSON integers;
 - float/double are JSON numbers; NaN and infinities are the strings "NaN", "inf", "-inf";
 - char[N] (and a scalar `char`, which the test dialect has) is a string cut at the first NUL,
@@ -335,7 +335,7 @@ def parse_stream(mod, data, key=None):
 
 
 def message_to_json(msg, key_given):
-    """A pymavlink-decoded message as mavstack's JSON object (DESIGN.md)."""
+    """A pymavlink-decoded message as mavstack's JSON object (docs/contracts/json-lines.md)."""
     buf = bytes(msg.get_msgbuf())
     lay = layout(type(msg))
     h = frame_header(buf)

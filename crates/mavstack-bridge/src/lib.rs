@@ -1,12 +1,14 @@
 //! Fleet links: a vehicle's MAVLink network onto an MQTT 5 broker (feature `mqtt`) or a
 //! Zenoh network (feature `zenoh`), as one more link of a `mavstack` router or node.
 //!
+//! Architecture: `docs/architecture.md` in the repository.
+//!
 //! A bridge link is a router link whose far end is a broker connection instead of a
 //! socket. Every frame the router sends to it is published on its own key, raw and byte for
 //! byte (signatures kept, never converted: the link's version mode is
 //! [`VersionMode::Transparent`](mavstack_router::VersionMode::Transparent)); frames
 //! published to the vehicle's `in` key come into the router as if a peer had sent them.
-//! The key layout (shared/DESIGN.md, "Fleet bridge"), for fleet `F` and vehicle `V`:
+//! The key layout (`docs/contracts/fleet-keys.md`), for fleet `F` and vehicle `V`:
 //!
 //! | key | what |
 //! | --- | --- |

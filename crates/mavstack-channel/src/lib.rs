@@ -5,6 +5,8 @@
 //! roles, signing with per-stream replay protection, sequence and loss statistics, and a
 //! semi-transparent radio.
 //!
+//! Architecture: `docs/architecture.md` in the repository.
+//!
 //! ```text
 //!   bytes in ──► handle_input(now, &[u8]) ─► Deframer ─► signing checks ─► version rules
 //!                                                          │ rejections      │ handshake

@@ -126,7 +126,7 @@ pub(crate) fn conform(args: &ConformArgs) -> Result<(), Failure> {
     }
 }
 
-/// The report as shared/DESIGN.md's JSON object ("Conformance").
+/// The report as the JSON object of `docs/contracts/conformance.md`.
 fn report_json(report: &Report) -> serde_json::Value {
     json!({
         "role": report.role.as_str(),

@@ -22,7 +22,7 @@ pub(crate) enum DialectAction {
     Show {
         /// A built-in dialect name or a path to an XML file.
         dialect: String,
-        /// Print one JSON object (the format of shared/DESIGN.md, "A dialect as JSON").
+        /// Print one JSON object (the format of `docs/contracts/json-lines.md`).
         #[arg(long)]
         json: bool,
     },
@@ -173,7 +173,7 @@ fn show_message(out: &mut impl Write, m: &Message) -> io::Result<()> {
     Ok(())
 }
 
-/// The dialect as the JSON object of shared/DESIGN.md.
+/// The dialect as the JSON object of `docs/contracts/json-lines.md`.
 pub(crate) fn dialect_json(d: &Dialect) -> Value {
     let messages: Vec<Value> = d
         .messages

@@ -1,6 +1,6 @@
 //! `mavstack log summary | plot | filter`: what a tlog (or raw capture) holds, time series of
-//! its fields as an image, and a smaller log of the frames selected (shared/DESIGN.md,
-//! "Operator tools").
+//! its fields as an image, and a smaller log of the frames selected
+//! (`docs/contracts/logs-and-operator-tools.md`).
 
 use std::collections::{BTreeMap, HashMap};
 use std::io::{BufWriter, Write};

@@ -1,7 +1,9 @@
 //! `mavstack`: the command-line face of the mavstack MAVLink stack.
 //!
 //! Errors are one line on stderr starting with `error:`; the exit code is 0 on success, 1 on
-//! failure and 2 on bad usage or bad input (shared/DESIGN.md, "Command line").
+//! failure and 2 on bad usage or bad input (`docs/contracts/cli.md`).
+//!
+//! Architecture: `docs/architecture.md` in the repository.
 
 mod codec_cmd;
 mod conform_cmd;

@@ -1,5 +1,5 @@
 //! `mavstack router`: forwards between many links, each with its own MAVLink version and
-//! signing, converting where they differ (shared/DESIGN.md, "Router"). A thin shell over
+//! signing, converting where they differ (`docs/contracts/router.md`). A thin shell over
 //! [`mavstack::Node`]: argument parsing, the mavlink-router configuration file, `--stats`
 //! JSON lines (the object of `mavstack::status`).
 
@@ -296,7 +296,7 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
     })
 }
 
-/// One `--stats` line (shared/DESIGN.md, "Router").
+/// One `--stats` line (`docs/contracts/router.md`).
 fn print_stats(report: &NodeReport, bridges: &[(String, Arc<BridgeStats>)]) {
     let mut line = mavstack::status::status_json(report);
     if !bridges.is_empty()

@@ -1,6 +1,6 @@
 //! `mavstack vehicle`: a simulated vehicle (`mavstack::sim`: parameters, missions, commands,
 //! telemetry streams, a kinematic craft) on a [`mavstack::Node`] with one or more links, each
-//! with its own version and signing (shared/DESIGN.md, "Vehicle with several links").
+//! with its own version and signing (`docs/contracts/cli.md`, "`mavstack vehicle`").
 //!
 //! The version rules live in the links' channels and the router; the vehicle is
 //! `mavstack::sim_vehicle::SimVehicle`. This command parses arguments and prints.

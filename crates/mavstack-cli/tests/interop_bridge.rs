@@ -1,7 +1,7 @@
 //! `mavstack router` with an MQTT 5 fleet link (`mqtt://HOST:PORT?fleet=F&vid=V`), against
 //! mosquitto (Debian's broker, started by the script on a free port) with paho-mqtt as the
 //! independent MQTT peer and pymavlink 2.4.50 packing and reading every frame
-//! (`tests-interop/bridge_interop.py`; shared/DESIGN.md "Fleet bridge"):
+//! (`tests-interop/bridge_interop.py`; `docs/contracts/fleet-keys.md`):
 //!
 //! - `telemetry`: every frame from the vehicle's network (MAVLink 1, MAVLink 2, signed, an id
 //!   no dialect knows) reaches a paho subscriber on `mav/F/V/{sysid}/{compid}/{NAME}` byte for

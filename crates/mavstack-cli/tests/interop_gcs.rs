@@ -24,7 +24,7 @@
 //! time (they time a flying vehicle against the wall clock).
 //!
 //! The same ground stations against `mavstack vehicle` THROUGH `mavstack router`
-//! (DESIGN.md "Router", "Link options"): the scenarios above, each script run
+//! (`docs/contracts/router.md`, `link-options.md`): the scenarios above, each script run
 //! with `--via-router`, which starts the router between the two (the vehicle on the router's
 //! `udpin:...?name=vehicle` link, the ground station on its `udpout:...?name=gcs` link),
 //! SIGTERMs it at the end (exit 0 required) and checks its stats (both links carried frames,
@@ -159,7 +159,7 @@ fn mavproxy_params_mission_arm_signed_link_and_mavlink1_hop_through_the_router()
 /// Across an MQTT broker (mosquitto): the vehicle's router bridges its network onto
 /// `mqtt://...?fleet=interop&vid=truck-1`, a ground router subscribed to the fleet (`vid=*`)
 /// serves MAVProxy on UDP: parameter fetch, set and read back, mission download, upload and
-/// download again, arm and disarm (shared/DESIGN.md "Fleet bridge").
+/// download again, arm and disarm (`docs/contracts/fleet-keys.md`).
 #[test]
 fn mavproxy_params_mission_and_arm_across_an_mqtt_broker() {
     let out = run("gcs_mavproxy.py", &["--via-broker"]);

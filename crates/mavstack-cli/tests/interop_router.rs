@@ -1,6 +1,6 @@
 //! `mavstack router` between pymavlink 2.4.50 peers over loopback UDP: learned routes,
-//! version conversion per link, signing boundaries, stats and exit (DESIGN.md "Router",
-//! "Link options").
+//! version conversion per link, signing boundaries, stats and exit
+//! (`docs/contracts/router.md`, `docs/contracts/link-options.md`).
 //!
 //! Each test runs one scenario of `tests-interop/router_interop.py`, which starts the router
 //! with its own links on free ports and plays every peer with pymavlink: MAVLink 2 peers speak

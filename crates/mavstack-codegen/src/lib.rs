@@ -4,6 +4,8 @@
 //! script of `mavstack-dialects` runs over the vendored XML, and what `mavstack codegen`
 //! runs over a user's own XML.
 //!
+//! Architecture: `docs/architecture.md` in the repository.
+//!
 //! ```text
 //!  XML roots ──mavstack-dialect──► Dialect per file ──plan──► modules + enum owners
 //!                                                              │

@@ -3,6 +3,8 @@
 //! The `no_std`, allocation-free foundation of mavstack: what every other layer and every
 //! generated dialect stands on.
 //!
+//! Architecture: `docs/architecture.md` in the repository.
+//!
 //! ```text
 //!  XML dialects ──(mavstack-codegen)──► generated structs ──implement──► Message / MessageSet
 //!                                                                         │

@@ -1,4 +1,4 @@
-//! Golden byte vectors for every frame kind (shared/spec/mavlink-digest.md §10, computed there
+//! Golden byte vectors for every frame kind (`docs/protocol-notes.md` §4, computed there
 //! with pymavlink and the C library), and properties of the parser.
 
 use mavstack_core::MessageInfo;

@@ -3,6 +3,8 @@
 //! MAVLink message definitions ("dialects") from XML to a validated model, and a run-time
 //! codec over that model.
 //!
+//! Architecture: `docs/architecture.md` in the repository.
+//!
 //! ```text
 //!  XML file ──xml──► declarations ──loader──► includes resolved, merged ──layout──► Dialect
 //!  (+ includes)      (positioned)             (duplicates, cycles checked)          │

@@ -1,4 +1,4 @@
-//! Every vendored dialect loads, and the CRC_EXTRA / length anchors of the protocol digest hold.
+//! Every vendored dialect loads, and the CRC_EXTRA / length anchors of `docs/protocol-notes.md` hold.
 
 use mavstack_dialect::{builtin, load};
 
@@ -16,8 +16,8 @@ fn every_builtin_dialect_loads() {
     }
 }
 
-/// Golden CRC_EXTRA and lengths: shared/spec/mavlink-digest.md §3.3, checked there against
-/// the generated C headers. The digest read a 2026 common.xml; the vendored one (pymavlink
+/// Golden CRC_EXTRA and lengths: `docs/protocol-notes.md` §2, checked against the headers
+/// the C generator writes. The anchors are from a 2026 common.xml; the vendored one (pymavlink
 /// 2.4.50) predates some extension fields (MISSION_CURRENT, MISSION_COUNT, MISSION_ACK,
 /// TIMESYNC are shorter here), so only id, CRC_EXTRA and the base length are anchored:
 /// extensions never change those. Full lengths are compared with pymavlink 2.4.50 itself in

@@ -4,6 +4,8 @@
 //! `mavstack-codegen` from the XML vendored in `definitions/` (see its `PROVENANCE.md`).
 //! `no_std`, no allocation.
 //!
+//! Architecture: `docs/architecture.md` in the repository.
+//!
 //! Each definition file is a module behind a cargo feature of the same name, in lower case
 //! (`common`, `ardupilotmega`, `uavionix`, ...); a feature enables the files its XML includes,
 //! and `all` enables every one. The default is `ardupilotmega`.

@@ -151,7 +151,7 @@ fn unknown_ids_are_reported() {
     assert!(minimal::MavMessage::info(300).is_none());
 }
 
-/// shared/spec/mavlink-digest.md §10: COMMAND_LONG REQUEST_MESSAGE(300) payload, and the
+/// `docs/protocol-notes.md` §5: COMMAND_LONG REQUEST_MESSAGE(300) payload, and (§4) the
 /// HEARTBEAT payload of the golden frames.
 #[test]
 fn golden_payloads() {

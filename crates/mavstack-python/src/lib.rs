@@ -8,6 +8,8 @@
 //! - `mavstack.read_tlog(path, types=None, dialect=..., key=None, progress=False)`: one Arrow
 //!   table per message type through the Arrow C stream interface.
 //!
+//! Architecture: `docs/architecture.md` in the repository.
+//!
 //! The frames are found by the same code as `mavstack decode` and `mavstack log`:
 //! `mavstack_core::parse::SliceParser` for raw logs, `mavstack_core::tlog::Records` for tlogs.
 

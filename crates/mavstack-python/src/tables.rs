@@ -53,7 +53,7 @@ const fn element_type(p: PrimitiveType) -> DataType {
     }
 }
 
-/// The schema of a message's table (shared/DESIGN.md, "Python"): `timestamp_us`, `sysid`,
+/// The schema of a message's table (`docs/contracts/python-api.md`): `timestamp_us`, `sysid`,
 /// `compid`, `seq`, `signed`, then the fields in wire order, each with its XML `units` as
 /// field metadata.
 fn schema(ty: &MessageType) -> Schema {

@@ -21,7 +21,7 @@ def same_value(a, b):
 
 
 def expected_row(m, raw=False):
-    """A pymavlink message as the row of our table (DESIGN.md's columns)."""
+    """A pymavlink message as the row of our table (the columns of docs/contracts/python-api.md)."""
     buf = bytes(m.get_msgbuf())
     row = {
         "timestamp_us": 0 if raw else None,

@@ -6,6 +6,8 @@
 //! framings where links differ and keeps signed links signed; dedup, filters, rate limits
 //! and bounded queues per link.
 //!
+//! Architecture: `docs/architecture.md` in the repository.
+//!
 //! ```text
 //!  link A bytes ─► handle_datagram(now, A, ..) ─► channel A: parse, CRC, signature, replay
 //!                                                   │ accepted frame

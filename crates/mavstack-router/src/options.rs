@@ -1,5 +1,5 @@
 //! Link options as written after a connection string: `version=1&name=legacy&key=…`
-//! (shared/DESIGN.md, "Link options").
+//! (`docs/contracts/link-options.md`).
 //!
 //! ```
 //! use mavstack_router::options::parse;

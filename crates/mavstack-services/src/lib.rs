@@ -1,6 +1,8 @@
 //! Sans-IO MAVLink microservices, in both roles: heartbeat and peer tracking, the command
 //! protocol, the parameter and mission protocols, message rates, and TIMESYNC.
 //!
+//! Architecture: `docs/architecture.md` in the repository.
+//!
 //! Every service is a state machine that never reads a clock, never sleeps and never touches
 //! a socket. It works on *decoded* messages (the `common` dialect's
 //! [`MavMessage`]), not bytes, so it sits on top of a
@@ -31,8 +33,8 @@
 //!   event type) until `None`: results of requests, peers found and lost, values changed.
 //!
 //! Time is a [`mavstack_core::time::Instant`] (monotonic microseconds) chosen by the driver.
-//! Retries and timeouts follow the reference values collected in the project's protocol
-//! digest (§7): MAVSDK's 0.5 s command timeout with 3 retries and 3 s after IN_PROGRESS,
+//! Retries and timeouts follow the reference values collected in `docs/protocol-notes.md`
+//! (§6): MAVSDK's 0.5 s command timeout with 3 retries and 3 s after IN_PROGRESS,
 //! a 3 s heartbeat timeout, parameter retries ×5.
 //!
 //! | module | messages | client role | server role |

@@ -1,6 +1,8 @@
 //! A simulated MAVLink vehicle, sans-IO: the vehicle behind `mavstack vehicle` and
 //! `mavstack demo`, and the one a ground station's tests can run in-process.
 //!
+//! Architecture: `docs/architecture.md` in the repository.
+//!
 //! [`Vehicle`] puts the server roles of `mavstack-services` together around a kinematic
 //! craft ([`flight::Flight`]): a [`CommandServer`] whose handler flies the craft, a
 //! [`ParamServer`] with the flavour's table (or a file's), a [`MissionServer`] whose plan the

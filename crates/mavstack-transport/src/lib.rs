@@ -3,6 +3,8 @@
 //! MAVLink links for `std` + tokio: UDP, TCP, serial ports and tlog files behind one
 //! connection string, with an async handle and a blocking one over the same driver.
 //!
+//! Architecture: `docs/architecture.md` in the repository.
+//!
 //! ```text
 //!  "udpin:0.0.0.0:14550"            (conn)  ConnSpec::from_str
 //!            │

@@ -15,6 +15,8 @@
 //!   ground station's tests (feature `sim`), and [`radio::RadioBridge`] a semi-transparent
 //!   radio to put between them.
 //!
+//! Architecture: `docs/architecture.md` in the repository.
+//!
 //! ## A ground station
 //!
 //! System 255 ([`Node::ground_station`]: a GCS HEARTBEAT every second, links that run the

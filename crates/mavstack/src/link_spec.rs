@@ -1,5 +1,5 @@
 //! A link as written on a command line: a connection string, then `?` and `&`-separated
-//! link options (shared/DESIGN.md, "Link options").
+//! link options (`docs/contracts/link-options.md`).
 //!
 //! ```
 //! use mavstack::LinkSpec;

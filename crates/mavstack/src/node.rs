@@ -1,5 +1,5 @@
 //! [`Node`]: one MAVLink component with many links, the router core between them, and one
-//! driver that owns every socket (the composition shared/DESIGN.md calls "One
+//! driver that owns every socket (the composition `docs/architecture.md` calls "One
 //! composition"): a tokio task, or a thread of its own with its UDP sockets on its own
 //! `epoll` ([`NodeBuilder::own_thread`], what `mavstack router` runs).
 //!

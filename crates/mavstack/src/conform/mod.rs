@@ -89,7 +89,7 @@ impl Status {
     }
 }
 
-/// The rules, with their stable ids (shared/DESIGN.md, "Conformance").
+/// The rules, with their stable ids (`docs/contracts/conformance.md`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[non_exhaustive]
 pub enum Rule {
