@@ -47,6 +47,12 @@ thing:
                           nack_without_v2 fails, handshake_answer n/a
   vehicle_nack_v1_only    MAVLink 1 only, capability clear, NACKs the handshake in MAVLink 1:
                           exit 0, nack_without_v2 and capability_flag pass, handshake_answer n/a
+  vehicle_refuses_like_ardupilot
+                          refuses PROTOCOL_VERSION as ArduPilot does (COMMAND_ACK FAILED for
+                          REQUEST_MESSAGE(300), UNSUPPORTED for 519, in MAVLink 2), answers
+                          AUTOPILOT_VERSION: exit 0, handshake_answer passes by the documents'
+                          fallback, protocol_version_supported (info) fails, handshake_519 and
+                          handshake_command_int pass (refused the same way)
   vehicle_seq_gaps        seq += 2 on every frame: exit 1, sequence fails
   vehicle_signed_late     `--key K` (64 hex digits) given to conform; the vehicle (MAVLink 2,
                           verifying with K) sends unsigned frames until 2 after the first frame
@@ -140,6 +146,7 @@ PV_CRC_EXTRA = M.MAVLink_protocol_version_message.crc_extra  # 217
 CAP_MAVLINK2 = M.MAV_PROTOCOL_CAPABILITY_MAVLINK2  # 8192
 ACCEPTED = M.MAV_RESULT_ACCEPTED
 IN_PROGRESS = M.MAV_RESULT_IN_PROGRESS
+FAILED = M.MAV_RESULT_FAILED
 UNSUPPORTED = M.MAV_RESULT_UNSUPPORTED
 KEY = hashlib.sha256(b"mavstack conform interop").digest()
 
@@ -158,8 +165,9 @@ RULES = {
         "capability_flag": "must",
         "switch_on_v2": "should",
         "handshake_answer": "must",
+        "protocol_version_supported": "info",
         "handshake_v2_framing": "must",
-        "handshake_519": "should",
+        "handshake_519": "info",
         "handshake_command_int": "should",
         "nack_without_v2": "should",
         "protocol_version_values": "should",
@@ -402,7 +410,8 @@ class PyVehicle(Peer):
     """The pymavlink vehicle, 1/1, sending to `dest` (conform's udpin, or a radio's side B).
 
     v2: has MAVLink 2 (switches on the first MAVLink 2 frame; signed vehicles send it from the
-    first frame); handshake: "answer" | "nack" | "silent"; cap: the MAVLINK2 capability bit
+    first frame); handshake: "answer" | "nack" | "silent" | "refuse" (as ArduPilot: FAILED for
+    REQUEST_MESSAGE(300), UNSUPPORTED for 519); cap: the MAVLINK2 capability bit
     (default: v2); pv_v1: PROTOCOL_VERSION as the C library's MAVLink 1 msgid-44 frame;
     v1_after_switch: HEARTBEATs 2 (0.4 s after 1), 5, 8... after the switch in MAVLink 1;
     untruncated: MAVLink 2
@@ -511,6 +520,10 @@ class PyVehicle(Peer):
                     self.send(pv, v2=True)
             elif self.handshake == "nack":
                 self.ack(msg, UNSUPPORTED)
+            elif self.handshake == "refuse":
+                # ArduPilot: REQUEST_MESSAGE for a message it cannot send fails; command 519
+                # is unknown to it.
+                self.ack(msg, FAILED if command == REQUEST_MESSAGE else UNSUPPORTED)
         elif (command == REQUEST_MESSAGE and p1 == AUTOPILOT_VERSION_ID) or command == REQUEST_AUTOPILOT_CAPABILITIES:
             self.ack(msg, ACCEPTED)
             self.send(autopilot_version_message(self.cap))
@@ -1268,7 +1281,7 @@ VEHICLE_SCENARIOS = {
         "rc": 0,
         "rules": {"heartbeat": "pass", "crc": "pass", "sequence": "pass", "truncation": "pass",
                   "capability_flag": "pass", "switch_on_v2": "pass", "handshake_answer": "pass",
-                  "handshake_v2_framing": "pass", "handshake_519": "pass", "handshake_command_int": "pass",
+                  "protocol_version_supported": "pass", "handshake_v2_framing": "pass", "handshake_519": "pass", "handshake_command_int": "pass",
                   "protocol_version_values": "pass", "no_mixing": "pass", "signed_from_start": "n/a",
                   "nack_without_v2": "n/a", "radio_v2_after_first_v2": "n/a"},
         "facts": {},
@@ -1308,6 +1321,14 @@ VEHICLE_SCENARIOS = {
         "rc": 0,
         "rules": {"nack_without_v2": "pass", "capability_flag": "pass", "handshake_answer": "n/a"},
         "facts": dict(V1_ONLY_FACTS, handshake=[("nack", 1, None)] * 3, av_cap=False),
+    },
+    "vehicle_refuses_like_ardupilot": {
+        "vehicle": {"handshake": "refuse"},
+        "rc": 0,
+        "rules": {"handshake_answer": "pass", "protocol_version_supported": "fail", "handshake_519": "pass",
+                  "handshake_command_int": "pass", "handshake_v2_framing": "n/a", "capability_flag": "pass",
+                  "switch_on_v2": "pass", "no_mixing": "pass", "nack_without_v2": "n/a"},
+        "facts": {"handshake": [("nack", 2, None)] * 3, "av_cap": True},
     },
     "vehicle_seq_gaps": {
         "vehicle": {"seq_step": 2},

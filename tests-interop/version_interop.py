@@ -40,9 +40,14 @@ on request, starts in MAVLink 1):
   probe_answers           the vehicle ACKs the handshake and answers PROTOCOL_VERSION in v2
                           (probe on udpin): version 1 -> 2, result protocol_version, capability true
   probe_nack              the vehicle NACKs (MAV_RESULT_UNSUPPORTED) and stays v1 (probe on udpout
-                          towards it): version 1 -> 1, result nack, capability false
+                          towards it): the fallback's AUTOPILOT_VERSION comes in v1: version
+                          1 -> 1, result nack, capability false
   probe_silent            the vehicle never answers anything but heartbeats: result timeout after
-                          retries (confirmation 0, 1, ...), capability null
+                          retries (confirmation 0, 1, ...) and the fallback's, capability null
+  probe_refuses           the vehicle refuses PROTOCOL_VERSION as ArduPilot does (REQUEST_MESSAGE(300)
+                          -> FAILED) but switches on the first v2 frame: the probe requests
+                          AUTOPILOT_VERSION in v2 and it comes in v2: method request_message_other,
+                          result message_v2, protocol_version_supported false, version 1 -> 2
   probe_protocol_version_int
                           --method request-protocol-version --command-int against the answering
                           vehicle: 519 as COMMAND_INT, method request_protocol_version
@@ -80,6 +85,7 @@ CAP_MAVLINK2 = M.MAV_PROTOCOL_CAPABILITY_MAVLINK2  # 8192
 ACCEPTED = M.MAV_RESULT_ACCEPTED
 IN_PROGRESS = M.MAV_RESULT_IN_PROGRESS
 UNSUPPORTED = M.MAV_RESULT_UNSUPPORTED
+FAILED = M.MAV_RESULT_FAILED
 KEY = hashlib.sha256(b"mavstack version interop").digest()
 OTHER_KEY = hashlib.sha256(b"not the vehicle's key").digest()
 
@@ -783,6 +789,7 @@ class PyVehicle:
             s.allow_unsigned_callback = lambda _mav, msg_id: self.refused.append(msg_id) and False
         self.received = []  # Rx of every frame from the probe
         self.handshakes = []  # Rx of each handshake request
+        self.fallbacks = []  # Rx of each request for AUTOPILOT_VERSION in v2 after one
         self.answered_at = None  # when the handshake answer (or NACK) went out
 
     @property
@@ -814,7 +821,7 @@ class PyVehicle:
         if rx.type == "BAD_DATA":
             fail("the pymavlink vehicle could not accept a frame from mavstack probe: %r" % rx)
             return
-        if rx.version == 2 and self.behaviour == "answers":
+        if rx.version == 2 and self.behaviour in ("answers", "refuses"):
             self.v2 = True
         if rx.type not in ("COMMAND_LONG", "COMMAND_INT"):
             return
@@ -831,11 +838,18 @@ class PyVehicle:
             elif self.behaviour == "nack":
                 self.ack(rx, UNSUPPORTED)
                 self.answered_at = time.monotonic()
+            elif self.behaviour == "refuses":
+                # ArduPilot: REQUEST_MESSAGE for a message it cannot send fails; it does not
+                # know command 519.
+                self.ack(rx, FAILED if command == REQUEST_MESSAGE else UNSUPPORTED)
+                self.answered_at = time.monotonic()
         elif (command == REQUEST_MESSAGE and p1 == AUTOPILOT_VERSION_ID) or command == REQUEST_AUTOPILOT_CAPABILITIES:
+            if rx.version == 2 and self.handshakes:
+                self.fallbacks.append(rx)
             if self.behaviour == "silent":
                 return
             caps = M.MAV_PROTOCOL_CAPABILITY_MISSION_INT | M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-            if self.behaviour == "answers":
+            if self.behaviour in ("answers", "refuses"):
                 caps |= CAP_MAVLINK2
             self.ack(rx, ACCEPTED)
             self.send(M.MAVLink_autopilot_version_message(caps, 0x04010000, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0))
@@ -916,7 +930,9 @@ def check_probe_frames(veh, what, method=(REQUEST_MESSAGE, PROTOCOL_VERSION_ID),
     check(hbs, "%s: the probe sent no HEARTBEAT" % what)
     for rx in hbs:
         check(rx.msg.type == M.MAV_TYPE_GCS, "%s: the probe's HEARTBEAT has type %d, expected MAV_TYPE_GCS" % (what, rx.msg.type))
-    others = [rx for rx in veh.received if rx not in hs and rx.type != "BAD_DATA"]
+    # The documents' fallback: after a refusal or silence, AUTOPILOT_VERSION is requested in
+    # MAVLink 2; those requests are part of the handshake.
+    others = [rx for rx in veh.received if rx not in hs and rx not in veh.fallbacks and rx.type != "BAD_DATA"]
     if switched:
         # After PROTOCOL_VERSION arrived in v2, the probe's link is MAVLink 2 (a frame sent
         # while the answer was on its way may still be v1).
@@ -947,8 +963,27 @@ def probe_nack(bin_):
                           "handshake": {"method": "request_message_300", "result": "nack"},
                           "mavlink2_capability": False, "signed": False})
     check_probe_frames(veh, "probe_nack")
-    check(len(veh.handshakes) == 1, "probe_nack: %d handshake requests, expected 1 (a NACK is final)" % len(veh.handshakes))
+    check(len(veh.handshakes) == 1, "probe_nack: %d handshake requests, expected 1 (a NACK is not retried)" % len(veh.handshakes))
+    check(len(veh.fallbacks) == 1, "probe_nack: %d fallback requests for AUTOPILOT_VERSION in v2, expected 1 "
+          "(answered in v1: no MAVLink 2)" % len(veh.fallbacks))
     return "report %s" % json.dumps(report)
+
+
+def probe_refuses(bin_):
+    port = free_port()
+    veh = PyVehicle("refuses", 13, M.MAV_AUTOPILOT_ARDUPILOTMEGA, M.MAV_TYPE_QUADROTOR, peer=("127.0.0.1", port))
+    report = run_probe(bin_, veh, "udpin:127.0.0.1:%d" % port)
+    check_report(report, {"sysid": 13, "compid": 1, "autopilot": 3, "type": 2, "version_before": 1, "version_after": 2,
+                          "handshake": {"method": "request_message_other", "result": "message_v2"},
+                          "mavlink2_capability": True, "signed": False, "protocol_version_supported": False})
+    check(len(veh.handshakes) == 1, "probe_refuses: %d requests for PROTOCOL_VERSION, expected 1" % len(veh.handshakes))
+    fb = veh.fallbacks
+    if check(fb, "probe_refuses: no request for AUTOPILOT_VERSION in MAVLink 2 after the refusal"):
+        check(fb[0].t > veh.answered_at, "probe_refuses: the fallback came before the refusal")
+        m = fb[0].msg
+        check((m.target_system, m.target_component) == (13, 1),
+              "probe_refuses: fallback addressed to %d/%d" % (m.target_system, m.target_component))
+    return "%d fallback request(s), report %s" % (len(fb), json.dumps(report))
 
 
 def probe_silent(bin_):
@@ -964,6 +999,10 @@ def probe_silent(bin_):
     confirmations = [rx.msg.confirmation for rx in hs if rx.type == "COMMAND_LONG"]
     check(confirmations == list(range(len(confirmations))),
           "probe_silent: COMMAND_LONG confirmations %s, expected 0, 1, 2, ..." % confirmations)
+    fallback = [rx.msg.confirmation for rx in veh.fallbacks]
+    check(len(fallback) >= 2 and fallback == list(range(len(fallback))),
+          "probe_silent: fallback requests for AUTOPILOT_VERSION in v2 with confirmations %s, expected 0, 1, ..."
+          % fallback)
     return "%d requests (confirmation %s), report %s" % (len(hs), confirmations, json.dumps(report))
 
 
@@ -1062,6 +1101,7 @@ SCENARIOS = {
     "vehicle_signed": vehicle_signed,
     "probe_answers": probe_answers,
     "probe_nack": probe_nack,
+    "probe_refuses": probe_refuses,
     "probe_silent": probe_silent,
     "probe_protocol_version_int": probe_protocol_version_int,
     "probe_signed": probe_signed,

@@ -701,7 +701,7 @@ impl<L: CrcExtra> Channel<L> {
                 after[1] = Some(event);
             }
             if let Some(state) = self.handshake.take() {
-                let step = state.handle_frame(now, &frame, self.sysid);
+                let step = state.handle_frame(now, &self.handshake_config, &frame, self.sysid);
                 (after[2], after[3]) = self.apply_step(step);
             }
         }
@@ -831,6 +831,24 @@ impl<L: CrcExtra> Channel<L> {
         }
         let to = (frame.sysid(), frame.compid());
         let answer = match (policy.protocol_version, policy.version) {
+            (None, _) if policy.refuse_unsupported => {
+                // ArduPilot's answers: REQUEST_MESSAGE for a message it cannot send fails,
+                // a command it does not know is unsupported.
+                let result = if cmd.command == MavCmd::REQUEST_PROTOCOL_VERSION {
+                    MavResult::UNSUPPORTED
+                } else {
+                    MavResult::FAILED
+                };
+                self.queue_control(
+                    Control::Ack {
+                        command: cmd.command,
+                        result,
+                        to,
+                    },
+                    Framing::Link,
+                );
+                ProtocolVersionAnswer::Nacked(result)
+            }
             (None, _) => ProtocolVersionAnswer::Ignored,
             (Some(_), VehicleVersion::Mavlink1Only) => {
                 let result = policy.nack_result;

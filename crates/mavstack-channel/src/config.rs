@@ -38,6 +38,10 @@ pub struct VehiclePolicy {
     /// The COMMAND_ACK result that refuses a handshake when MAVLink 2 is disabled
     /// (default MAV_RESULT_UNSUPPORTED; the devguide also names DENIED).
     pub nack_result: MavResult,
+    /// For a vehicle without protocol-version support (`protocol_version` `None`): refuse
+    /// the request as ArduPilot does — COMMAND_ACK FAILED for REQUEST_MESSAGE(300),
+    /// UNSUPPORTED for MAV_CMD_REQUEST_PROTOCOL_VERSION — instead of staying silent.
+    pub refuse_unsupported: bool,
 }
 
 impl Default for VehiclePolicy {
@@ -46,6 +50,7 @@ impl Default for VehiclePolicy {
             version: VehicleVersion::default(),
             protocol_version: Some(default_protocol_version()),
             nack_result: MavResult::UNSUPPORTED,
+            refuse_unsupported: false,
         }
     }
 }

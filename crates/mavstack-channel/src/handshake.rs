@@ -30,6 +30,19 @@
 //! ([`Channel::handshake`](crate::Channel::handshake)) and receive its
 //! [`HandshakeOutcome`] as an [`Event::Handshake`](crate::Event::Handshake).
 //!
+//! **The documents' fallback.** A request for PROTOCOL_VERSION (300 or 519) that is refused
+//! (a failure COMMAND_ACK) or unanswered is not the end when [`HandshakeConfig::fallback`]
+//! names a message (AUTOPILOT_VERSION by default): "if the target system does not support
+//! PROTOCOL_VERSION you can request any other message that it is able to emit". The ground
+//! station then asks for that message with REQUEST_MESSAGE in a MAVLink 2 frame, and that
+//! message arriving in MAVLink 2 framing proves the link both ways
+//! ([`HandshakeResult::Message`], with [`HandshakeOutcome::fallback`] saying why it ran).
+//! ArduPilot never implemented PROTOCOL_VERSION, the MAVLink guide deprecated it in 2025-12
+//! and PX4 removed command 519 in 2026: the handshake must not depend on it. The fallback
+//! ends in a NACK when the system refuses it too, or answers in MAVLink 1; a failure ACK in
+//! that phase ends it only at the attempt's deadline, since it may be the late answer to an
+//! earlier request for 300 (COMMAND_ACK does not say which message was asked for).
+//!
 //! Matching follows the command protocol: an ACK counts when its `command` is the request's
 //! and its source is the target (a target id of 0 matches any source), and when its
 //! `target_system` extension, if set, names this system. ACCEPTED and IN_PROGRESS move on to
@@ -43,7 +56,8 @@ use mavstack_core::message::Message;
 use mavstack_core::time::Instant;
 use mavstack_core::wire::Version;
 use mavstack_dialects::common::{
-    CommandAck, CommandInt, CommandLong, MavCmd, MavFrame, MavResult, ProtocolVersion,
+    AutopilotVersion, CommandAck, CommandInt, CommandLong, MavCmd, MavFrame, MavResult,
+    ProtocolVersion,
 };
 
 use crate::dialect::CommandEncoding;
@@ -188,6 +202,10 @@ pub struct HandshakeConfig {
     /// How long to wait for an answer before resending, and after the last send before
     /// giving up (default 500 ms, MAVSDK's command timeout).
     pub interval: Duration,
+    /// The message requested, in MAVLink 2, when a request for PROTOCOL_VERSION is refused
+    /// or unanswered (default AUTOPILOT_VERSION, which every autopilot emits on request;
+    /// `None`: no fallback, the refusal or silence is the outcome).
+    pub fallback: Option<u32>,
 }
 
 impl Default for HandshakeConfig {
@@ -195,6 +213,30 @@ impl Default for HandshakeConfig {
         Self {
             retries: 3,
             interval: Duration::from_millis(500),
+            fallback: Some(AutopilotVersion::ID),
+        }
+    }
+}
+
+/// Why the handshake fell back to requesting another message.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum FallbackReason {
+    /// The request for PROTOCOL_VERSION was refused with this COMMAND_ACK result (ArduPilot:
+    /// FAILED for REQUEST_MESSAGE, UNSUPPORTED for 519).
+    Refused(MavResult),
+    /// No PROTOCOL_VERSION came after every retry.
+    Unanswered {
+        /// Whether an ACK ACCEPTED came for it.
+        acked: bool,
+    },
+}
+
+impl FallbackReason {
+    /// The result the first phase would have ended with.
+    const fn result(self) -> HandshakeResult {
+        match self {
+            Self::Refused(result) => HandshakeResult::Nack { result },
+            Self::Unanswered { acked } => HandshakeResult::Timeout { acked },
         }
     }
 }
@@ -205,8 +247,8 @@ impl Default for HandshakeConfig {
 pub enum HandshakeResult {
     /// PROTOCOL_VERSION arrived in MAVLink 2: the link now sends MAVLink 2.
     ProtocolVersion(ProtocolVersion),
-    /// The message asked for with [`HandshakeMethod::RequestMessageOther`] arrived in
-    /// MAVLink 2: the link now sends MAVLink 2.
+    /// The message asked for with [`HandshakeMethod::RequestMessageOther`] (directly, or as
+    /// the fallback) arrived in MAVLink 2: the link now sends MAVLink 2.
     Message {
         /// Its id.
         msg_id: u32,
@@ -225,12 +267,12 @@ pub enum HandshakeResult {
 }
 
 impl HandshakeResult {
-    /// The name used in reports: `protocol_version`, `message`, `nack` or `timeout`.
+    /// The name used in reports: `protocol_version`, `message_v2`, `nack` or `timeout`.
     #[must_use]
     pub const fn name(&self) -> &'static str {
         match self {
             Self::ProtocolVersion(_) => "protocol_version",
-            Self::Message { .. } => "message",
+            Self::Message { .. } => "message_v2",
             Self::Nack { .. } => "nack",
             Self::Timeout { .. } => "timeout",
         }
@@ -246,11 +288,14 @@ impl HandshakeResult {
 /// A finished handshake.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HandshakeOutcome {
-    /// What was asked.
+    /// What was asked last: the fallback's request when it ran.
     pub request: HandshakeRequest,
+    /// Why the fallback ran (the request for PROTOCOL_VERSION was refused or unanswered);
+    /// `None` when it did not.
+    pub fallback: Option<FallbackReason>,
     /// How it ended.
     pub result: HandshakeResult,
-    /// Requests sent (1 + retries used).
+    /// Requests sent (1 + retries used), in the last phase.
     pub attempts: u8,
     /// When it started.
     pub started_at: Instant,
@@ -265,6 +310,10 @@ struct Progress {
     attempts: u8,
     deadline: Instant,
     started_at: Instant,
+    /// Set in the fallback phase: why it runs.
+    fallback: Option<FallbackReason>,
+    /// In the fallback phase: a failure ACK seen (it ends the phase at the deadline).
+    refused: Option<MavResult>,
 }
 
 /// Waiting for the first sign of an answer: an ACK or the message itself.
@@ -296,9 +345,49 @@ pub(crate) enum Step {
 }
 
 impl Progress {
-    fn finish(self, now: Instant, result: HandshakeResult) -> Step {
+    /// Ends the handshake with `result`, or, when `result` is the first phase's refusal or
+    /// silence and a fallback is configured, starts the fallback phase.
+    fn finish(mut self, now: Instant, config: &HandshakeConfig, result: HandshakeResult) -> Step {
+        let reason = match result {
+            HandshakeResult::Nack { result } => Some(FallbackReason::Refused(result)),
+            HandshakeResult::Timeout { acked } => Some(FallbackReason::Unanswered { acked }),
+            HandshakeResult::ProtocolVersion(_) | HandshakeResult::Message { .. } => None,
+        };
+        let asked_for_300 = matches!(
+            self.request.method,
+            HandshakeMethod::RequestMessage300 | HandshakeMethod::RequestProtocolVersion
+        );
+        if let (Some(reason), Some(msg_id), None, true) =
+            (reason, config.fallback, self.fallback, asked_for_300)
+        {
+            self.request.method = HandshakeMethod::RequestMessageOther { msg_id };
+            self.request.encoding = CommandEncoding::Long;
+            self.attempts = 1;
+            self.deadline = now + config.interval;
+            self.fallback = Some(reason);
+            return Step::Resend(self.state(false));
+        }
+        let result = match (self.fallback, result.is_success()) {
+            // The fallback failed too: a refusal in either phase is a NACK.
+            (Some(FallbackReason::Refused(first)), false) => HandshakeResult::Nack {
+                result: self.refused.unwrap_or(first),
+            },
+            (Some(FallbackReason::Unanswered { .. }), false) if self.refused.is_some() => {
+                HandshakeResult::Nack {
+                    result: self.refused.unwrap_or(MavResult::FAILED),
+                }
+            }
+            (Some(first @ FallbackReason::Unanswered { acked }), false) => match result {
+                HandshakeResult::Timeout { acked: again } => HandshakeResult::Timeout {
+                    acked: acked || again,
+                },
+                _ => first.result(),
+            },
+            _ => result,
+        };
         Step::Done(HandshakeOutcome {
             request: self.request,
+            fallback: self.fallback,
             result,
             attempts: self.attempts,
             started_at: self.started_at,
@@ -306,20 +395,24 @@ impl Progress {
         })
     }
 
-    /// The awaited message's result, if `frame` is it.
-    fn answer(&self, frame: &OwnedFrame) -> Option<HandshakeResult> {
+    /// What `frame` says, if it is the awaited message: its result when it came in MAVLink 2;
+    /// in the fallback phase, the message in MAVLink 1 shows the link has no MAVLink 2.
+    fn answer(&self, frame: &OwnedFrame) -> Option<Answer> {
         let method = self.request.method;
-        let from_target = self.request.target.matches(frame.sysid(), frame.compid());
-        if !from_target || frame.version() != Version::V2 {
+        if !self.request.target.matches(frame.sysid(), frame.compid()) {
             return None;
+        }
+        if frame.version() != Version::V2 {
+            let fallback_answered_in_v1 = self.fallback.is_some()
+                && matches!(method, HandshakeMethod::RequestMessageOther { msg_id } if frame.msg_id() == msg_id);
+            return fallback_answered_in_v1.then_some(Answer::Mavlink1);
         }
         match method {
             HandshakeMethod::RequestMessage300 | HandshakeMethod::RequestProtocolVersion => frame
                 .decode_as::<ProtocolVersion>()
-                .map(HandshakeResult::ProtocolVersion),
-            HandshakeMethod::RequestMessageOther { msg_id } => {
-                (frame.msg_id() == msg_id).then_some(HandshakeResult::Message { msg_id })
-            }
+                .map(|v| Answer::Mavlink2(HandshakeResult::ProtocolVersion(v))),
+            HandshakeMethod::RequestMessageOther { msg_id } => (frame.msg_id() == msg_id)
+                .then_some(Answer::Mavlink2(HandshakeResult::Message { msg_id })),
         }
     }
 
@@ -333,12 +426,29 @@ impl Progress {
         .then_some(ack)
     }
 
+    /// Feeds the awaited message (or its MAVLink 1 copy in the fallback phase).
+    fn answered(self, now: Instant, config: &HandshakeConfig, answer: Answer) -> Step {
+        match answer {
+            Answer::Mavlink2(result) => self.finish(now, config, result),
+            Answer::Mavlink1 => {
+                let refused = self.refused.unwrap_or(match self.fallback {
+                    Some(FallbackReason::Refused(first)) => first,
+                    _ => MavResult::FAILED,
+                });
+                self.finish(now, config, HandshakeResult::Nack { result: refused })
+            }
+        }
+    }
+
     fn timeout(mut self, now: Instant, config: &HandshakeConfig, acked: bool) -> Step {
         if now < self.deadline {
             return Step::Wait(self.state(acked));
         }
+        if let Some(result) = self.refused {
+            return self.finish(now, config, HandshakeResult::Nack { result });
+        }
         if self.attempts > config.retries {
-            return self.finish(now, HandshakeResult::Timeout { acked });
+            return self.finish(now, config, HandshakeResult::Timeout { acked });
         }
         self.attempts += 1;
         self.deadline = now + config.interval;
@@ -354,6 +464,14 @@ impl Progress {
     }
 }
 
+/// The awaited message, seen.
+enum Answer {
+    /// In MAVLink 2: the handshake's result.
+    Mavlink2(HandshakeResult),
+    /// The fallback's message in MAVLink 1: the link has no MAVLink 2.
+    Mavlink1,
+}
+
 impl AwaitingAnswer {
     /// The state after the first request, sent at `now`.
     pub(crate) fn start(now: Instant, request: HandshakeRequest, config: &HandshakeConfig) -> Self {
@@ -362,12 +480,20 @@ impl AwaitingAnswer {
             attempts: 1,
             deadline: now + config.interval,
             started_at: now,
+            fallback: None,
+            refused: None,
         })
     }
 
-    fn handle_frame(self, now: Instant, frame: &OwnedFrame, own_sysid: u8) -> Step {
-        if let Some(result) = self.0.answer(frame) {
-            return self.0.finish(now, result);
+    fn handle_frame(
+        mut self,
+        now: Instant,
+        config: &HandshakeConfig,
+        frame: &OwnedFrame,
+        own_sysid: u8,
+    ) -> Step {
+        if let Some(answer) = self.0.answer(frame) {
+            return self.0.answered(now, config, answer);
         }
         match self.0.ack(frame, own_sysid) {
             Some(ack)
@@ -375,18 +501,24 @@ impl AwaitingAnswer {
             {
                 Step::Wait(Handshake::AwaitingMessage(AwaitingMessage(self.0)))
             }
+            // In the fallback phase a refusal may be the late answer to a request for 300:
+            // it ends the phase at the deadline unless the message comes first.
+            Some(ack) if self.0.fallback.is_some() => {
+                self.0.refused = Some(ack.result);
+                Step::Wait(Handshake::AwaitingAnswer(self))
+            }
             Some(ack) => self
                 .0
-                .finish(now, HandshakeResult::Nack { result: ack.result }),
+                .finish(now, config, HandshakeResult::Nack { result: ack.result }),
             None => Step::Wait(Handshake::AwaitingAnswer(self)),
         }
     }
 }
 
 impl AwaitingMessage {
-    fn handle_frame(self, now: Instant, frame: &OwnedFrame) -> Step {
+    fn handle_frame(self, now: Instant, config: &HandshakeConfig, frame: &OwnedFrame) -> Step {
         match self.0.answer(frame) {
-            Some(result) => self.0.finish(now, result),
+            Some(answer) => self.0.answered(now, config, answer),
             None => Step::Wait(Handshake::AwaitingMessage(self)),
         }
     }
@@ -433,11 +565,24 @@ impl Handshake {
         }
     }
 
+    /// Whether the fallback phase is running (the request for PROTOCOL_VERSION was refused or
+    /// unanswered; the fallback message is asked for now).
+    #[must_use]
+    pub const fn fallback(&self) -> Option<FallbackReason> {
+        self.progress().fallback
+    }
+
     /// Feeds an accepted frame.
-    pub(crate) fn handle_frame(self, now: Instant, frame: &OwnedFrame, own_sysid: u8) -> Step {
+    pub(crate) fn handle_frame(
+        self,
+        now: Instant,
+        config: &HandshakeConfig,
+        frame: &OwnedFrame,
+        own_sysid: u8,
+    ) -> Step {
         match self {
-            Self::AwaitingAnswer(s) => s.handle_frame(now, frame, own_sysid),
-            Self::AwaitingMessage(s) => s.handle_frame(now, frame),
+            Self::AwaitingAnswer(s) => s.handle_frame(now, config, frame, own_sysid),
+            Self::AwaitingMessage(s) => s.handle_frame(now, config, frame),
         }
     }
 

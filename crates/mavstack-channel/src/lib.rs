@@ -160,8 +160,8 @@ pub use event::{
 };
 pub use frame::{Authentication, OwnedFrame, ReceivedFrame};
 pub use handshake::{
-    Handshake, HandshakeConfig, HandshakeMethod, HandshakeOutcome, HandshakeRequest,
-    HandshakeResult, Target,
+    FallbackReason, Handshake, HandshakeConfig, HandshakeMethod, HandshakeOutcome,
+    HandshakeRequest, HandshakeResult, Target,
 };
 pub use radio::{Radio, RadioConfig, RadioEvent, RadioStats, RadioTransmit, Side};
 pub use seq::SourceStats;

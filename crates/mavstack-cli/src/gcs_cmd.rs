@@ -727,17 +727,19 @@ pub(crate) fn command(args: &CommandArgs) -> Result<(), Failure> {
             .await;
         let seconds = remote.since(began);
         remote.close().await?;
-        let (result, code, param2) = match &result {
-            Ok(ack) => (Some(ack.result), 0, ack.result_param2),
+        let none: &[String] = &[];
+        let (result, code, param2, said) = match &result {
+            Ok(ack) => (Some(ack.result), 0, ack.result_param2, none),
             Err(SystemError::Command {
                 source:
                     CommandError::Rejected {
                         result,
                         result_param2,
                     },
+                statustext,
                 ..
-            }) => (Some(*result), 1, *result_param2),
-            Err(SystemError::Command { .. }) => (None, 1, 0),
+            }) => (Some(*result), 1, *result_param2, statustext.as_slice()),
+            Err(SystemError::Command { statustext, .. }) => (None, 1, 0, statustext.as_slice()),
             Err(e) => return Err(other(e)),
         };
         let line = if json {
@@ -749,11 +751,17 @@ pub(crate) fn command(args: &CommandArgs) -> Result<(), Failure> {
                 "result_code": result.map(|r| r.0),
                 "result_param2": param2,
                 "seconds": seconds,
+                "statustext": said,
             })
             .to_string()
         } else {
+            let why = if said.is_empty() {
+                String::new()
+            } else {
+                format!(": {}", said.join("; "))
+            };
             format!(
-                "{} → {} ({seconds:.2} s)",
+                "{} → {} ({seconds:.2} s){why}",
                 command_name(id),
                 result.map_or("no acknowledgement (timed out)", result_name)
             )

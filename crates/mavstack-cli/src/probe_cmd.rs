@@ -10,7 +10,8 @@ use clap::{Args, ValueEnum};
 use mavstack::router::LinkId;
 use mavstack::{EventSubscription, Incoming, LinkEvent, LinkSpec, NodeHandle, Subscription};
 use mavstack_channel::{
-    Authentication, CommandEncoding, HandshakeMethod, HandshakeResult, SigningConfig, Target,
+    Authentication, CommandEncoding, FallbackReason, HandshakeMethod, HandshakeOutcome,
+    SigningConfig, Target,
 };
 use mavstack_core::Message;
 use mavstack_core::wire::Version;
@@ -76,7 +77,7 @@ struct System {
     version_after: Option<Version>,
     capability: Option<bool>,
     signed: bool,
-    handshake: Option<&'static str>,
+    handshake: Option<HandshakeOutcome>,
 }
 
 struct Probe {
@@ -84,7 +85,7 @@ struct Probe {
     frames: Subscription,
     events: EventSubscription,
     systems: BTreeMap<(u8, u8), System>,
-    outcomes: BTreeMap<LinkId, HandshakeResult>,
+    outcomes: BTreeMap<LinkId, HandshakeOutcome>,
     /// Heartbeats seen after each system's handshake ended.
     after: BTreeMap<(u8, u8), Version>,
     handshake_done: BTreeMap<(u8, u8), bool>,
@@ -101,7 +102,7 @@ impl Probe {
                 e = self.events.recv() => {
                     let e = e.ok_or_else(closed)?;
                     if let LinkEvent::Handshake(outcome) = e.kind {
-                        self.outcomes.insert(e.link_id, outcome.result);
+                        self.outcomes.insert(e.link_id, outcome);
                     }
                 }
             }
@@ -146,20 +147,45 @@ impl Probe {
     }
 }
 
-fn report(key: (u8, u8), s: &System, method: &str) -> String {
+/// The handshake's method and result as the report gives them, and whether PROTOCOL_VERSION
+/// is known to be unsupported. The method is the request that decided: the fallback's
+/// (`request_message_other`) when its message proved MAVLink 2, else the one asked for.
+fn handshake_fields(
+    outcome: Option<&HandshakeOutcome>,
+    asked: HandshakeMethod,
+) -> (&'static str, &'static str, bool) {
+    let Some(o) = outcome else {
+        return (asked.name(), "timeout", false);
+    };
+    let method = if o.fallback.is_some() && o.result.is_success() {
+        o.request.method.name()
+    } else {
+        asked.name()
+    };
+    let unsupported = matches!(o.fallback, Some(FallbackReason::Refused(_)))
+        || (o.fallback.is_some() && o.result.is_success());
+    (method, o.result.name(), unsupported)
+}
+
+fn report(key: (u8, u8), s: &System, asked: HandshakeMethod) -> String {
     let v = |v: Version| v.number();
     let capability = s
         .capability
         .map_or_else(|| "null".to_owned(), |c| c.to_string());
+    let (method, result, unsupported) = handshake_fields(s.handshake.as_ref(), asked);
+    let supported = if unsupported {
+        ",\"protocol_version_supported\":false"
+    } else {
+        ""
+    };
     format!(
-        "{{\"sysid\":{},\"compid\":{},\"autopilot\":{},\"type\":{},\"version_before\":{},\"version_after\":{},\"handshake\":{{\"method\":\"{method}\",\"result\":\"{}\"}},\"mavlink2_capability\":{capability},\"signed\":{}}}",
+        "{{\"sysid\":{},\"compid\":{},\"autopilot\":{},\"type\":{},\"version_before\":{},\"version_after\":{},\"handshake\":{{\"method\":\"{method}\",\"result\":\"{result}\"}},\"mavlink2_capability\":{capability},\"signed\":{}{supported}}}",
         key.0,
         key.1,
         s.autopilot,
         s.kind,
         v(s.version_before),
         v(s.version_after.unwrap_or(s.version_before)),
-        s.handshake.unwrap_or("timeout"),
         s.signed
     )
 }
@@ -239,7 +265,6 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
             .pump(Instant::now() + Duration::from_millis(1200))
             .await?;
         let keys: Vec<(u8, u8)> = probe.systems.keys().copied().collect();
-        let method_name = method.name();
         for key in keys {
             let Some(link) = probe.systems.get(&key).map(|s| s.link) else {
                 continue;
@@ -280,14 +305,14 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
                         .await
                 })
             };
-            let deadline = Instant::now() + Duration::from_secs(5);
+            let deadline = Instant::now() + Duration::from_secs(6);
             while !probe.outcomes.contains_key(&link) && Instant::now() < deadline {
                 probe
                     .pump(Instant::now() + Duration::from_millis(100))
                     .await?;
             }
             handshake.abort();
-            let result = probe.outcomes.get(&link).map(HandshakeResult::name);
+            let result = probe.outcomes.get(&link).copied();
             probe.handshake_done.insert(key, true);
             // 4. The version the system uses now: its next heartbeat.
             let deadline = Instant::now() + Duration::from_millis(2500);
@@ -302,7 +327,7 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
             }
         }
         for (key, system) in &probe.systems {
-            println!("{}", report(*key, system, method_name));
+            println!("{}", report(*key, system, method));
         }
         drop(probe);
         node.shutdown().await.map_err(other)?;

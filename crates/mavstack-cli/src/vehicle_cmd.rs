@@ -5,9 +5,11 @@
 //! The version rules live in the links' channels and the router; the vehicle is
 //! `mavstack::sim_vehicle::SimVehicle`. This command parses arguments and prints.
 
+use core::time::Duration;
+
 use anyhow::anyhow;
 use clap::Args;
-use mavstack::router::{LinkRole, VersionMode};
+use mavstack::router::{LinkRole, ProtocolVersionSupport, VersionMode};
 use mavstack::sim_vehicle::SimVehicle;
 use mavstack::{LinkSpec, Node, NodeBuilder};
 use mavstack_channel::SigningConfig;
@@ -59,8 +61,15 @@ pub(crate) struct VehicleArgs {
     #[arg(long, default_value_t = 0)]
     link_id: u8,
     /// Never answer the handshake (no PROTOCOL_VERSION support): neither ACK nor answer.
-    #[arg(long)]
+    /// The same as `--protocol-version silent`.
+    #[arg(long, conflicts_with = "protocol_version")]
     no_protocol_version: bool,
+    /// How a request for PROTOCOL_VERSION is answered: `answer` (PROTOCOL_VERSION in
+    /// MAVLink 2, as the versions documents describe), `refuse` (as ArduPilot does:
+    /// COMMAND_ACK FAILED for REQUEST_MESSAGE(300), UNSUPPORTED for command 519; ground
+    /// stations then request AUTOPILOT_VERSION instead) or `silent`.
+    #[arg(long, value_name = "HOW", default_value = "answer", value_parser = protocol_version_arg)]
+    protocol_version: ProtocolVersionSupport,
     /// Treat the links that set neither `version` nor `key` as secure (a USB cable): accept
     /// SETUP_SIGNING on them.
     #[arg(long)]
@@ -69,12 +78,34 @@ pub(crate) struct VehicleArgs {
     /// `NAME,VALUE` or QGroundControl `SYSID COMPID NAME VALUE TYPE` line per parameter.
     #[arg(long, value_name = "FILE")]
     params: Option<String>,
+    /// Seconds after start during which arming is refused with a STATUSTEXT saying why, as
+    /// a flight stack's estimator settles (ArduPilot SITL: about 40 s). Default 0.
+    #[arg(long, value_name = "S", default_value_t = 0.0, value_parser = settle_seconds)]
+    estimator_settle: f64,
     /// Print what happens (link versions, handshakes, rejections, modes, parameter sets,
     /// plans) to stderr.
     #[arg(long, short)]
     verbose: bool,
     #[command(flatten)]
     http: crate::router_cmd::HttpArgs,
+}
+
+fn settle_seconds(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if (0.0..=3600.0).contains(&v) => Ok(v),
+        _ => Err(format!(
+            "'{text}' is not a number of seconds from 0 to 3600"
+        )),
+    }
+}
+
+fn protocol_version_arg(text: &str) -> Result<ProtocolVersionSupport, String> {
+    match text {
+        "answer" => Ok(ProtocolVersionSupport::Answer),
+        "refuse" => Ok(ProtocolVersionSupport::Refuse),
+        "silent" => Ok(ProtocolVersionSupport::Silent),
+        _ => Err(format!("'{text}' is not one of answer, refuse, silent")),
+    }
 }
 
 pub(crate) fn secret_key(hex: &str, what: &str) -> Result<SecretKey, Failure> {
@@ -128,7 +159,11 @@ pub(crate) fn vehicle_node(args: &VehicleArgs) -> Result<NodeBuilder, Failure> {
         .map(|k| secret_key(k, "--sign-key").map(|key| SigningConfig::new(key, args.link_id)))
         .transpose()?;
     let mut builder = Node::builder().role(LinkRole::Vehicle {
-        protocol_version: !args.no_protocol_version,
+        protocol_version: if args.no_protocol_version {
+            ProtocolVersionSupport::Silent
+        } else {
+            args.protocol_version
+        },
     });
     for text in &args.links {
         let mut spec =
@@ -166,6 +201,7 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
         autopilot: args.autopilot,
         mavlink2: true,
         params,
+        estimator_settle: Duration::from_secs_f64(args.estimator_settle),
     };
     runtime()?.block_on(async {
         let log = stderr_log(args.verbose);

@@ -79,6 +79,7 @@ fn planted_deviations_each_fail_their_rule_and_conforming_vehicles_pass() {
             "vehicle_untruncated",
             "vehicle_silent_v1_only",
             "vehicle_nack_v1_only",
+            "vehicle_refuses_like_ardupilot",
             "vehicle_seq_gaps",
             "vehicle_signed_late",
             "vehicle_signed_good",

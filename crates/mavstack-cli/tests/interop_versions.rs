@@ -77,6 +77,11 @@ fn probe_against_a_vehicle_that_nacks() {
 }
 
 #[test]
+fn probe_falls_back_to_autopilot_version_when_protocol_version_is_refused() {
+    scenario("probe_refuses");
+}
+
+#[test]
 fn probe_against_a_silent_vehicle() {
     scenario("probe_silent");
 }

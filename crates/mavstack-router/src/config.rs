@@ -20,15 +20,29 @@ pub enum LinkRole {
     /// addressed to it on a `secure` link, and the MAV_PROTOCOL_CAPABILITY_MAVLINK2 bit of the
     /// component's own AUTOPILOT_VERSION is set exactly on the links that accept MAVLink 2.
     Vehicle {
-        /// Whether it answers the handshake at all (`false`: a vehicle without
-        /// PROTOCOL_VERSION support, which stays silent).
-        protocol_version: bool,
+        /// How it answers a request for PROTOCOL_VERSION.
+        protocol_version: ProtocolVersionSupport,
     },
     /// The link of the router's own component when it is a ground station: it can run the
     /// MAVLink 2 handshake ([`crate::Router::start_handshake`]), and an `auto` link also
     /// switches to MAVLink 2 on an AUTOPILOT_VERSION with the MAVLINK2 capability. A
     /// `version=1` link never handshakes.
     GroundStation,
+}
+
+/// How a vehicle's link answers a request for PROTOCOL_VERSION (REQUEST_MESSAGE(300) or
+/// MAV_CMD_REQUEST_PROTOCOL_VERSION).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum ProtocolVersionSupport {
+    /// PROTOCOL_VERSION in MAVLink 2, as the versions documents describe (a NACK on a
+    /// `version=1` link).
+    #[default]
+    Answer,
+    /// Refused as ArduPilot refuses it: COMMAND_ACK FAILED for REQUEST_MESSAGE(300),
+    /// UNSUPPORTED for command 519. A ground station then falls back to another message.
+    Refuse,
+    /// Neither ACK nor answer (a vehicle that ignores the request).
+    Silent,
 }
 
 /// Which framing a link carries (the `version` link option).
@@ -205,8 +219,10 @@ impl LinkConfig {
                 let mut config = ChannelConfig::vehicle(sysid, compid);
                 if let Some(policy) = config.vehicle_policy_mut() {
                     policy.version = self.version.channel_policy();
-                    if !protocol_version {
+                    if protocol_version != ProtocolVersionSupport::Answer {
                         policy.protocol_version = None;
+                        policy.refuse_unsupported =
+                            protocol_version == ProtocolVersionSupport::Refuse;
                     }
                 }
                 config

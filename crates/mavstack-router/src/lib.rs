@@ -51,8 +51,8 @@ pub mod stats;
 pub mod systems;
 
 pub use config::{
-    DirectionFilters, IdFilter, LinkConfig, LinkRole, LocalDelivery, RateLimits, RouterConfig,
-    VersionMode,
+    DirectionFilters, IdFilter, LinkConfig, LinkRole, LocalDelivery, ProtocolVersionSupport,
+    RateLimits, RouterConfig, VersionMode,
 };
 pub use dialect::{Dialect, DialectInfo, InfoFn, is_control, target_of};
 pub use options::OptionError;

@@ -575,7 +575,7 @@ fn vehicle_links_answer_the_handshake_in_their_own_version_and_set_the_capabilit
     config.component_id = 1;
     let mut r = Router::new(config, DialectInfo::<MavMessage>::new());
     let vehicle = LinkRole::Vehicle {
-        protocol_version: true,
+        protocol_version: mavstack_router::ProtocolVersionSupport::Answer,
     };
     let v1 = link(&mut r, "v1", |c| {
         c.version = VersionMode::Mavlink1;
@@ -689,7 +689,7 @@ fn a_ground_station_link_runs_the_handshake_with_a_vehicle_link() {
     let g = link(&mut gcs, "to vehicle", |c| c.role = LinkRole::GroundStation);
     let v = link(&mut veh, "to gcs", |c| {
         c.role = LinkRole::Vehicle {
-            protocol_version: true,
+            protocol_version: mavstack_router::ProtocolVersionSupport::Answer,
         }
     });
     assert!(

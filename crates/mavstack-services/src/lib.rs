@@ -44,6 +44,7 @@
 //! | [`param`] | PARAM_REQUEST_LIST/READ, PARAM_SET, PARAM_VALUE | [`param::ParamClient`] | [`param::ParamServer`] |
 //! | [`mission`] | MISSION_COUNT, MISSION_REQUEST_INT, MISSION_ITEM_INT, MISSION_ACK, ... | [`mission::MissionClient`] | [`mission::MissionServer`] |
 //! | [`stream`] | SET_MESSAGE_INTERVAL, REQUEST_MESSAGE, MESSAGE_INTERVAL | [`stream::Subscriptions`], [`stream::set_message_interval`], [`stream::request_message`] | [`stream::StreamScheduler`], [`stream::StreamServer`] (a whole service) |
+//! | [`statustext`] | STATUSTEXT | [`statustext::Lines`] (chunks put together, text made safe to show) | — |
 //! | [`timesync`] | TIMESYNC | [`timesync::Timesync`] (estimates the offset) | the same type answers requests |
 //!
 //! # Limitations
@@ -128,6 +129,7 @@ pub mod mission;
 pub mod mission_json;
 pub mod param;
 mod rtt;
+pub mod statustext;
 pub mod stream;
 pub mod timesync;
 pub mod wpl;

@@ -97,6 +97,8 @@ pub enum FlightEvent {
     CurrentChanged(u16),
     /// A line for STATUSTEXT and the log.
     Text(String),
+    /// A warning for STATUSTEXT (severity CRITICAL) and the log: why something was refused.
+    Warning(String),
 }
 
 /// Why a command was refused.
@@ -285,6 +287,11 @@ impl Flight {
 
     fn say(&mut self, text: impl Into<String>) {
         self.events.push_back(FlightEvent::Text(text.into()));
+    }
+
+    /// Says why something was refused (STATUSTEXT, severity CRITICAL).
+    pub fn warn(&mut self, text: impl Into<String>) {
+        self.events.push_back(FlightEvent::Warning(text.into()));
     }
 
     /// Changes the mode.

@@ -86,6 +86,10 @@ pub struct SimConfig {
     pub mavlink2: bool,
     /// Its parameter table.
     pub params: Vec<(Name, Value)>,
+    /// How long after start its estimator is not ready: arming is refused with a STATUSTEXT
+    /// saying why, as flight stacks do (ArduPilot SITL takes about 40 s: `PreArm: Need
+    /// Position Estimate`). Zero: ready at once.
+    pub estimator_settle: Duration,
 }
 
 /// The messages the vehicle streams and their default intervals (`None`: on request only).
@@ -143,6 +147,8 @@ struct Craft {
     streams: StreamScheduler,
     /// Mission items made current by a command, for the mission server.
     new_current: Option<u16>,
+    /// When the estimator is ready (arming is refused before).
+    ready_at: Instant,
 }
 
 /// The numeric params of a command: p1–p4, latitude and longitude in degrees (`None` when
@@ -442,7 +448,20 @@ impl CommandHandler for Craft {
             MavCmd::GET_HOME_POSITION => self.one_shot(now, request.from, HomePosition::ID),
             MavCmd::COMPONENT_ARM_DISARM => {
                 // 21196 in param2 forces, as both autopilots define it.
-                match self.flight.arm(p[0] >= 0.5, p[1] == 21196.0) {
+                let (arm, force) = (p[0] >= 0.5, p[1] == 21196.0);
+                if arm && !force && !self.flight.is_armed() && now < self.ready_at {
+                    // Both autopilots refuse and say why in STATUSTEXT; ArduPilot's ACK
+                    // says FAILED, PX4's DENIED.
+                    let (text, result) = match self.autopilot {
+                        Autopilot::Ardupilot => {
+                            ("PreArm: Need Position Estimate", MavResult::FAILED)
+                        }
+                        Autopilot::Px4 => ("Arming denied: estimator not ready", MavResult::DENIED),
+                    };
+                    self.flight.warn(text);
+                    return done(result);
+                }
+                match self.flight.arm(arm, force) {
                     Ok(()) => accepted,
                     Err(_) => done(MavResult::DENIED),
                 }
@@ -565,6 +584,7 @@ impl Vehicle {
             flight: Flight::new(config.autopilot, Tuning::default()),
             streams,
             new_current: None,
+            ready_at: now + config.estimator_settle,
         };
         let mut vehicle = Self {
             own: config.own,
@@ -733,17 +753,8 @@ impl Vehicle {
                 FlightEvent::CurrentChanged(seq) => {
                     self.missions.set_current(seq);
                 }
-                FlightEvent::Text(text) => {
-                    let mut field = [0u8; 50];
-                    let n = text.len().min(50);
-                    field[..n].copy_from_slice(&text.as_bytes()[..n]);
-                    self.broadcast(MavMessage::Statustext(Statustext {
-                        severity: MavSeverity::INFO,
-                        text: field,
-                        ..Statustext::default()
-                    }));
-                    self.log.push_back(text);
-                }
+                FlightEvent::Text(text) => self.say(MavSeverity::INFO, text),
+                FlightEvent::Warning(text) => self.say(MavSeverity::CRITICAL, text),
             }
         }
         loop {
@@ -758,6 +769,19 @@ impl Vehicle {
                 });
             }
         }
+    }
+
+    /// A line in STATUSTEXT (cut to its 50 bytes) and in the log.
+    fn say(&mut self, severity: MavSeverity, text: String) {
+        let mut field = [0u8; 50];
+        let n = text.len().min(50);
+        field[..n].copy_from_slice(&text.as_bytes()[..n]);
+        self.broadcast(MavMessage::Statustext(Statustext {
+            severity,
+            text: field,
+            ..Statustext::default()
+        }));
+        self.log.push_back(text);
     }
 
     fn broadcast(&mut self, message: MavMessage) {

@@ -60,7 +60,7 @@
 //!
 //! ```no_run
 //! # async fn run() -> Result<(), Box<dyn core::error::Error>> {
-//! use mavstack::router::LinkRole;
+//! use mavstack::router::{LinkRole, ProtocolVersionSupport};
 //! use mavstack::serve::Served;
 //! use mavstack::services::Address;
 //! use mavstack::services::param::{Encoding, Name, ParamServer, Value};
@@ -68,7 +68,7 @@
 //! let none = |_: &str| None;
 //! let node = Node::builder()
 //!     .identity(1, 100) // a camera
-//!     .role(LinkRole::Vehicle { protocol_version: true })
+//!     .role(LinkRole::Vehicle { protocol_version: ProtocolVersionSupport::Answer })
 //!     .link(LinkSpec::parse("serial:/dev/ttyAMA0:921600?name=fc", &none)?)
 //!     .link(LinkSpec::parse("udpin:0.0.0.0:14550?name=gcs", &none)?)
 //!     .start()

@@ -6,7 +6,7 @@
 //!
 //! ```no_run
 //! # async fn run() -> Result<(), Box<dyn core::error::Error>> {
-//! use mavstack::router::LinkRole;
+//! use mavstack::router::{LinkRole, ProtocolVersionSupport};
 //! use mavstack::serve::Served;
 //! use mavstack::services::Address;
 //! use mavstack::services::mission::{MissionConfig, MissionServer};
@@ -15,7 +15,7 @@
 //! let none = |_: &str| None;
 //! let node = Node::builder()
 //!     .identity(1, 191)
-//!     .role(LinkRole::Vehicle { protocol_version: true })
+//!     .role(LinkRole::Vehicle { protocol_version: ProtocolVersionSupport::Answer })
 //!     .link(LinkSpec::parse("udpin:0.0.0.0:14550", &none)?)
 //!     .start()
 //!     .await?;

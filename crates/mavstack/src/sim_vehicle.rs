@@ -21,7 +21,7 @@ use mavstack_channel::SigningSetup;
 use mavstack_core::Message as _;
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::{AutopilotVersion, CommandLong, MavCmd, MavMessage};
-use mavstack_router::LinkRole;
+use mavstack_router::{LinkRole, ProtocolVersionSupport};
 use mavstack_services::param::{Name, Value};
 use mavstack_services::{Address, Outgoing, Service};
 use mavstack_sim::{Autopilot, SimConfig, Vehicle};
@@ -116,6 +116,7 @@ impl SimVehicle {
             autopilot,
             mavlink2: true,
             params,
+            estimator_settle: core::time::Duration::ZERO,
         }
     }
 
@@ -140,7 +141,7 @@ impl SimVehicle {
     ) -> Result<Self, NodeError> {
         let builder = if builder.link_role().is_none() {
             builder.role(LinkRole::Vehicle {
-                protocol_version: true,
+                protocol_version: ProtocolVersionSupport::Answer,
             })
         } else {
             builder

@@ -44,6 +44,7 @@ use mavstack_services::param::list::ListFetch;
 use mavstack_services::param::{
     Encoding, Name, Param, ParamClient, ParamConfig, ParamError, ParamEvent, ParamRef, Value,
 };
+use mavstack_services::statustext::Lines;
 use mavstack_services::{Address, Service};
 use mavstack_transport::clock;
 
@@ -96,12 +97,15 @@ pub enum SystemError {
         source: MissionError,
     },
     /// A command was not accepted.
-    #[error("command {command}: {source}")]
+    #[error("command {command}: {source}{}", said(statustext))]
     Command {
         /// The command.
         command: String,
         /// Why.
         source: CommandError,
+        /// What the system said in STATUSTEXT between the request and 0.5 s after its answer
+        /// (flight stacks say why they refuse there: `PreArm: Need Position Estimate`).
+        statustext: Vec<String>,
     },
     /// The request could not start (another like it is running).
     #[error("{0}")]
@@ -110,6 +114,21 @@ pub enum SystemError {
     #[error("the node has stopped")]
     Stopped,
 }
+
+/// The STATUSTEXT lines after an error's message.
+fn said(lines: &[String]) -> String {
+    if lines.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", lines.join("; "))
+    }
+}
+
+/// STATUSTEXT lines kept while a command runs.
+const MAX_SAID: usize = 32;
+
+/// How long STATUSTEXT is still collected after a refusal.
+const SAID_AFTER: Duration = Duration::from_millis(500);
 
 /// A remote system reached through a node's link.
 #[derive(Debug)]
@@ -126,6 +145,10 @@ pub struct System {
     handshake: Option<HandshakeOutcome>,
     home_amsl: Option<f32>,
     retries: u8,
+    /// STATUSTEXT chunks put together.
+    lines: Lines,
+    /// STATUSTEXT lines of the target since the current command started.
+    said: Vec<String>,
 }
 
 impl System {
@@ -192,6 +215,8 @@ impl System {
             handshake: None,
             home_amsl: None,
             retries: PATIENT_RETRIES,
+            lines: Lines::default(),
+            said: Vec::new(),
         };
         if found_in == Version::V1 {
             let outcome = system
@@ -555,7 +580,9 @@ impl System {
 
     /// Sends a command (COMMAND_LONG or COMMAND_INT; its target fields are the system's) with
     /// the services' retries and waits for the final COMMAND_ACK; `progress` hears each
-    /// IN_PROGRESS (0–100, 255 unknown).
+    /// IN_PROGRESS (0–100, 255 unknown). When the command is refused or unanswered, the
+    /// error carries the STATUSTEXT lines the system sent from the request until 0.5 s after
+    /// its answer (the reason flight stacks give).
     ///
     /// # Errors
     /// [`SystemError::Command`] (refused, or no acknowledgement), [`SystemError::Busy`],
@@ -566,6 +593,8 @@ impl System {
         mut progress: impl FnMut(u8),
     ) -> Result<CommandAck, SystemError> {
         let id = command.id();
+        self.update();
+        self.said.clear();
         let mut client = CommandClient::new(self.own, CommandConfig::default());
         let handle = client
             .send(clock::now(), self.target, command)
@@ -585,10 +614,28 @@ impl System {
                 })
             })
             .await?;
-        result.map_err(|source| SystemError::Command {
-            command: command_name(id),
-            source,
-        })
+        match result {
+            Ok(ack) => Ok(ack),
+            Err(source) => {
+                self.listen(SAID_AFTER).await;
+                Err(SystemError::Command {
+                    command: command_name(id),
+                    source,
+                    statustext: core::mem::take(&mut self.said),
+                })
+            }
+        }
+    }
+
+    /// Takes in what the system sends for `time` (its STATUSTEXT lines among it).
+    async fn listen(&mut self, time: Duration) {
+        let until = tokio::time::Instant::now() + time;
+        while let Ok(Some(incoming)) = tokio::time::timeout_at(until, self.frames.recv()).await {
+            let f = incoming.frame.frame.view();
+            if let Ok(msg) = MavMessage::decode(f.msg_id(), f.payload()) {
+                self.note(Address::new(f.sysid(), f.compid()), &msg);
+            }
+        }
     }
 
     /// Asks the system to send message `id` once (MAV_CMD_REQUEST_MESSAGE); returns its
@@ -738,6 +785,15 @@ impl System {
 
     /// Keeps what the system tells about itself in passing.
     fn note(&mut self, from: Address, msg: &MavMessage) {
+        if let MavMessage::Statustext(text) = msg
+            && from.system == self.target.system
+            && let Some(line) = self.lines.push((from.system, from.component), text)
+        {
+            if self.said.len() == MAX_SAID {
+                self.said.remove(0);
+            }
+            self.said.push(line.text);
+        }
         if let MavMessage::GlobalPositionInt(GlobalPositionInt {
             alt, relative_alt, ..
         }) = msg

@@ -8,6 +8,7 @@ use core::time::Duration;
 use mavstack::conform::{
     GcsOptions, Rule, Status, VehicleMode, VehicleOptions, grade_ground_station, grade_vehicle,
 };
+use mavstack::router::{LinkRole, ProtocolVersionSupport};
 use mavstack::sim::Autopilot;
 use mavstack::sim_vehicle::SimVehicle;
 use mavstack::system::{System, Wanted};
@@ -18,8 +19,17 @@ fn spec(s: &str) -> LinkSpec {
 }
 
 async fn grade_sim(link_options: &str) -> mavstack::conform::Report {
+    grade_sim_answering(link_options, ProtocolVersionSupport::Answer).await
+}
+
+async fn grade_sim_answering(
+    link_options: &str,
+    protocol_version: ProtocolVersionSupport,
+) -> mavstack::conform::Report {
     let vehicle = SimVehicle::start(
-        Node::builder().link(spec(&format!("udpin:127.0.0.1:0{link_options}"))),
+        Node::builder()
+            .link(spec(&format!("udpin:127.0.0.1:0{link_options}")))
+            .role(LinkRole::Vehicle { protocol_version }),
         SimVehicle::config(
             Autopilot::Ardupilot,
             mavstack::sim::params::defaults(Autopilot::Ardupilot),
@@ -77,6 +87,32 @@ async fn the_simulated_vehicle_conforms() {
     assert_eq!(status(&report, Rule::NackWithoutV2), Status::NotApplicable);
     assert!(report.conforms());
     assert!(report.seconds < 15.0, "{}", report.seconds);
+}
+
+#[tokio::test]
+async fn a_vehicle_that_refuses_protocol_version_like_ardupilot_conforms_by_the_fallback() {
+    let report = grade_sim_answering("?version=2", ProtocolVersionSupport::Refuse).await;
+    assert!(report.conforms(), "{report:#?}");
+    let answer = report.verdict(Rule::HandshakeAnswer).expect("graded");
+    assert_eq!(answer.status, Status::Pass, "{answer:?}");
+    assert!(
+        answer.evidence.contains("COMMAND_ACK FAILED")
+            && answer.evidence.contains("AUTOPILOT_VERSION in MAVLink 2"),
+        "{}",
+        answer.evidence
+    );
+    // Reported, not graded: PROTOCOL_VERSION is deprecated, command 519 gone from PX4.
+    assert_eq!(
+        status(&report, Rule::ProtocolVersionSupported),
+        Status::Fail
+    );
+    assert_eq!(status(&report, Rule::Handshake519), Status::Pass);
+    assert_eq!(status(&report, Rule::HandshakeCommandInt), Status::Pass);
+    assert_eq!(
+        status(&report, Rule::HandshakeV2Framing),
+        Status::NotApplicable
+    );
+    assert_eq!(status(&report, Rule::CapabilityFlag), Status::Pass);
 }
 
 #[tokio::test]

@@ -57,7 +57,7 @@ async fn a_ground_station_uses_a_companions_own_parameters_missions_and_commands
     let node = Node::builder()
         .identity(1, 191)
         .role(LinkRole::Vehicle {
-            protocol_version: true,
+            protocol_version: mavstack::router::ProtocolVersionSupport::Answer,
         })
         .heartbeat(
             &Heartbeat {

@@ -8,16 +8,19 @@ use core::time::Duration;
 use std::path::PathBuf;
 use std::process::{Child, Command as Process};
 
-use mavstack::channel::HandshakeResult;
+use mavstack::channel::{FallbackReason, HandshakeResult};
+use mavstack::core::Message as _;
 use mavstack::dialects::common::{
     Attitude, CommandLong, MavCmd, MavFrame, MavMissionType, MavResult, MissionItemInt,
 };
+use mavstack::router::{LinkRole, ProtocolVersionSupport};
 use mavstack::services::command::Command;
+use mavstack::services::command::CommandError;
 use mavstack::services::heartbeat::HeartbeatEvent;
 use mavstack::services::param::{Name, Value};
 use mavstack::sim::{Autopilot, params};
 use mavstack::sim_vehicle::SimVehicle;
-use mavstack::system::{Discovery, System, Wanted};
+use mavstack::system::{Discovery, System, SystemError, Wanted};
 use mavstack::{LinkSpec, Node};
 
 fn none(_: &str) -> Option<u32> {
@@ -289,4 +292,91 @@ async fn signing_is_set_up_over_a_secure_link_and_the_list_reports_its_progress(
     drop(v);
     gcs.shutdown().await.expect("ground station stops");
     vehicle.shutdown().await.expect("vehicle stops");
+}
+
+/// A vehicle of `config` on a loopback UDP server, and a ground-station node reaching it.
+async fn vehicle_and_gcs(
+    role: ProtocolVersionSupport,
+    config: mavstack::sim::SimConfig,
+) -> (SimVehicle, Node) {
+    let vehicle = SimVehicle::start(
+        Node::builder()
+            .link(LinkSpec::parse("udpin:127.0.0.1:0", &none).expect("spec"))
+            .role(LinkRole::Vehicle {
+                protocol_version: role,
+            }),
+        config,
+    )
+    .await
+    .expect("vehicle starts");
+    let port = vehicle.node().local_addrs()[0].expect("bound").port();
+    let gcs = ground_station()
+        .link(LinkSpec::parse(&format!("udpout:127.0.0.1:{port}"), &none).expect("spec"))
+        .start()
+        .await
+        .expect("ground station starts");
+    (vehicle, gcs)
+}
+
+#[tokio::test]
+async fn a_vehicle_that_refuses_protocol_version_is_switched_by_the_fallback() {
+    // ArduPilot's answers: REQUEST_MESSAGE(300) → FAILED; AUTOPILOT_VERSION on request.
+    let (vehicle, gcs) = vehicle_and_gcs(
+        ProtocolVersionSupport::Refuse,
+        SimVehicle::config(Autopilot::Ardupilot, params::defaults(Autopilot::Ardupilot)),
+    )
+    .await;
+    let v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
+        .await
+        .expect("the vehicle is found");
+    let outcome = v.handshake().expect("a handshake ran (found in MAVLink 1)");
+    assert_eq!(
+        outcome.result,
+        HandshakeResult::Message {
+            msg_id: mavstack::dialects::common::AutopilotVersion::ID
+        }
+    );
+    assert_eq!(
+        outcome.fallback,
+        Some(FallbackReason::Refused(MavResult::FAILED))
+    );
+    assert_eq!(v.link_version().await, Some("2"));
+    gcs.shutdown().await.expect("stops");
+    vehicle.shutdown().await.expect("stops");
+}
+
+#[tokio::test]
+async fn a_refused_command_carries_the_statustext_that_says_why() {
+    let mut config =
+        SimVehicle::config(Autopilot::Ardupilot, params::defaults(Autopilot::Ardupilot));
+    config.estimator_settle = Duration::from_secs(600);
+    let (vehicle, gcs) = vehicle_and_gcs(ProtocolVersionSupport::Answer, config).await;
+    let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
+        .await
+        .expect("the vehicle is found");
+    let arm = Command::Long(CommandLong {
+        command: MavCmd::COMPONENT_ARM_DISARM,
+        param1: 1.0,
+        ..CommandLong::default()
+    });
+    let error = v.command(arm, |_| {}).await.expect_err("refused");
+    let SystemError::Command {
+        source, statustext, ..
+    } = &error
+    else {
+        panic!("{error}");
+    };
+    assert!(
+        matches!(source, CommandError::Rejected { result, .. } if *result == MavResult::FAILED),
+        "{source}"
+    );
+    assert_eq!(statustext, &["PreArm: Need Position Estimate".to_owned()]);
+    assert!(
+        error
+            .to_string()
+            .ends_with("(PreArm: Need Position Estimate)"),
+        "{error}"
+    );
+    gcs.shutdown().await.expect("stops");
+    vehicle.shutdown().await.expect("stops");
 }

@@ -9,7 +9,7 @@ use mavstack_core::wire::Version;
 use mavstack_dialects::common::{
     AutopilotVersion, CommandInt, CommandLong, Heartbeat, MavCmd, ProtocolVersion,
 };
-use mavstack_router::{LinkRole, VersionMode};
+use mavstack_router::{LinkRole, ProtocolVersionSupport, VersionMode};
 use mavstack_sim::Autopilot;
 use mavstack_transport::clock;
 
@@ -100,7 +100,11 @@ pub async fn grade_ground_station(
     let (builder, mut tap) = Node::builder()
         .link(link)
         .role(LinkRole::Vehicle {
-            protocol_version: options.mode != VehicleMode::Silent,
+            protocol_version: if options.mode == VehicleMode::Silent {
+                ProtocolVersionSupport::Silent
+            } else {
+                ProtocolVersionSupport::Answer
+            },
         })
         .with_tap();
     let (builder, mut events) = builder.with_events();

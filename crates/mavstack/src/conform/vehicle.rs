@@ -434,7 +434,7 @@ fn nobody_heard(timeout: Duration) -> Vec<Verdict> {
 }
 
 /// The vehicle role's rules, in the table's order.
-const VEHICLE_RULES: [Rule; 15] = [
+pub(super) const VEHICLE_RULES: [Rule; 16] = [
     Rule::Heartbeat,
     Rule::Crc,
     Rule::Sequence,
@@ -442,6 +442,7 @@ const VEHICLE_RULES: [Rule; 15] = [
     Rule::CapabilityFlag,
     Rule::SwitchOnV2,
     Rule::HandshakeAnswer,
+    Rule::ProtocolVersionSupported,
     Rule::HandshakeV2Framing,
     Rule::Handshake519,
     Rule::HandshakeCommandInt,
@@ -585,6 +586,7 @@ impl Facts<'_> {
                 Rule::CapabilityFlag => self.capability_flag(),
                 Rule::SwitchOnV2 => self.switch_on_v2(),
                 Rule::HandshakeAnswer => self.handshake_answer(),
+                Rule::ProtocolVersionSupported => self.protocol_version_supported(),
                 Rule::HandshakeV2Framing => self.handshake_v2_framing(),
                 Rule::Handshake519 => self.same_way(Rule::Handshake519, 1),
                 Rule::HandshakeCommandInt => self.same_way(Rule::HandshakeCommandInt, 2),
@@ -845,17 +847,68 @@ impl Facts<'_> {
         if !self.has_v2() && a.protocol_version.is_none() && self.flag() != Some(true) {
             return Verdict::na(rule, format!("no MAVLink 2: {}", self.v2_behaviour()));
         }
-        Verdict::check(
-            rule,
-            a.protocol_version.is_some(),
-            format!(
-                "{} in MAVLink 2 at {} ({} sent): {}",
-                r.what,
-                secs(r.sent),
-                r.attempts,
-                a.describe()
+        let asked = format!(
+            "{} in MAVLink 2 at {} ({} sent): {}",
+            r.what,
+            secs(r.sent),
+            r.attempts,
+            a.describe()
+        );
+        if a.protocol_version.is_some() {
+            return Verdict::pass(rule, asked);
+        }
+        // The documents' fallback: a system that refuses 300 proves MAVLink 2 by answering a
+        // request for another message it emits in MAVLink 2 framing.
+        match (a.nack(), self.fallback_answer()) {
+            (true, Some(f)) => Verdict::pass(
+                rule,
+                format!(
+                    "{asked}; then REQUEST_MESSAGE(148) in MAVLink 2 answered with AUTOPILOT_VERSION in MAVLink 2 at {} (the documents' fallback)",
+                    secs(f.t)
+                ),
             ),
-        )
+            (true, None) => Verdict::fail(
+                rule,
+                format!(
+                    "{asked}; and no AUTOPILOT_VERSION in MAVLink 2 for REQUEST_MESSAGE(148) in MAVLink 2"
+                ),
+            ),
+            (false, _) => Verdict::fail(rule, asked),
+        }
+    }
+
+    /// AUTOPILOT_VERSION in MAVLink 2 framing after our MAVLink 2 request for it.
+    fn fallback_answer(&self) -> Option<&Seen> {
+        let (t, v) = *self.av_requested.first()?;
+        if v != Version::V2 {
+            return None;
+        }
+        self.mine()
+            .find(|f| f.t > t && f.is::<AutopilotVersion>() && f.version == Version::V2)
+    }
+
+    fn protocol_version_supported(&self) -> Verdict {
+        let rule = Rule::ProtocolVersionSupported;
+        let answers: Vec<(usize, Answer<'_>)> = (0..self.requests.len())
+            .map(|i| (i, self.answer(i)))
+            .collect();
+        if answers.is_empty() {
+            return Verdict::na(rule, "no request sent");
+        }
+        match answers.iter().find(|(_, a)| a.protocol_version.is_some()) {
+            Some((i, a)) => Verdict::pass(
+                rule,
+                format!("{}: {}", self.requests[*i].what, a.describe()),
+            ),
+            None => Verdict::fail(
+                rule,
+                answers
+                    .iter()
+                    .map(|(i, a)| format!("{} → {}", self.requests[*i].what, a.describe()))
+                    .collect::<Vec<_>>()
+                    .join("; "),
+            ),
+        }
     }
 
     fn handshake_v2_framing(&self) -> Verdict {
@@ -907,20 +960,29 @@ impl Facts<'_> {
         };
         let a = self.answer(i);
         let has = self.has_v2();
-        let ok = if has { a.genuine() } else { a.nack() };
+        // A system that refuses PROTOCOL_VERSION everywhere (ArduPilot) answers the other
+        // forms the same way when it refuses them too.
+        let refuses_300 = has && self.answer(0).nack() && self.answer(0).protocol_version.is_none();
+        let ok = if refuses_300 {
+            a.nack() || a.genuine()
+        } else if has {
+            a.genuine()
+        } else {
+            a.nack()
+        };
+        let expected = match (refuses_300, has) {
+            (true, _) => "a NACK, as for REQUEST_MESSAGE(300), or PROTOCOL_VERSION in MAVLink 2",
+            (false, true) => "PROTOCOL_VERSION in MAVLink 2",
+            (false, false) => "a NACK",
+        };
         Verdict::check(
             rule,
             ok,
             format!(
-                "{} at {}: {} (expected {}, as the system {})",
+                "{} at {}: {} (expected {expected}, as the system {})",
                 r.what,
                 secs(r.sent),
                 a.describe(),
-                if has {
-                    "PROTOCOL_VERSION in MAVLink 2"
-                } else {
-                    "a NACK"
-                },
                 if has {
                     "has MAVLink 2"
                 } else {
