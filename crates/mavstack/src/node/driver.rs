@@ -1,0 +1,472 @@
+//! The driver: the state of a running node and one turn of it (read the ready links, run
+//! what is due, forward, carry out a command).
+
+use core::time::Duration;
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+use mavstack_core::time::Instant;
+use mavstack_core::wire::MAX_FRAME_LEN;
+use mavstack_core::{Message, MessageSet};
+use mavstack_router::{Event, InfoFn, LinkConfig, LinkId, Router, SendTo};
+use mavstack_transport::protocol::Framing;
+use mavstack_transport::{Dest, Input, Link, PeerId, PeerInfo, clock, tlog};
+use tokio::sync::mpsc;
+
+use super::moderation::Moderation;
+use super::{Command, Incoming, LinkEvent, NodeError, NodeEvent, NodeReport, Tapped};
+
+/// A link's peers: their router link, framing and address, looked up per input (foldhash
+/// instead of SipHash).
+pub(super) type PeerLinks = HashMap<PeerId, (LinkId, Framing, String), foldhash::fast::RandomState>;
+
+/// One configured link and the router links of its peers.
+pub(super) struct Slot {
+    pub(super) io: Link,
+    pub(super) template: LinkConfig,
+    pub(super) peers: PeerLinks,
+}
+
+pub(super) struct Driver {
+    pub(super) router: Router<InfoFn>,
+    pub(super) slots: Vec<Slot>,
+    /// Router link → (slot, peer).
+    pub(super) owners: Vec<Option<(usize, PeerId)>>,
+    pub(super) commands: mpsc::Receiver<Command>,
+    pub(super) log: Option<(PathBuf, tlog::Writer<std::fs::File>)>,
+    pub(super) log_local_only: bool,
+    pub(super) started: Instant,
+    pub(super) buf: [u8; MAX_FRAME_LEN],
+    pub(super) subscribers: Vec<mpsc::Sender<Incoming>>,
+    pub(super) subscriber_drops: u64,
+    pub(super) watchers: Vec<mpsc::Sender<NodeEvent>>,
+    /// Peer events of the last dispatch, for the watchers.
+    pub(super) pending: Vec<NodeEvent>,
+    pub(super) taps: Vec<mpsc::Sender<Tapped>>,
+    pub(super) heartbeat: Option<Heartbeat>,
+    pub(super) moderation: Moderation,
+}
+
+/// What a driver turn leaves to do.
+pub(super) enum Turn {
+    /// Wait for the next input; `worked`: the turn did something (it found input, a command
+    /// or a due timer).
+    Go { worked: bool },
+    /// Shut down.
+    Stop,
+}
+
+/// The node's own HEARTBEAT: its encoded payload, period and next time.
+pub(super) struct Heartbeat {
+    pub(super) payload: Vec<u8>,
+    pub(super) period: Duration,
+    pub(super) next: Instant,
+}
+
+/// The [`Input`] a slot's link feeds: peers become router links.
+pub(super) struct Feed<'a> {
+    pub(super) router: &'a mut Router<InfoFn>,
+    pub(super) slot: usize,
+    pub(super) template: &'a LinkConfig,
+    pub(super) peers: &'a mut PeerLinks,
+    pub(super) owners: &'a mut Vec<Option<(usize, PeerId)>>,
+    /// Peer events, when someone watches.
+    pub(super) pending: Option<&'a mut Vec<NodeEvent>>,
+    /// Inputs (datagrams, stream reads) fed, for [`Moderation`].
+    pub(super) inputs: &'a mut u64,
+    /// Who gets a copy of every input.
+    pub(super) taps: &'a mut Vec<mpsc::Sender<Tapped>>,
+}
+
+impl Input for Feed<'_> {
+    fn handle_peer_added(&mut self, _now: Instant, peer: &PeerInfo) {
+        match self.router.add_link(self.template.clone()) {
+            Ok(id) => {
+                tracing::debug!("{}: {} is {id}", self.template.name, peer.addr);
+                self.peers
+                    .insert(peer.id, (id, peer.framing, peer.addr.to_string()));
+                if self.owners.len() <= id.index() {
+                    self.owners.resize(id.index() + 1, None);
+                }
+                self.owners[id.index()] = Some((self.slot, peer.id));
+                if let Some(pending) = &mut self.pending {
+                    pending.push(NodeEvent {
+                        link: self.template.name.clone(),
+                        link_id: id,
+                        kind: LinkEvent::PeerAdded {
+                            peer: peer.addr.to_string(),
+                        },
+                    });
+                }
+            }
+            Err(e) => tracing::warn!("{}: {e}", self.template.name),
+        }
+    }
+
+    fn handle_peer_removed(&mut self, _now: Instant, peer: PeerId) {
+        if let Some((id, _, addr)) = self.peers.remove(&peer) {
+            tracing::debug!("{}: {addr} went away", self.template.name);
+            self.router.remove_link(id);
+            if let Some(o) = self.owners.get_mut(id.index()) {
+                *o = None;
+            }
+            if let Some(pending) = &mut self.pending {
+                pending.push(NodeEvent {
+                    link: self.template.name.clone(),
+                    link_id: id,
+                    kind: LinkEvent::PeerRemoved { peer: addr },
+                });
+            }
+        }
+    }
+
+    fn handle_input(&mut self, now: Instant, peer: PeerId, data: &[u8]) {
+        *self.inputs += 1;
+        if let Some(&(id, framing, _)) = self.peers.get(&peer) {
+            if !self.taps.is_empty() {
+                self.taps.retain(|t| !t.is_closed());
+                for t in self.taps.iter() {
+                    let _ = t.try_send(Tapped {
+                        link_id: id,
+                        at: now,
+                        bytes: data.to_vec(),
+                        datagram: framing == Framing::Datagram,
+                    });
+                }
+            }
+            match framing {
+                Framing::Datagram => self.router.handle_datagram(now, id, data),
+                Framing::Stream => self.router.handle_input(now, id, data),
+            }
+        }
+    }
+}
+
+impl Driver {
+    pub(super) fn feed(&mut self, i: usize) -> (&mut Link, Feed<'_>) {
+        let slot = &mut self.slots[i];
+        (
+            &mut slot.io,
+            Feed {
+                router: &mut self.router,
+                slot: i,
+                template: &slot.template,
+                peers: &mut slot.peers,
+                owners: &mut self.owners,
+                pending: (!self.watchers.is_empty()).then_some(&mut self.pending),
+                inputs: &mut self.moderation.inputs,
+                taps: &mut self.taps,
+            },
+        )
+    }
+
+    pub(super) fn start_links(&mut self) {
+        for i in 0..self.slots.len() {
+            let (io, mut feed) = self.feed(i);
+            io.start(&mut feed);
+        }
+    }
+
+    /// Polls every running link and the command queue with `cx`; marks the links that may
+    /// have input in `ready` and takes a command. Whether anything was ready.
+    pub(super) fn poll_inputs(
+        &mut self,
+        cx: &mut core::task::Context<'_>,
+        ready: &mut [bool],
+        command: &mut Option<Option<Command>>,
+    ) -> bool {
+        let mut any = false;
+        for (slot, r) in self.slots.iter_mut().zip(ready.iter_mut()) {
+            if slot.io.finished().is_none() && slot.io.poll_ready(cx).is_ready() {
+                *r = true;
+                any = true;
+            }
+        }
+        if command.is_none()
+            && let core::task::Poll::Ready(c) = self.commands.poll_recv(cx)
+        {
+            *command = Some(c);
+            any = true;
+        }
+        any
+    }
+
+    /// One turn after a wake-up: reads the ready links, runs what is due, forwards, and
+    /// carries out `command` (`Some(None)`: every handle is gone).
+    pub(super) fn turn(
+        &mut self,
+        ready: &mut [bool],
+        command: Option<Option<Command>>,
+        timer: bool,
+    ) -> Result<Turn, NodeError> {
+        let mut worked = command.is_some() || timer;
+        for (i, r) in ready.iter_mut().enumerate() {
+            if core::mem::take(r) {
+                let (io, mut feed) = self.feed(i);
+                worked |= io.dispatch(&mut feed);
+            }
+        }
+        let now = clock::now();
+        if let Some(hb) = &mut self.heartbeat
+            && now >= hb.next
+        {
+            hb.next = now + hb.period;
+            self.router.send(
+                now,
+                SendTo::Target,
+                mavstack_dialects::common::Heartbeat::ID,
+                &hb.payload,
+            );
+        }
+        if timer {
+            self.router.handle_timeout(now);
+            for i in 0..self.slots.len() {
+                if self.slots[i]
+                    .io
+                    .next_housekeeping()
+                    .is_some_and(|t| now >= t)
+                {
+                    let (io, mut feed) = self.feed(i);
+                    io.housekeeping(&mut feed);
+                }
+            }
+        }
+        self.drain_events()?;
+        self.flush();
+        match command {
+            Some(Some(Command::Report(tx))) => {
+                let _ = tx.send(self.report(clock::now()));
+            }
+            Some(Some(Command::Send {
+                to,
+                msg_id,
+                payload,
+                done,
+            })) => {
+                let queued = self.router.send(clock::now(), to, msg_id, &payload);
+                self.flush();
+                let _ = done.send(queued);
+            }
+            Some(Some(Command::Subscribe(tx, done))) => {
+                self.subscribers.push(tx);
+                let _ = done.send(());
+            }
+            Some(Some(Command::Events(tx, done))) => {
+                self.watchers.push(tx);
+                let _ = done.send(());
+            }
+            Some(Some(Command::Tap(tx, done))) => {
+                self.taps.push(tx);
+                let _ = done.send(());
+            }
+            Some(Some(Command::SendBytes { link, bytes, done })) => {
+                let sent = match self.owners.get(link.index()) {
+                    Some(Some((slot, peer))) => {
+                        let io = &mut self.slots[*slot].io;
+                        io.send(Dest::Peer(*peer), &bytes);
+                        io.flush();
+                        true
+                    }
+                    _ => false,
+                };
+                let _ = done.send(sent);
+            }
+            Some(Some(Command::Handshake {
+                link,
+                target,
+                method,
+                encoding,
+                done,
+            })) => {
+                let started =
+                    self.router
+                        .start_handshake(clock::now(), link, target, method, encoding);
+                self.flush();
+                let _ = done.send(started);
+            }
+            Some(Some(Command::SetSigning {
+                link,
+                signing,
+                done,
+            })) => {
+                let set = self.router.set_signing(clock::now(), link, signing);
+                self.drain_events()?;
+                let _ = done.send(set);
+            }
+            Some(Some(Command::Shutdown) | None) => return Ok(Turn::Stop),
+            None => {}
+        }
+        Ok(Turn::Go { worked })
+    }
+
+    /// The error of the first link that failed.
+    pub(super) fn failed(&self) -> Option<NodeError> {
+        self.slots.iter().find_map(|s| match s.io.finished() {
+            Some(Err(e)) => Some(NodeError::Link {
+                name: s.template.name.clone(),
+                source: e.clone(),
+            }),
+            _ => None,
+        })
+    }
+
+    /// Sends what is queued, closes the links, writes out the log; the final report.
+    pub(super) async fn finish(
+        mut self,
+        result: Result<(), NodeError>,
+    ) -> Result<NodeReport, NodeError> {
+        self.flush();
+        for slot in &mut self.slots {
+            if let Err(e) = slot.io.shutdown().await {
+                tracing::warn!("{}: {e}", slot.template.name);
+            }
+        }
+        if let Some((path, log)) = &mut self.log {
+            log.flush().map_err(|source| NodeError::Log {
+                path: path.clone(),
+                source,
+            })?;
+        }
+        result.map(|()| self.report(clock::now()))
+    }
+
+    pub(super) fn next_deadline(&self, now: Instant) -> Option<Instant> {
+        let housekeeping = self
+            .slots
+            .iter()
+            .filter_map(|s| s.io.next_housekeeping())
+            .min();
+        let log = self
+            .log
+            .as_ref()
+            .and_then(|(_, w)| w.flush_deadline())
+            .map(|_| now + Duration::from_secs(1));
+        let heartbeat = self.heartbeat.as_ref().map(|h| h.next);
+        [self.router.poll_timeout(), housekeeping, log, heartbeat]
+            .into_iter()
+            .flatten()
+            .min()
+    }
+
+    pub(super) fn drain_events(&mut self) -> Result<(), NodeError> {
+        while let Some(event) = self.router.poll_event() {
+            match event {
+                Event::Local { link, frame } => {
+                    if let Some((path, log)) = &mut self.log {
+                        let slot = self
+                            .owners
+                            .get(link.index())
+                            .copied()
+                            .flatten()
+                            .map_or(2, |(s, _)| s);
+                        let bits = slot.min(2) as u64;
+                        let ts = (frame.received_at.as_micros() & !3) | bits;
+                        log.write_record(ts, frame.frame.as_bytes())
+                            .map_err(|source| NodeError::Log {
+                                path: path.clone(),
+                                source,
+                            })?;
+                    }
+                    if self.log_local_only || self.subscribers.is_empty() {
+                        continue;
+                    }
+                    let name = self.link_label(link);
+                    let incoming = Incoming {
+                        link: name,
+                        link_id: link,
+                        frame,
+                    };
+                    self.subscribers.retain(|s| !s.is_closed());
+                    for s in &self.subscribers {
+                        if s.try_send(incoming.clone()).is_err() {
+                            self.subscriber_drops += 1;
+                        }
+                    }
+                }
+                Event::VersionChanged {
+                    link,
+                    from,
+                    to,
+                    cause,
+                } => {
+                    tracing::info!("{}: {from} → {to} ({cause})", self.link_label(link));
+                    self.tell(link, LinkEvent::VersionChanged { from, to, cause });
+                }
+                Event::Rejected { link, rejected } => {
+                    tracing::debug!("{}: rejected {:?}", self.link_label(link), rejected.reason);
+                    self.tell(link, LinkEvent::Rejected(rejected));
+                }
+                Event::ProtocolVersionRequested { link, from, answer } => {
+                    tracing::info!("{}: handshake request: {answer}", self.link_label(link));
+                    self.tell(link, LinkEvent::ProtocolVersionRequested { from, answer });
+                }
+                Event::Handshake { link, outcome } => {
+                    tracing::info!(
+                        "{}: handshake: {}",
+                        self.link_label(link),
+                        outcome.result.name()
+                    );
+                    self.tell(link, LinkEvent::Handshake(outcome));
+                }
+                Event::SigningSetup { link, from, setup } => {
+                    tracing::info!("{}: SETUP_SIGNING applied", self.link_label(link));
+                    self.tell(link, LinkEvent::SigningSetup { from, setup });
+                }
+                _ => {}
+            }
+        }
+        let pending = core::mem::take(&mut self.pending);
+        for event in pending {
+            self.publish(event);
+        }
+        if let Some((path, log)) = &mut self.log {
+            log.flush_if_due().map_err(|source| NodeError::Log {
+                path: path.clone(),
+                source,
+            })?;
+        }
+        Ok(())
+    }
+
+    /// Tells the watchers what happened on `link`.
+    pub(super) fn tell(&mut self, link: LinkId, kind: LinkEvent) {
+        if self.watchers.is_empty() {
+            return;
+        }
+        let event = NodeEvent {
+            link: self.link_label(link),
+            link_id: link,
+            kind,
+        };
+        self.publish(event);
+    }
+
+    pub(super) fn publish(&mut self, event: NodeEvent) {
+        self.watchers.retain(|w| !w.is_closed());
+        for w in &self.watchers {
+            if w.try_send(event.clone()).is_err() {
+                self.subscriber_drops += 1;
+            }
+        }
+    }
+
+    pub(super) fn link_label(&self, link: LinkId) -> String {
+        self.router
+            .link_config(link)
+            .map_or_else(|| link.to_string(), |c| c.name.clone())
+    }
+
+    /// Writes every queued frame to its link, then sends the batches.
+    pub(super) fn flush(&mut self) {
+        while let Some(t) = self.router.poll_transmit(&mut self.buf) {
+            if let Some(Some((slot, peer))) = self.owners.get(t.link.index()) {
+                self.slots[*slot]
+                    .io
+                    .send(Dest::Peer(*peer), &self.buf[..t.len]);
+            }
+        }
+        for slot in &mut self.slots {
+            slot.io.flush();
+        }
+    }
+}

@@ -1,0 +1,93 @@
+//! The driver on a thread of its own (`NodeBuilder::own_thread`): its UDP sockets on that
+//! thread's level-triggered `epoll`.
+
+use mavstack_transport::clock;
+
+use super::driver::{Driver, Turn};
+use super::moderation::{InputModeration, Moderation};
+use super::{NodeError, NodeReport};
+
+impl Driver {
+    /// The node on a thread of its own (see [`NodeBuilder::own_thread`]): its UDP sockets
+    /// move to an `epoll` this thread waits on; the other links' tasks, the handles' commands
+    /// and the subscribers stay on `runtime`, and wake the poll through its waker.
+    #[cfg(target_os = "linux")]
+    pub(super) fn run_on_thread(
+        mut self,
+        runtime: &tokio::runtime::Handle,
+    ) -> Result<NodeReport, NodeError> {
+        let result = self.run_polled();
+        runtime.block_on(self.finish(result))
+    }
+
+    #[cfg(target_os = "linux")]
+    pub(super) fn run_polled(&mut self) -> Result<(), NodeError> {
+        let polling = |source: std::io::Error| NodeError::Poll { source };
+        let mut waiter = crate::own_thread::Waiter::new().map_err(polling)?;
+        for (i, slot) in self.slots.iter_mut().enumerate() {
+            if let Some(fd) = slot.io.watch_externally().map_err(polling)? {
+                waiter.watch(fd, i).map_err(polling)?;
+            }
+        }
+        let waker = waiter.waker().clone();
+        let mut cx = core::task::Context::from_waker(&waker);
+        self.start_links();
+        let mut ready = vec![false; self.slots.len()];
+        let mut bulk = false;
+        loop {
+            let mut command = None;
+            let mut waited = false;
+            // Waiting changes none of the node's deadlines: worked out once per turn.
+            let mut deadline = None;
+            let (timer, now) = loop {
+                let any = self.poll_inputs(&mut cx, &mut ready, &mut command);
+                let now = clock::now();
+                let deadline = *deadline.get_or_insert_with(|| self.next_deadline(now));
+                let due = deadline.is_some_and(|d| now >= d);
+                let slots = &mut self.slots;
+                let mut mark = |i: usize| {
+                    if let Some(slot) = slots.get_mut(i) {
+                        slot.io.set_readable();
+                    }
+                };
+                if any || due {
+                    if !waited {
+                        // Input left from the last turn: the other sockets' readiness is
+                        // looked at too, so that a link that always has more cannot starve
+                        // them (one `epoll_wait` more per turn, only while input is left).
+                        waiter.look(&mut mark).map_err(polling)?;
+                        self.poll_inputs(&mut cx, &mut ready, &mut command);
+                    }
+                    break (due, now);
+                }
+                waited = true;
+                waiter.wait(deadline, now, mark).map_err(polling)?;
+            };
+            let input = ready.iter().any(|&r| r);
+            let busy = input && self.moderation.busy(now);
+            // Under a steady stream the sockets are read in batches (one datagram per read
+            // otherwise: the cheapest read, and the frame goes on at once).
+            if self.moderation.busy != bulk {
+                bulk = self.moderation.busy;
+                for slot in &mut self.slots {
+                    slot.io.set_bulk_reads(bulk);
+                }
+            }
+            let inputs_before = self.moderation.inputs;
+            // Under a steady stream the thread reads in bursts: nothing else runs on it, so
+            // both kinds of moderation sleep it (no wake-ups while datagrams pile up).
+            if busy && waited && self.moderation.mode == InputModeration::Timer {
+                std::thread::sleep(Moderation::PAUSE);
+            }
+            let Turn::Go { worked } = self.turn(&mut ready, command, timer)? else {
+                return Ok(());
+            };
+            if self.moderation.pause_after(busy, worked, inputs_before) {
+                std::thread::sleep(Moderation::PAUSE);
+            }
+            if let Some(e) = self.failed() {
+                return Err(e);
+            }
+        }
+    }
+}
