@@ -62,11 +62,12 @@
 //!   "seq 0 is home" is the caller's concern.
 //! - TIMESYNC: this dialect's TIMESYNC has no target fields, so answers are matched by
 //!   their `ts1`.
-//! - The adapter over a link is the caller's: decode each accepted frame with
-//!   `MavMessage::decode(frame.msg_id(), frame.payload())` and frame each [`Outgoing`]
-//!   message (`mavstack_transport::channel_protocol::RawMessage::of` does it for
-//!   `mavstack-channel` links; `mavstack vehicle` and the CLI's ground-station commands
-//!   are complete drivers).
+//! - Over real links, run these state machines on a `mavstack::Node`:
+//!   `mavstack::system::System` drives the client roles for one remote system and
+//!   `mavstack::serve::Served` the server roles as the node's own component; every message
+//!   is then framed by its link's channel (version, sequence, signature). By hand, decode
+//!   each accepted frame with `MavMessage::decode(frame.msg_id(), frame.payload())` and
+//!   give each [`Outgoing`] message to the link that frames it.
 //!
 //! # Features
 //!

@@ -82,7 +82,6 @@
 
 mod batch;
 pub mod blocking;
-pub mod channel_protocol;
 pub mod clock;
 pub mod conn;
 mod connection;
