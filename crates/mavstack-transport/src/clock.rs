@@ -62,12 +62,25 @@ mod tests {
 
     #[test]
     fn converts_both_ways() {
+        let before = std::time::Instant::now();
         let t = now();
+        let after = std::time::Instant::now();
+        // A reading maps to an instant between the std readings around it (microseconds
+        // are the clock's grain: one either side).
+        let grain = Duration::from_micros(1);
+        let std_t = to_std(t);
+        assert!(std_t + grain >= before, "{std_t:?} before {before:?}");
+        assert!(std_t <= after + grain, "{std_t:?} after {after:?}");
+        // Durations carry over exactly, both ways.
         let later = t + Duration::from_millis(250);
-        let std_later = to_std(later);
-        let diff = std_later.saturating_duration_since(std::time::Instant::now());
-        assert!(diff <= Duration::from_millis(250), "{diff:?}");
-        assert!(diff >= Duration::from_millis(200), "{diff:?}");
+        assert_eq!(
+            to_std(later).duration_since(std_t),
+            Duration::from_millis(250)
+        );
+        assert_eq!(
+            to_tokio(later).duration_since(to_tokio(t)),
+            Duration::from_millis(250)
+        );
         // Far past and far future never panic.
         let _ = to_std(Instant::ZERO);
         let _ = to_std(Instant::MAX);
