@@ -266,8 +266,14 @@ pub struct RouterConfig {
     /// Drop a frame whose exact bytes were seen within this window; each sighting renews it
     /// (default off).
     pub dedup: Option<Duration>,
-    /// Entries in the dedup table (default 8192; older entries are evicted first).
+    /// Entries in the dedup table (default 8192; older entries are evicted first). Each
+    /// keeps its frame's bytes (up to 280), so that frames are told apart by their bytes,
+    /// not by a hash alone.
     pub dedup_capacity: usize,
+    /// The hash the dedup table files frames under (`None`, the default: its own). Tests
+    /// force collisions with it; whatever it returns, only equal bytes are duplicates.
+    #[doc(hidden)]
+    pub dedup_hash: Option<fn(&[u8]) -> u64>,
     /// Frames for the router itself ([`crate::Event::Local`]): none, the ones addressed to
     /// it or broadcast, or every frame (a sniffer).
     pub local: LocalDelivery,
@@ -298,6 +304,7 @@ impl Default for RouterConfig {
             route_move_after: Duration::from_secs(1),
             dedup: None,
             dedup_capacity: 8192,
+            dedup_hash: None,
             local: LocalDelivery::None,
             forward: true,
         }

@@ -221,7 +221,9 @@ impl<D: Dialect> Router<D> {
     /// A router with no links.
     #[must_use]
     pub fn new(config: RouterConfig, dialect: D) -> Self {
-        let dedup = config.dedup.map(|w| Dedup::new(config.dedup_capacity, w));
+        let dedup = config
+            .dedup
+            .map(|w| Dedup::new(config.dedup_capacity, w, config.dedup_hash));
         Self {
             config,
             dialect,
