@@ -170,7 +170,7 @@ fn radio_status_is_rejected_on_a_signed_link_without_the_allow_list() {
             .all(|r| *r == RejectReason::UnsignedNotAllowed)
     );
     // Count what has arrived by now (the last frames may still be on the way).
-    let arrived = |s: &&&util::Sent| s.at + p.knobs.latency <= p.now;
+    let arrived = |s: &&&util::Sent| s.at + p.link.knobs.latency <= p.now;
     let stats = p.gcs.stats();
     assert_eq!(
         stats.rejected.total(),
@@ -193,7 +193,7 @@ fn handshake_succeeds_through_the_radio_under_loss() {
         let mut p = Pair::default_pair()
             .with_radio(RadioConfig::default())
             .seed(seed);
-        p.knobs.loss = 0.1;
+        p.link.knobs.loss = 0.1;
         p.gcs
             .start_handshake(
                 p.now,

@@ -14,23 +14,26 @@ use util::{Pair, T0, feed, frame};
 fn loss_and_duplicates_are_counted_and_match_the_injected_faults() {
     for seed in 0..5 {
         let mut p = Pair::default_pair().seed(seed);
-        p.knobs.loss = 0.1;
-        p.knobs.duplicate = 0.05;
+        p.link.knobs.loss = 0.1;
+        p.link.knobs.duplicate = 0.05;
         for _ in 0..1_000 {
             p.now += Duration::from_millis(10);
             p.vehicle_send(&Heartbeat::default());
             p.drive();
         }
         // A last frame over a perfect link closes any trailing gap.
-        p.knobs = util::Knobs::default();
+        p.link.knobs = util::Knobs::default();
         p.vehicle_send(&Heartbeat::default());
         p.drive();
         let stats = p.gcs.stats();
         let source = p.gcs.sources()[0];
         assert_eq!((source.sysid, source.compid), (1, 1));
-        assert_eq!(stats.lost, p.faults.lost, "seed {seed}");
-        assert_eq!(stats.duplicates, p.faults.duplicated, "seed {seed}");
-        assert_eq!(stats.received, 1_001 - p.faults.lost + p.faults.duplicated);
+        assert_eq!(stats.lost, p.link.faults.lost, "seed {seed}");
+        assert_eq!(stats.duplicates, p.link.faults.duplicated, "seed {seed}");
+        assert_eq!(
+            stats.received,
+            1_001 - p.link.faults.lost + p.link.faults.duplicated
+        );
         assert_eq!(source.received, stats.received);
     }
 }

@@ -47,7 +47,7 @@ fn wrong_key() -> SecretKey {
 #[test]
 fn signed_link_accepts_the_genuine_stream_both_ways() {
     let mut p = signed_pair().seed(7);
-    p.knobs.loss = 0.1;
+    p.link.knobs.loss = 0.1;
     p.heartbeats = Some(Duration::from_millis(200));
     p.drive_for(Duration::from_secs(30));
     for events in [&p.gcs_events, &p.vehicle_events] {
@@ -749,8 +749,8 @@ fn set_signing_at_run_time_reports_the_version_change() {
 fn no_genuine_frame_is_rejected_under_loss_duplication_and_attack() {
     for seed in 0..5 {
         let mut p = signed_pair().seed(seed);
-        p.knobs.loss = 0.1;
-        p.knobs.duplicate = 0.1;
+        p.link.knobs.loss = 0.1;
+        p.link.knobs.duplicate = 0.1;
         let mut injected = 0;
         for i in 0..200u64 {
             p.now += Duration::from_millis(50);
@@ -776,11 +776,11 @@ fn no_genuine_frame_is_rejected_under_loss_duplication_and_attack() {
             p.drive();
         }
         let stats = p.gcs.stats();
-        let delivered = 200 - p.faults.lost;
+        let delivered = 200 - p.link.faults.lost;
         // Every genuine frame that arrived was accepted; each duplicate was a replay.
         assert_eq!(stats.accepted, delivered, "seed {seed}");
         let dups_arrived = stats.rejected.replayed;
-        assert!(dups_arrived <= p.faults.duplicated);
+        assert!(dups_arrived <= p.link.faults.duplicated);
         assert_eq!(
             stats.rejected.total(),
             injected + dups_arrived,

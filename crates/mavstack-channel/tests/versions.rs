@@ -615,7 +615,7 @@ fn handshake_timeout_when_the_path_drops_mavlink2_falls_back_to_mavlink1() {
     // A non-transparent radio that mangles MAVLink 2: the vehicle would answer, but neither
     // the request nor the answer gets through.
     let mut p = Pair::default_pair();
-    p.knobs.drop_v2 = true;
+    p.drop_v2 = true;
     p.heartbeats = Some(Duration::from_secs(1));
     start(
         &mut p,
@@ -710,7 +710,7 @@ fn handshake_succeeds_under_20_percent_loss_thanks_to_retries() {
     let mut needed_retries = 0;
     for seed in 0..50 {
         let mut p = Pair::default_pair().seed(seed);
-        p.knobs.loss = 0.2;
+        p.link.knobs.loss = 0.2;
         start(
             &mut p,
             HandshakeMethod::RequestMessage300,

@@ -28,6 +28,8 @@
 //! ## Features
 //! - `std` (default): links `std`; nothing in the crate needs it.
 //! - `serde`: serde support for generated messages, including arrays longer than 32.
+//! - `testing`: [`testing`], the in-memory test network of the sans-IO crates' tests (for
+//!   dev-dependencies; implies `std`).
 //!
 //! MSRV: Rust 1.95 (the toolchain CI builds with).
 #![no_std]
@@ -43,6 +45,9 @@ pub mod payload;
 #[cfg(feature = "serde")]
 pub mod serde_arrays;
 pub mod signing;
+pub mod table;
+#[cfg(feature = "testing")]
+pub mod testing;
 pub mod text;
 pub mod time;
 pub mod tlog;

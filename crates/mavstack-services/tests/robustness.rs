@@ -6,6 +6,7 @@ mod util;
 
 use core::time::Duration;
 
+use mavstack_core::testing::Rng;
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::{
     CommandAck, CommandInt, CommandLong, Heartbeat, MavAutopilot, MavCmd, MavMessage,
@@ -21,7 +22,7 @@ use mavstack_services::param::{Encoding, Name, ParamClient, ParamRef, ParamServe
 use mavstack_services::stream::{StreamScheduler, Subscriptions};
 use mavstack_services::timesync::Timesync;
 use mavstack_services::{Address, Service};
-use util::{Rng, T0};
+use util::T0;
 
 struct Anything(StreamScheduler);
 

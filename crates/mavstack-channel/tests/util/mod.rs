@@ -1,7 +1,8 @@
 //! A deterministic simulation harness for channel tests, after quinn-proto's `Pair`: a
-//! vehicle and a ground-station channel (and optionally a radio between them) over an
-//! in-memory link with a virtual clock, loss, duplication and latency knobs, a
-//! "drop MAVLink 2" knob (a path that mangles MAVLink 2), and a seeded RNG.
+//! vehicle and a ground-station channel (and optionally a radio between them) over the
+//! shared in-memory test network (`mavstack_core::testing::Link`: virtual clock, loss,
+//! duplication and latency knobs, a seeded RNG), plus a "drop MAVLink 2" knob (a path that
+//! mangles MAVLink 2).
 //!
 //! ```text
 //!   gcs ──► [radio A → B] ──► vehicle        (without a radio: gcs ──► vehicle)
@@ -20,35 +21,13 @@ use mavstack_channel::{
     Rejected, Side,
 };
 use mavstack_core::message::Message;
+pub use mavstack_core::testing::{Knobs, Link};
 use mavstack_core::time::Instant;
 use mavstack_core::wire::{MAX_FRAME_LEN, STX_V2};
 
 /// 2026-01-01 00:00:00 UTC as a Unix-epoch instant: the virtual clock starts here, so
 /// signing timestamps derived from it are realistic.
 pub const T0: Instant = Instant::from_secs(1_767_225_600);
-
-/// SplitMix64: small, seeded, good enough for fault injection.
-#[derive(Clone, Debug)]
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// True with probability `p`.
-    pub fn chance(&mut self, p: f64) -> bool {
-        p > 0.0 && (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64 <= p
-    }
-}
 
 /// Where bytes go.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -67,30 +46,6 @@ pub enum Origin {
     Gcs,
     Vehicle,
     Radio,
-}
-
-/// Fault injection on every transmission.
-#[derive(Clone, Copy, Debug)]
-pub struct Knobs {
-    /// Probability that a frame is lost.
-    pub loss: f64,
-    /// Probability that a frame is delivered twice.
-    pub duplicate: f64,
-    /// Delay of every delivery.
-    pub latency: Duration,
-    /// Drop every MAVLink 2 frame (a path that mangles MAVLink 2).
-    pub drop_v2: bool,
-}
-
-impl Default for Knobs {
-    fn default() -> Self {
-        Self {
-            loss: 0.0,
-            duplicate: 0.0,
-            latency: Duration::from_millis(5),
-            drop_v2: false,
-        }
-    }
 }
 
 /// A frame some node wrote.
@@ -124,33 +79,21 @@ impl Sent {
     }
 }
 
-struct InFlight {
-    at: Instant,
-    to: Node,
-    bytes: Vec<u8>,
-}
-
-/// Fault counts, to compare with what the channels measured.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Faults {
-    pub lost: u64,
-    pub duplicated: u64,
-    pub dropped_v2: u64,
-}
-
 pub struct Pair {
     pub now: Instant,
     pub vehicle: Channel,
     pub gcs: Channel,
     pub radio: Option<Radio>,
-    pub knobs: Knobs,
-    pub rng: Rng,
-    wire: Vec<InFlight>,
+    /// Everything on the way, to whom (knobs, faults and seed are the link's).
+    pub link: Link<(Node, Vec<u8>)>,
+    /// Drop every MAVLink 2 frame (a path that mangles MAVLink 2).
+    pub drop_v2: bool,
+    /// MAVLink 2 frames dropped by [`Pair::drop_v2`].
+    pub dropped_v2: u64,
     pub vehicle_events: Vec<Event>,
     pub gcs_events: Vec<Event>,
     pub radio_events: Vec<RadioEvent>,
     pub sent: Vec<Sent>,
-    pub faults: Faults,
     /// Both applications send a HEARTBEAT at this interval (None: they stay quiet).
     pub heartbeats: Option<Duration>,
     next_heartbeat: Instant,
@@ -167,14 +110,13 @@ impl Pair {
             vehicle: Channel::new(vehicle).unwrap(),
             gcs: Channel::new(gcs).unwrap(),
             radio: None,
-            knobs: Knobs::default(),
-            rng: Rng::new(1),
-            wire: Vec::new(),
+            link: Link::new(Knobs::default(), 1),
+            drop_v2: false,
+            dropped_v2: 0,
             vehicle_events: Vec::new(),
             gcs_events: Vec::new(),
             radio_events: Vec::new(),
             sent: Vec::new(),
-            faults: Faults::default(),
             heartbeats: None,
             next_heartbeat: T0,
             vehicle_persisted: Vec::new(),
@@ -194,7 +136,7 @@ impl Pair {
     }
 
     pub fn seed(mut self, seed: u64) -> Self {
-        self.rng = Rng::new(seed);
+        self.link.rng = mavstack_core::testing::Rng::new(seed);
         self
     }
 
@@ -249,27 +191,11 @@ impl Pair {
             bytes: bytes.to_vec(),
         });
         let to = self.route(from, side);
-        if self.knobs.drop_v2 && bytes.first() == Some(&STX_V2) {
-            self.faults.dropped_v2 += 1;
+        if self.drop_v2 && bytes.first() == Some(&STX_V2) {
+            self.dropped_v2 += 1;
             return;
         }
-        if self.rng.chance(self.knobs.loss) {
-            self.faults.lost += 1;
-            return;
-        }
-        let copies = if self.rng.chance(self.knobs.duplicate) {
-            self.faults.duplicated += 1;
-            2
-        } else {
-            1
-        };
-        for _ in 0..copies {
-            self.wire.push(InFlight {
-                at: self.now + self.knobs.latency,
-                to,
-                bytes: bytes.to_vec(),
-            });
-        }
+        self.link.send(self.now, (to, bytes.to_vec()));
     }
 
     fn deliver(&mut self, to: Node, bytes: &[u8]) {
@@ -347,9 +273,8 @@ impl Pair {
     /// everything. Returns whether anything happened.
     pub fn step(&mut self) -> bool {
         let mut progressed = false;
-        while let Some(i) = self.wire.iter().position(|f| f.at <= self.now) {
-            let item = self.wire.remove(i);
-            self.deliver(item.to, &item.bytes);
+        while let Some((to, bytes)) = self.link.pop_due(self.now) {
+            self.deliver(to, &bytes);
             progressed = true;
         }
         if self.vehicle.poll_timeout().is_some_and(|t| t <= self.now) {
@@ -377,7 +302,7 @@ impl Pair {
 
     /// The next instant something is scheduled, if any.
     pub fn next_wakeup(&self) -> Option<Instant> {
-        let mut next = self.wire.iter().map(|f| f.at).min();
+        let mut next = self.link.next_delivery();
         let mut consider = |t: Option<Instant>| {
             if let Some(t) = t {
                 next = Some(next.map_or(t, |n| n.min(t)));

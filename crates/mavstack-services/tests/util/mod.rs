@@ -1,7 +1,7 @@
 //! A deterministic simulation harness for service tests, after quinn-proto's `Pair`: two
-//! services (say a ground-station client and a vehicle server) over an in-memory link of
-//! decoded messages with a virtual clock, loss, duplication and latency jitter (which
-//! reorders), and a seeded RNG.
+//! services (say a ground-station client and a vehicle server) over the shared in-memory
+//! test network (`mavstack_core::testing::Link`) carrying decoded messages: a virtual clock,
+//! loss, duplication and latency jitter (which reorders), and a seeded RNG.
 //!
 //! ```text
 //!   a (address A) ──► [loss, dup, latency + jitter] ──► b (address B)
@@ -15,6 +15,7 @@
 
 use core::time::Duration;
 
+pub use mavstack_core::testing::{Knobs, Link};
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::MavMessage;
 use mavstack_services::{Address, Service};
@@ -22,80 +23,11 @@ use mavstack_services::{Address, Service};
 /// The virtual clock starts here.
 pub const T0: Instant = Instant::from_secs(1_000);
 
-/// SplitMix64: small, seeded, good enough for fault injection.
-#[derive(Clone, Debug)]
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// True with probability `p`.
-    pub fn chance(&mut self, p: f64) -> bool {
-        p > 0.0 && (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64 <= p
-    }
-
-    /// Uniform in `0..n` (0 when `n` is 0).
-    pub fn below(&mut self, n: u64) -> u64 {
-        if n == 0 { 0 } else { self.next_u64() % n }
-    }
-}
-
-/// Fault injection on every message.
-#[derive(Clone, Copy, Debug)]
-pub struct Knobs {
-    /// Probability that a message is lost.
-    pub loss: f64,
-    /// Probability that a message is delivered twice (the copy with its own latency).
-    pub duplicate: f64,
-    /// Fixed delay of every delivery.
-    pub latency: Duration,
-    /// Extra random delay in `0..jitter`, so messages overtake each other.
-    pub jitter: Duration,
-}
-
-impl Knobs {
-    /// A perfect link with 5 ms latency.
-    pub fn clean() -> Self {
-        Self {
-            loss: 0.0,
-            duplicate: 0.0,
-            latency: Duration::from_millis(5),
-            jitter: Duration::ZERO,
-        }
-    }
-
-    /// 20 % loss, 20 % duplication, 5–25 ms latency (reordering).
-    pub fn hostile() -> Self {
-        Self {
-            loss: 0.2,
-            duplicate: 0.2,
-            latency: Duration::from_millis(5),
-            jitter: Duration::from_millis(20),
-        }
-    }
-}
-
+/// Which end a message goes to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Side {
+pub enum Side {
     A,
     B,
-}
-
-struct InFlight {
-    at: Instant,
-    order: u64,
-    to: Side,
-    message: MavMessage,
 }
 
 /// Counts of one direction.
@@ -114,14 +46,12 @@ pub struct Pair<A, B> {
     pub a_addr: Address,
     pub b_addr: Address,
     pub now: Instant,
-    pub knobs: Knobs,
-    pub rng: Rng,
+    /// Both directions, each message with the side it goes to.
+    pub link: Link<(Side, MavMessage)>,
     /// a → b
     pub ab: Counts,
     /// b → a
     pub ba: Counts,
-    link: Vec<InFlight>,
-    order: u64,
 }
 
 impl<A: Service, B: Service> Pair<A, B> {
@@ -132,34 +62,14 @@ impl<A: Service, B: Service> Pair<A, B> {
             a_addr,
             b_addr,
             now: T0,
-            knobs,
-            rng: Rng::new(seed),
+            link: Link::new(knobs, seed),
             ab: Counts::default(),
             ba: Counts::default(),
-            link: Vec::new(),
-            order: 0,
         }
     }
 
     fn queue(&mut self, to: Side, message: MavMessage) {
-        let copies = if self.rng.chance(self.knobs.loss) {
-            0
-        } else if self.rng.chance(self.knobs.duplicate) {
-            2
-        } else {
-            1
-        };
-        for _ in 0..copies {
-            let jitter = self.rng.below(self.knobs.jitter.as_micros() as u64);
-            let at = self.now + self.knobs.latency + Duration::from_micros(jitter);
-            self.order += 1;
-            self.link.push(InFlight {
-                at,
-                order: self.order,
-                to,
-                message: message.clone(),
-            });
-        }
+        self.link.send(self.now, (to, message));
     }
 
     /// Moves everything both sides want to send onto the link.
@@ -176,11 +86,14 @@ impl<A: Service, B: Service> Pair<A, B> {
 
     /// The next time something happens: a delivery or a service timer.
     fn next_time(&self) -> Option<Instant> {
-        let deliveries = self.link.iter().map(|m| m.at).min();
-        [deliveries, self.a.poll_timeout(), self.b.poll_timeout()]
-            .into_iter()
-            .flatten()
-            .min()
+        [
+            self.link.next_delivery(),
+            self.a.poll_timeout(),
+            self.b.poll_timeout(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
     }
 
     /// Advances to the next event and handles it. Returns false when nothing is left to do.
@@ -192,25 +105,15 @@ impl<A: Service, B: Service> Pair<A, B> {
         self.now = self.now.max(next);
         let now = self.now;
         // Deliver everything due, in arrival order.
-        let mut due: Vec<InFlight> = Vec::new();
-        let mut i = 0;
-        while i < self.link.len() {
-            if self.link[i].at <= now {
-                due.push(self.link.swap_remove(i));
-            } else {
-                i += 1;
-            }
-        }
-        due.sort_by_key(|m| (m.at, m.order));
-        for m in due {
-            match m.to {
+        while let Some((to, message)) = self.link.pop_due(now) {
+            match to {
                 Side::A => {
                     self.ba.delivered += 1;
-                    let _ = self.a.handle_message(now, self.b_addr, &m.message);
+                    let _ = self.a.handle_message(now, self.b_addr, &message);
                 }
                 Side::B => {
                     self.ab.delivered += 1;
-                    let _ = self.b.handle_message(now, self.a_addr, &m.message);
+                    let _ = self.b.handle_message(now, self.a_addr, &message);
                 }
             }
         }
