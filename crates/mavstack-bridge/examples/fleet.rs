@@ -30,7 +30,7 @@ use mavstack::dialects::common::{
     MavMessage, MavResult, MavState, MavType, SysStatus,
 };
 use mavstack::node::Node;
-use mavstack::router::InfoFn;
+use mavstack::router::MessageTable;
 use mavstack_bridge::BridgeSpec;
 use rumqttc::v5::mqttbytes::QoS;
 use rumqttc::v5::mqttbytes::v5::{Packet, PublishProperties};
@@ -104,8 +104,8 @@ async fn until(start_us: u64, t: f64) {
     }
 }
 
-fn dialect() -> InfoFn {
-    InfoFn(|id| MavMessage::info(id).copied())
+fn dialect() -> MessageTable {
+    MessageTable::of::<MavMessage>()
 }
 
 /// Frames sent, per message name and per send second.

@@ -6,10 +6,9 @@
 //! ```no_run
 //! # async fn run() -> Result<(), Box<dyn std::error::Error>> {
 //! use mavstack_bridge::BridgeSpec;
-//! use mavstack_router::InfoFn;
-//! use mavstack_core::MessageSet as _;
+//! use mavstack_router::MessageTable;
 //! let spec = BridgeSpec::parse("mqtt://127.0.0.1:1883?fleet=demo&vid=v1")?;
-//! let dialect = InfoFn(|id| mavstack_dialects::common::MavMessage::info(id).copied());
+//! let dialect = MessageTable::of::<mavstack_dialects::common::MavMessage>();
 //! let bridge = mavstack_bridge::open(&spec, dialect)?;
 //! // Give the link to a node: `NodeBuilder::opened_link(bridge.config, bridge.link)`;
 //! // after the node has shut down, `bridge.handle.finish().await` publishes `offline`.
@@ -20,7 +19,7 @@ use core::sync::atomic::Ordering;
 use core::time::Duration;
 use std::sync::Arc;
 
-use mavstack_router::InfoFn;
+use mavstack_router::MessageTable;
 use rumqttc::v5::mqttbytes::QoS;
 use rumqttc::v5::mqttbytes::v5::{LastWill, Packet, PublishProperties};
 use rumqttc::v5::{AsyncClient, Event, EventLoop, MqttOptions};
@@ -44,7 +43,7 @@ const CLOSE_TIMEOUT: Duration = Duration::from_secs(2);
 /// Opens the MQTT link `spec` describes; `dialect` names the messages in the keys. The
 /// broker is connected in the background (and reconnected, with back-off, whenever it
 /// drops): opening never waits for it. `mqtts://` reads its certificate files here.
-pub(crate) fn open(spec: &BridgeSpec, dialect: InfoFn) -> Result<Bridge, OpenError> {
+pub(crate) fn open(spec: &BridgeSpec, dialect: MessageTable) -> Result<Bridge, OpenError> {
     let mut options = MqttOptions::new(spec.client_id.clone(), spec.host.clone(), spec.port);
     options.set_keep_alive(Duration::from_secs(5));
     options.set_clean_start(true);

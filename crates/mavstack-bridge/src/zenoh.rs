@@ -17,7 +17,7 @@ use core::sync::atomic::Ordering;
 use core::time::Duration;
 use std::sync::Arc;
 
-use mavstack_router::InfoFn;
+use mavstack_router::MessageTable;
 use tokio::sync::oneshot;
 use zenoh::Wait as _;
 use zenoh::qos::{CongestionControl, Priority};
@@ -36,7 +36,7 @@ const MAX_BACKOFF: Duration = Duration::from_secs(5);
 const CLOSE_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// Opens the Zenoh link `spec` describes (a client of the router at HOST:PORT, or a peer).
-pub(crate) fn open(spec: &BridgeSpec, dialect: InfoFn) -> Result<Bridge, OpenError> {
+pub(crate) fn open(spec: &BridgeSpec, dialect: MessageTable) -> Result<Bridge, OpenError> {
     let config = config(spec).map_err(|reason| OpenError::Zenoh {
         name: spec.name.clone(),
         reason,

@@ -3,8 +3,9 @@
 //! See the crate docs for the driving loop and the version rules; this module holds the
 //! state machine itself.
 
+use mavstack_core::MessageTable;
 use mavstack_core::message::{MAX_PAYLOAD_LEN, Message, MessageInfo};
-use mavstack_core::parse::{CrcExtra, Deframer, Item};
+use mavstack_core::parse::{Deframer, Item};
 use mavstack_core::signing::{MAX_TIMESTAMP, SecretKey, append_signature};
 use mavstack_core::time::Instant;
 use mavstack_core::wire::{self, EmitError, FrameHeader, MAX_FRAME_LEN, Version};
@@ -14,7 +15,7 @@ use mavstack_dialects::common::{
 };
 
 use crate::config::{Config, ConfigError, GroundPolicy, Role, VehiclePolicy, VehicleVersion};
-use crate::dialect::{CommandEncoding, CommandRequest, CommonCrc, WithBuiltins};
+use crate::dialect::{CommandEncoding, CommandRequest, common_table, crc_extra_with_builtins};
 use crate::event::{
     Event, LinkVersion, ProtocolVersionAnswer, RejectReason, Rejected, SigningSetup, SwitchCause,
 };
@@ -130,15 +131,16 @@ enum Framing {
 /// call `handle_timeout` next. The caller's own frames are written by
 /// [`send`](Self::send). The channel never reads a clock, sleeps or allocates.
 ///
-/// `L` is where CRC_EXTRA comes from (see [`crate::dialect`]); the default is `common`.
+/// CRC_EXTRA comes from a [`MessageTable`] (see [`crate::dialect`]); [`Channel::new`] uses
+/// `common`'s.
 #[derive(Clone)]
-pub struct Channel<L = CommonCrc> {
+pub struct Channel {
     sysid: u8,
     compid: u8,
     role: Role,
     secure: bool,
     handshake_config: HandshakeConfig,
-    lookup: L,
+    table: MessageTable,
     deframer: Deframer,
     /// The unsigned output version; a signing link always sends signed MAVLink 2.
     out_version: Version,
@@ -157,23 +159,21 @@ pub struct Channel<L = CommonCrc> {
     stats: LinkStats,
 }
 
-impl Channel<CommonCrc> {
+impl Channel {
     /// A channel for the `common` dialect.
     ///
     /// # Errors
     /// [`ConfigError`] if `config` cannot work (see [`Config::validate`]).
     pub fn new(config: Config) -> Result<Self, ConfigError> {
-        Self::with_lookup(config, CommonCrc::new())
+        Self::with_table(config, common_table())
     }
-}
 
-impl<L: CrcExtra> Channel<L> {
-    /// A channel that takes CRC_EXTRA from `lookup` (the messages the channel reads itself
+    /// A channel that takes CRC_EXTRA from `table` (the messages the channel reads itself
     /// are always known).
     ///
     /// # Errors
     /// [`ConfigError`] if `config` cannot work (see [`Config::validate`]).
-    pub fn with_lookup(config: Config, lookup: L) -> Result<Self, ConfigError> {
+    pub fn with_table(config: Config, table: MessageTable) -> Result<Self, ConfigError> {
         config.validate()?;
         let out_version = match config.role {
             Role::Vehicle(VehiclePolicy {
@@ -191,7 +191,7 @@ impl<L: CrcExtra> Channel<L> {
             role: config.role,
             secure: config.secure,
             handshake_config: config.handshake,
-            lookup,
+            table,
             deframer: Deframer::new(),
             out_version,
             signing: config.signing.map(LinkSigning::new),
@@ -654,7 +654,8 @@ impl<L: CrcExtra> Channel<L> {
             if self.events.free() < EVENTS_PER_FRAME {
                 return false;
             }
-            let lookup = WithBuiltins(&self.lookup);
+            let table = self.table;
+            let lookup = |id: u32| crc_extra_with_builtins(&table, id);
             let item = if self.datagram_end {
                 self.deframer.finish(&lookup)
             } else {
@@ -1096,7 +1097,7 @@ impl<L: CrcExtra> Channel<L> {
     }
 }
 
-impl<L: CrcExtra> core::fmt::Debug for Channel<L> {
+impl core::fmt::Debug for Channel {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.debug_struct("Channel")
             .field("sysid", &self.sysid)

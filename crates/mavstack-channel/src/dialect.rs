@@ -1,16 +1,14 @@
 //! Where the channel gets each message's CRC_EXTRA, and the few messages it reads itself.
 //!
 //! The parser can only check a frame's checksum when it knows the message's CRC_EXTRA. A
-//! [`Channel`](crate::Channel) or [`Radio`](crate::Radio) takes any
-//! [`CrcExtra`] lookup: [`DialectCrc`] for a compiled-in dialect (the default is `common`), a
-//! closure `Fn(u32) -> Option<u8>`, or a table built at run time from XML. Whatever the lookup,
-//! the messages the channel handles itself (COMMAND_LONG, COMMAND_INT, COMMAND_ACK,
-//! AUTOPILOT_VERSION, RADIO_STATUS, SETUP_SIGNING, PROTOCOL_VERSION) are always known.
+//! [`Channel`](crate::Channel) or [`Radio`](crate::Radio) takes it from a
+//! [`MessageTable`]: a compiled-in dialect's ([`MessageTable::of`]; the default is `common`)
+//! or one built at run time from XML. Whatever the table, the messages the channel handles
+//! itself (COMMAND_LONG, COMMAND_INT, COMMAND_ACK, AUTOPILOT_VERSION, RADIO_STATUS,
+//! SETUP_SIGNING, PROTOCOL_VERSION) are always known.
 
-use core::marker::PhantomData;
-
-use mavstack_core::message::{Message, MessageSet};
-use mavstack_core::parse::CrcExtra;
+use mavstack_core::MessageTable;
+use mavstack_core::message::Message;
 use mavstack_dialects::common::{
     AutopilotVersion, CommandAck, CommandInt, CommandLong, MavCmd, MavMessage, ProtocolVersion,
     RadioStatus, SetupSigning,
@@ -18,53 +16,10 @@ use mavstack_dialects::common::{
 
 use crate::frame::OwnedFrame;
 
-/// CRC_EXTRA from a generated dialect's [`MessageSet`].
-///
-/// ```
-/// use mavstack_channel::DialectCrc;
-/// use mavstack_core::parse::CrcExtra;
-/// let common = DialectCrc::<mavstack_dialects::common::MavMessage>::new();
-/// assert_eq!(common.crc_extra(0), Some(50)); // HEARTBEAT
-/// assert_eq!(common.crc_extra(0xFF_FFFF), None);
-/// ```
-pub struct DialectCrc<M>(PhantomData<fn() -> M>);
-
-/// The default lookup: the `common` dialect.
-pub type CommonCrc = DialectCrc<MavMessage>;
-
-impl<M> DialectCrc<M> {
-    /// The lookup for dialect `M`.
-    #[must_use]
-    pub const fn new() -> Self {
-        Self(PhantomData)
-    }
-}
-
-impl<M> Default for DialectCrc<M> {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl<M> Clone for DialectCrc<M> {
-    fn clone(&self) -> Self {
-        *self
-    }
-}
-
-impl<M> Copy for DialectCrc<M> {}
-
-impl<M> core::fmt::Debug for DialectCrc<M> {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.write_str("DialectCrc")
-    }
-}
-
-impl<M: MessageSet> CrcExtra for DialectCrc<M> {
-    #[inline]
-    fn crc_extra(&self, id: u32) -> Option<u8> {
-        M::info(id).map(|info| info.crc_extra)
-    }
+/// The `common` dialect's table, what [`Channel::new`](crate::Channel::new) and
+/// [`Radio::new`](crate::Radio::new) use.
+pub(crate) fn common_table() -> MessageTable {
+    MessageTable::of::<MavMessage>()
 }
 
 /// The CRC_EXTRA of the messages the channel reads itself.
@@ -81,14 +36,10 @@ pub(crate) const fn builtin_crc_extra(id: u32) -> Option<u8> {
     }
 }
 
-/// A caller's lookup, completed with the built-in messages.
-pub(crate) struct WithBuiltins<'a, L>(pub(crate) &'a L);
-
-impl<L: CrcExtra> CrcExtra for WithBuiltins<'_, L> {
-    #[inline]
-    fn crc_extra(&self, id: u32) -> Option<u8> {
-        self.0.crc_extra(id).or_else(|| builtin_crc_extra(id))
-    }
+/// The CRC_EXTRA of `id` in `table`, completed with the messages the channel reads itself.
+#[inline]
+pub(crate) fn crc_extra_with_builtins(table: &MessageTable, id: u32) -> Option<u8> {
+    table.crc_extra(id).or_else(|| builtin_crc_extra(id))
 }
 
 /// How a command was encoded.
@@ -153,18 +104,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn builtins_complete_any_lookup() {
-        let nothing = |_: u32| None;
-        let with = WithBuiltins(&nothing);
-        assert_eq!(with.crc_extra(76), Some(152));
-        assert_eq!(with.crc_extra(75), Some(158));
-        assert_eq!(with.crc_extra(77), Some(143));
-        assert_eq!(with.crc_extra(109), Some(185));
-        assert_eq!(with.crc_extra(148), Some(178));
-        assert_eq!(with.crc_extra(256), Some(71));
-        assert_eq!(with.crc_extra(300), Some(217));
-        assert_eq!(with.crc_extra(0), None);
-        let common = CommonCrc::new();
-        assert_eq!(WithBuiltins(&common).crc_extra(0), Some(50));
+    fn builtins_complete_any_table() {
+        let nothing = MessageTable::empty();
+        let with = |id| crc_extra_with_builtins(&nothing, id);
+        assert_eq!(with(76), Some(152));
+        assert_eq!(with(75), Some(158));
+        assert_eq!(with(77), Some(143));
+        assert_eq!(with(109), Some(185));
+        assert_eq!(with(148), Some(178));
+        assert_eq!(with(256), Some(71));
+        assert_eq!(with(300), Some(217));
+        assert_eq!(with(0), None);
+        assert_eq!(crc_extra_with_builtins(&common_table(), 0), Some(50));
     }
 }

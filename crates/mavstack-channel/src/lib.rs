@@ -154,7 +154,7 @@ pub mod stats;
 
 pub use channel::{Channel, HandshakeError, SendError, Transmit};
 pub use config::{Config, ConfigError, GroundPolicy, Role, VehiclePolicy, VehicleVersion};
-pub use dialect::{CommandEncoding, CommonCrc, DialectCrc};
+pub use dialect::CommandEncoding;
 pub use event::{
     Event, LinkVersion, ProtocolVersionAnswer, RejectReason, Rejected, SigningSetup, SwitchCause,
 };
@@ -163,6 +163,7 @@ pub use handshake::{
     FallbackReason, Handshake, HandshakeConfig, HandshakeMethod, HandshakeOutcome,
     HandshakeRequest, HandshakeResult, Target,
 };
+pub use mavstack_core::MessageTable;
 pub use radio::{Radio, RadioConfig, RadioEvent, RadioStats, RadioTransmit, Side};
 pub use seq::SourceStats;
 pub use signing::{CapacityError, SigningConfig, SigningStream, WallClock};
@@ -178,7 +179,7 @@ pub fn fuzz_channel(data: &[u8]) {
     use mavstack_core::time::Instant;
     use mavstack_core::wire::MAX_FRAME_LEN;
 
-    fn feed<L: mavstack_core::parse::CrcExtra>(ch: &mut Channel<L>, now: Instant, data: &[u8]) {
+    fn feed(ch: &mut Channel, now: Instant, data: &[u8]) {
         let mut buf = [0u8; MAX_FRAME_LEN];
         let mut rest = data;
         while !rest.is_empty() {

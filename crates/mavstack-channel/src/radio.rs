@@ -23,13 +23,14 @@
 
 use core::time::Duration;
 
+use mavstack_core::MessageTable;
 use mavstack_core::message::{MAX_PAYLOAD_LEN, Message};
-use mavstack_core::parse::{self, CrcExtra, Deframer, Item};
+use mavstack_core::parse::{self, Deframer, Item};
 use mavstack_core::time::Instant;
 use mavstack_core::wire::{self, FrameHeader, MAX_FRAME_LEN, Version};
 use mavstack_dialects::common::RadioStatus;
 
-use crate::dialect::{CommonCrc, WithBuiltins};
+use crate::dialect::{common_table, crc_extra_with_builtins};
 use crate::frame::OwnedFrame;
 use crate::queue::Queue;
 
@@ -192,9 +193,9 @@ impl SideState {
 /// assert_eq!((t.to, &buf[..t.len]), (Side::A, &hb[..]));
 /// ```
 #[derive(Clone, Debug)]
-pub struct Radio<L = CommonCrc> {
+pub struct Radio {
     config: RadioConfig,
-    lookup: L,
+    table: MessageTable,
     sides: [SideState; 2],
     next_inject: Instant,
     mavlink2: bool,
@@ -204,21 +205,21 @@ pub struct Radio<L = CommonCrc> {
     stats: RadioStats,
 }
 
-impl Radio<CommonCrc> {
+impl Radio {
     /// A radio that checks frames with the `common` dialect (frames of unknown ids are
     /// forwarded too).
     #[must_use]
     pub fn new(config: RadioConfig) -> Self {
-        Self::with_lookup(config, CommonCrc::new())
+        Self::with_table(config, common_table())
     }
-}
 
-impl<L: CrcExtra> Radio<L> {
-    /// A radio that takes CRC_EXTRA from `lookup`.
-    pub fn with_lookup(config: RadioConfig, lookup: L) -> Self {
+    /// A radio that takes CRC_EXTRA from `table` (the messages the radio reads itself are
+    /// always known).
+    #[must_use]
+    pub fn with_table(config: RadioConfig, table: MessageTable) -> Self {
         Self {
             config,
-            lookup,
+            table,
             sides: [SideState::new(), SideState::new()],
             next_inject: Instant::ZERO,
             mavlink2: false,
@@ -385,7 +386,8 @@ impl<L: CrcExtra> Radio<L> {
             Side::A => (a, b),
             Side::B => (b, a),
         };
-        let lookup = WithBuiltins(&self.lookup);
+        let table = self.table;
+        let lookup = |id: u32| crc_extra_with_builtins(&table, id);
         loop {
             if dst.queue.free() == 0 {
                 return false;

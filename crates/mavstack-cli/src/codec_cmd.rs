@@ -156,7 +156,7 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
         return Ok(());
     }
     let dialect = crate::dialect_cmd::load(&args.dialect)?;
-    let lookup = |id: u32| dialect.message(id).map(|m| m.crc_extra);
+    let table = dialect.message_table();
     let stdout = io::stdout();
     let mut sink = io::BufWriter::with_capacity(1 << 16, stdout.lock());
     let mut counts = Counts::default();
@@ -197,14 +197,7 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
         }
     };
     if is_tlog {
-        // The reader checks each record's checksum through its own copy of the CRC table.
-        let crcs: std::collections::HashMap<u32, u8> = dialect
-            .messages
-            .iter()
-            .map(|m| (m.id, m.crc_extra))
-            .collect();
-        let mut reader =
-            tlog::Reader::new(input).with_crc_extra(move |id: u32| crcs.get(&id).copied());
+        let mut reader = tlog::Reader::new(input).with_crc_extra(table);
         let mut stats = Stats::default();
         let mut progress = crate::progress::Progress::new("decoding", input_len);
         loop {
@@ -215,7 +208,7 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
                 break;
             };
             let frame = Frame::new_unchecked(bytes);
-            if lookup(frame.msg_id()).is_some() {
+            if table.info(frame.msg_id()).is_some() {
                 stats.frames += 1;
                 handle(Item::Frame(frame), Some(ts), &mut counts);
             } else {
@@ -233,7 +226,7 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
         let mut parse_counts = Counts::default();
         let stats = crate::log_reader::raw_items(
             &mut input,
-            lookup,
+            table,
             |item| handle(item, None, &mut parse_counts),
             |at| progress.set(at),
         )

@@ -77,9 +77,9 @@ pub(crate) fn conform(args: &ConformArgs) -> Result<(), Failure> {
                 let options = VehicleOptions {
                     timeout,
                     key,
-                    crc_extra: mavstack_transport::frame::crc_extra_of::<
+                    dialect: mavstack_core::MessageTable::of::<
                         mavstack_dialects::ardupilotmega::MavMessage,
-                    >,
+                    >(),
                     ..VehicleOptions::default()
                 };
                 let report = grade_vehicle(&node.handle(), &options).await;

@@ -100,18 +100,14 @@ pub(crate) struct ReplayArgs {
     raw: bool,
 }
 
-/// Opens `conn` with the frame protocol over `dialect`'s CRC_EXTRA values.
+/// Opens `conn` with the frame protocol over `dialect`'s message table.
 async fn open(
     spec: &ConnSpec,
-    dialect: &Arc<Dialect>,
+    dialect: &Dialect,
     keep_unknown: bool,
     mode: FileMode,
-) -> Result<Connection<FrameProtocol<impl Fn(u32) -> Option<u8> + Send + 'static>>, Failure> {
-    let lookup = {
-        let dialect = Arc::clone(dialect);
-        move |id: u32| dialect.message(id).map(|m| m.crc_extra)
-    };
-    let protocol = FrameProtocol::new(lookup)
+) -> Result<Connection<FrameProtocol>, Failure> {
+    let protocol = FrameProtocol::new(dialect.message_table())
         .keep_unknown(keep_unknown)
         .peer_events(false);
     let mut options = Options::default();
@@ -445,19 +441,14 @@ fn replay_frames(
     let is_tlog = !args.raw && FileFormat::from_path(&args.file) == FileFormat::Tlog;
     let mut frames = Vec::new();
     if is_tlog {
-        let lookup = {
-            let dialect = Arc::clone(dialect);
-            move |id: u32| dialect.message(id).map(|m| m.crc_extra)
-        };
-        let mut reader = tlog::Reader::new(&data[..]).with_crc_extra(lookup);
+        let mut reader = tlog::Reader::new(&data[..]).with_crc_extra(dialect.message_table());
         while let Some((ts, bytes)) = reader.read_record().context("reading the tlog")? {
             if let Ok(frame) = FrameBuf::new(bytes) {
                 frames.push((Some(ts), frame));
             }
         }
     } else {
-        let lookup = |id: u32| dialect.message(id).map(|m| m.crc_extra);
-        for item in SliceParser::new(&data, lookup) {
+        for item in SliceParser::new(&data, dialect.message_table()) {
             let (Item::Frame(f) | Item::Unknown(f)) = item;
             if let Ok(frame) = FrameBuf::new(f.as_bytes()) {
                 frames.push((None, frame));

@@ -1,7 +1,6 @@
 //! Reading a log file frame by frame, for the `log` commands: a tlog (a timestamp before each
 //! frame) or a raw stream, chosen by the file name, with a progress bar on a terminal.
 
-use std::collections::HashMap;
 use std::io::{self, BufReader, Read};
 use std::path::Path;
 
@@ -93,25 +92,20 @@ pub(crate) fn read_log(
     mut each: impl FnMut(&LogFrame<'_>),
 ) -> Result<ReadCounts, Failure> {
     let cannot = |e: io::Error| Failure::Input(anyhow!("cannot read {}: {e}", path.display()));
-    let crcs: HashMap<u32, u8> = dialect
-        .messages
-        .iter()
-        .map(|m| (m.id, m.crc_extra))
-        .collect();
+    let table = dialect.message_table();
     let mut counts = ReadCounts::default();
     if is_tlog(path) {
         let file = std::fs::File::open(path).map_err(cannot)?;
         let total = file.metadata().map_or(0, |m| m.len());
         let mut progress = Progress::new(what, total);
-        let known = crcs.clone();
-        let mut reader = tlog::Reader::new(BufReader::with_capacity(1 << 16, file))
-            .with_crc_extra(move |id: u32| known.get(&id).copied());
+        let mut reader =
+            tlog::Reader::new(BufReader::with_capacity(1 << 16, file)).with_crc_extra(table);
         while let Some((ts, bytes)) = reader
             .read_record()
             .with_context(|| format!("reading {}", path.display()))?
         {
             let frame = Frame::new_unchecked(bytes);
-            let known = crcs.contains_key(&frame.msg_id());
+            let known = table.info(frame.msg_id()).is_some();
             each(&LogFrame {
                 ts_us: Some(ts),
                 frame,
@@ -134,7 +128,7 @@ pub(crate) fn read_log(
         let mut frames = 0;
         let stats = raw_items(
             &mut file,
-            |id: u32| crcs.get(&id).copied(),
+            table,
             |item| {
                 let (frame, known) = match item {
                     Item::Frame(f) => (f, true),

@@ -9,8 +9,7 @@ use std::sync::Arc;
 
 use anyhow::anyhow;
 use clap::Args;
-use mavstack::core::MessageSet as _;
-use mavstack::router::{InfoFn, RouterConfig};
+use mavstack::router::{MessageTable, RouterConfig};
 use mavstack::{InputModeration, LinkSpec, Node, NodeReport, router_conf};
 use mavstack_bridge::BridgeStats;
 
@@ -42,7 +41,8 @@ pub(crate) struct RouterArgs {
     /// Print one JSON object of statistics every S seconds on stdout.
     #[arg(long, value_name = "S")]
     stats: Option<f64>,
-    /// Dialect for CRC_EXTRA, lengths and target offsets.
+    /// Dialect for CRC_EXTRA, lengths, target offsets and the message names of filters and
+    /// rates: a built-in name or an XML file (includes resolved relative to it).
     #[arg(long, default_value = "ardupilotmega")]
     dialect: String,
     /// Announce the router as a component of its own: a HEARTBEAT (an onboard computer's,
@@ -112,25 +112,27 @@ pub(crate) enum ModerationArg {
     Off,
 }
 
-/// The built-in dialects a router can use, by name.
-fn dialect(name: &str) -> Result<InfoFn, Failure> {
-    macro_rules! table {
+/// The router's message table: a dialect compiled into the binary by its name, any other
+/// built-in name or an XML file through the run-time model (`docs/contracts/json-lines.md`,
+/// "Dialect names").
+fn dialect(name: &str) -> Result<MessageTable, Failure> {
+    macro_rules! compiled {
         ($($d:ident),*) => {
             match name {
-                $(stringify!($d) => Ok(InfoFn(|id| mavstack::dialects::$d::MavMessage::info(id).copied())),)*
-                _ => Err(Failure::Input(anyhow!(
-                    "unknown dialect \"{name}\" for the router; expected one of {}",
-                    [$(stringify!($d)),*].join(", ")
-                ))),
+                $(stringify!($d) => return Ok(MessageTable::of::<mavstack::dialects::$d::MavMessage>()),)*
+                _ => {}
             }
         };
     }
-    table!(ardupilotmega, common, minimal, standard, development, all)
+    compiled!(ardupilotmega, common, minimal, standard, development, all);
+    crate::dialect_cmd::load(name).map(|d| d.message_table())
 }
 
-/// The id of a message name in `dialect`, for the filters and `rate` options.
-fn message_id(name: &str) -> Option<u32> {
-    mavstack::dialects::all::MavMessage::all()
+/// The id of a message name in the router's dialect (case does not matter), for the
+/// filters and `rate` options.
+fn message_id(dialect: &MessageTable, name: &str) -> Option<u32> {
+    dialect
+        .entries()
         .iter()
         .find(|m| m.name.eq_ignore_ascii_case(name))
         .map(|m| m.id)
@@ -162,6 +164,7 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
     let mut tcp_server = args.tcp_server;
     let mut log = args.log.clone();
     let mut dialect_name = args.dialect.clone();
+    let mut conf_links = Vec::new();
     if let Some(path) = &args.conf {
         let text = std::fs::read_to_string(path)
             .map_err(|e| Failure::Input(anyhow!("cannot read {}: {e}", path.display())))?;
@@ -190,7 +193,13 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         if let Some(d) = conf.general.dialect.filter(|d| d != "auto") {
             dialect_name = d;
         }
-        for link in conf.links {
+        conf_links = conf.links;
+    }
+    // Filters and rates given by message name resolve in the router's own dialect.
+    let dialect = dialect(&dialect_name)?;
+    let message_id = |name: &str| message_id(&dialect, name);
+    if let Some(path) = &args.conf {
+        for link in conf_links {
             let spec = LinkSpec::parse(&link.link, &message_id)
                 .map_err(|e| Failure::Input(anyhow!("{}:{}: {e}", path.display(), link.line)))?;
             specs.push(spec);
@@ -219,7 +228,6 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
     }
     let stats_every = args.stats.map(|s| seconds(s, "--stats")).transpose()?;
     let http = args.http.addr()?;
-    let dialect = dialect(&dialect_name)?;
     // The node runs on a thread of its own, waiting on its UDP sockets directly (no
     // scheduler between a datagram's wake-up and the forwarded frames); one runtime thread
     // beside it runs the TCP and serial links' tasks, signals and statistics.

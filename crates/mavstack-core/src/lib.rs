@@ -16,6 +16,8 @@
 //! - [`message`]: the [`Message`] trait that every generated message implements and the
 //!   [`MessageSet`] trait of a dialect's message enum, plus [`MessageInfo`], the per-id facts
 //!   (CRC_EXTRA, lengths, target offsets) a parser needs.
+//! - [`table`]: [`MessageTable`], a dialect's [`MessageInfo`] entries sorted by id: the one
+//!   message-id lookup every layer takes.
 //! - [`payload`]: the byte helpers generated code uses to read and write payload fields.
 //! - [`text`]: `char[N]` fields as text.
 //! - [`tlog`]: telemetry log records in a slice, zero-copy.
@@ -55,6 +57,7 @@ pub mod wire;
 
 pub use crc::Crc16;
 pub use message::{MAX_PAYLOAD_LEN, Message, MessageInfo, MessageSet, UnknownMessage};
+pub use table::MessageTable;
 
 /// The seeds of fuzz target `target` (`fuzz/corpus/TARGET` in the source tree), in file-name
 /// order, for the tests that replay them on stable.

@@ -20,6 +20,8 @@
 //! - Every [`Error`] names the file, line and column and what is wrong.
 //! - [`codec`] decodes a payload into [`codec::Value`]s and encodes values into a payload,
 //!   for any message of a dialect loaded at run time.
+//! - [`Dialect::message_table`] gives the dialect as the stack's
+//!   [`MessageTable`](mavstack_core::MessageTable) (what the parser, channel and router take).
 //! - `json` (feature `json`) writes frames as JSON lines and reads them back.
 //!
 //! ```
@@ -40,6 +42,7 @@ pub mod json;
 pub mod layout;
 mod loader;
 pub mod model;
+mod table;
 mod xml;
 
 pub use error::{Error, ErrorKind, Location};

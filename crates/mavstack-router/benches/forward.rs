@@ -12,7 +12,7 @@ use mavstack_core::time::Instant;
 use mavstack_core::wire::{self, FrameHeader, MAX_FRAME_LEN, Version};
 use mavstack_dialects::ardupilotmega::MavMessage;
 use mavstack_dialects::common::Attitude;
-use mavstack_router::{DialectInfo, LinkConfig, Router, RouterConfig, VersionMode};
+use mavstack_router::{LinkConfig, MessageTable, Router, RouterConfig, VersionMode};
 
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("forward");
@@ -30,7 +30,7 @@ fn bench(c: &mut Criterion) {
             l
         }),
     ] {
-        let mut router = Router::new(RouterConfig::default(), DialectInfo::<MavMessage>::new());
+        let mut router = Router::new(RouterConfig::default(), MessageTable::of::<MavMessage>());
         let mut vehicle = LinkConfig::new("vehicle");
         vehicle.trusted = true;
         let vehicle = router.add_link(vehicle).unwrap();

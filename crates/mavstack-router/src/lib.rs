@@ -54,7 +54,8 @@ pub use config::{
     DirectionFilters, IdFilter, LinkConfig, LinkRole, LocalDelivery, ProtocolVersionSupport,
     RateLimits, RouterConfig, VersionMode,
 };
-pub use dialect::{Dialect, DialectInfo, InfoFn, is_control, target_of};
+pub use dialect::{is_control, target_of};
+pub use mavstack_core::MessageTable;
 pub use options::OptionError;
 pub use route::Route;
 pub use router::{Event, LinkId, Router, SendTo, Transmit};
@@ -91,7 +92,7 @@ pub fn fuzz_router(data: &[u8]) {
     use mavstack_core::time::Instant;
     use mavstack_core::wire::{Frame, MAX_FRAME_LEN, Version};
 
-    let dialect = DialectInfo::<mavstack_dialects::common::MavMessage>::new();
+    let dialect = MessageTable::of::<mavstack_dialects::common::MavMessage>();
     let config = RouterConfig {
         dedup: Some(core::time::Duration::from_millis(50)),
         local: LocalDelivery::All,

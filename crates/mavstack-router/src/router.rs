@@ -9,6 +9,7 @@ use mavstack_channel::{
     HandshakeOutcome, LinkVersion, ProtocolVersionAnswer, ReceivedFrame, Rejected, SigningConfig,
     SigningSetup, SwitchCause, Target,
 };
+use mavstack_core::MessageTable;
 use mavstack_core::message::Message as _;
 use mavstack_core::signing;
 use mavstack_core::time::Instant;
@@ -18,7 +19,7 @@ use mavstack_dialects::common::{AutopilotVersion, Heartbeat, MavProtocolCapabili
 use crate::config::{LinkConfig, LocalDelivery, RouterConfig, VersionMode};
 use crate::convert::{self, Origin, Plan};
 use crate::dedup::Dedup;
-use crate::dialect::{Dialect, is_control, target_of};
+use crate::dialect::{is_control, target_of};
 use crate::limit::Limiter;
 use crate::queue::OutQueue;
 use crate::route::{Route, Routes};
@@ -147,16 +148,16 @@ pub struct Transmit {
     pub len: usize,
 }
 
-struct LinkState<D> {
+struct LinkState {
     config: LinkConfig,
-    channel: Channel<D>,
+    channel: Channel,
     queue: OutQueue,
     limiter: Limiter,
     counters: Counters,
     ready: bool,
 }
 
-impl<D: Dialect> LinkState<D> {
+impl LinkState {
     fn mode(&self) -> LinkMode {
         if self.channel.signing().is_some() {
             return LinkMode::Signed;
@@ -185,10 +186,10 @@ impl<D: Dialect> LinkState<D> {
 ///
 /// ```
 /// use mavstack_core::time::Instant;
-/// use mavstack_router::{DialectInfo, LinkConfig, Router, RouterConfig, VersionMode};
+/// use mavstack_router::{LinkConfig, MessageTable, Router, RouterConfig, VersionMode};
 /// use mavstack_dialects::common::MavMessage;
 ///
-/// let mut router = Router::new(RouterConfig::default(), DialectInfo::<MavMessage>::new());
+/// let mut router = Router::new(RouterConfig::default(), MessageTable::of::<MavMessage>());
 /// let vehicle = router.add_link(LinkConfig::new("vehicle")).unwrap();
 /// let mut legacy = LinkConfig::new("legacy");
 /// legacy.version = VersionMode::Mavlink1;
@@ -203,10 +204,10 @@ impl<D: Dialect> LinkState<D> {
 /// // ...converted to MAVLink 1, the digest's golden MAVLink 1 HEARTBEAT.
 /// assert_eq!(&buf[..t.len], [0xfe, 9, 0, 1, 1, 0, 0, 0, 0, 0, 2, 12, 0x51, 4, 3, 0x81, 0xb7]);
 /// ```
-pub struct Router<D> {
+pub struct Router {
     config: RouterConfig,
-    dialect: D,
-    links: Vec<Option<LinkState<D>>>,
+    dialect: MessageTable,
+    links: Vec<Option<LinkState>>,
     routes: Routes,
     systems: Systems,
     dedup: Option<Dedup>,
@@ -217,10 +218,10 @@ pub struct Router<D> {
     next_sweep: Option<Instant>,
 }
 
-impl<D: Dialect> Router<D> {
+impl Router {
     /// A router with no links.
     #[must_use]
-    pub fn new(config: RouterConfig, dialect: D) -> Self {
+    pub fn new(config: RouterConfig, dialect: MessageTable) -> Self {
         let dedup = config
             .dedup
             .map(|w| Dedup::new(config.dedup_capacity, w, config.dedup_hash));
@@ -252,9 +253,9 @@ impl<D: Dialect> Router<D> {
     /// # Errors
     /// [`ConfigError`] if its channel cannot be set up (signing with `version=1`).
     pub fn add_link(&mut self, config: LinkConfig) -> Result<LinkId, ConfigError> {
-        let channel = Channel::with_lookup(
+        let channel = Channel::with_table(
             config.channel_config(self.config.system_id, self.config.component_id),
-            self.dialect.clone(),
+            self.dialect,
         )?;
         let state = LinkState {
             limiter: Limiter::new(&config.limits),
@@ -312,7 +313,7 @@ impl<D: Dialect> Router<D> {
 
     /// A link's channel (its version, signing state, per-source sequence statistics).
     #[must_use]
-    pub fn channel(&self, link: LinkId) -> Option<&Channel<D>> {
+    pub fn channel(&self, link: LinkId) -> Option<&Channel> {
         self.link(link).map(|l| &l.channel)
     }
 
@@ -339,11 +340,11 @@ impl<D: Dialect> Router<D> {
         self.events_dropped
     }
 
-    fn link(&self, link: LinkId) -> Option<&LinkState<D>> {
+    fn link(&self, link: LinkId) -> Option<&LinkState> {
         self.links.get(link.index())?.as_ref()
     }
 
-    fn link_mut(&mut self, link: LinkId) -> Option<&mut LinkState<D>> {
+    fn link_mut(&mut self, link: LinkId) -> Option<&mut LinkState> {
         self.links.get_mut(link.index())?.as_mut()
     }
 
@@ -496,7 +497,7 @@ impl<D: Dialect> Router<D> {
         } else {
             None
         };
-        let (tsys, tcomp) = target_of(info.as_ref(), frame.payload());
+        let (tsys, tcomp) = target_of(info, frame.payload());
         let duplicate = self
             .dedup
             .as_mut()
@@ -553,7 +554,7 @@ impl<D: Dialect> Router<D> {
         } else {
             let control = is_control(msg_id);
             for &d in &dests {
-                self.forward(now, d, received, info.as_ref(), origin, control);
+                self.forward(now, d, received, info, origin, control);
             }
             let deliver = match self.config.local {
                 LocalDelivery::None => false,
@@ -668,10 +669,10 @@ impl<D: Dialect> Router<D> {
     /// ```
     /// use mavstack_core::time::Instant;
     /// use mavstack_core::Message as _;
-    /// use mavstack_router::{DialectInfo, LinkConfig, Router, RouterConfig, SendTo, VersionMode};
+    /// use mavstack_router::{LinkConfig, MessageTable, Router, RouterConfig, SendTo, VersionMode};
     /// use mavstack_dialects::common::{Heartbeat, MavMessage};
     ///
-    /// let mut router = Router::new(RouterConfig::default(), DialectInfo::<MavMessage>::new());
+    /// let mut router = Router::new(RouterConfig::default(), MessageTable::of::<MavMessage>());
     /// let mut legacy = LinkConfig::new("legacy");
     /// legacy.version = VersionMode::Mavlink1;
     /// router.add_link(legacy).unwrap();
@@ -697,7 +698,7 @@ impl<D: Dialect> Router<D> {
                 dests.push(link);
                 None
             }
-            SendTo::Target => Some(target_of(Some(&info), payload)),
+            SendTo::Target => Some(target_of(Some(info), payload)),
             SendTo::Component(sysid, compid) => Some((sysid, compid)),
         };
         if let Some((tsys, tcomp)) = target {
@@ -920,7 +921,7 @@ fn with_mavlink2_capability<'a>(payload: &[u8], on: bool, buf: &'a mut [u8]) -> 
     &buf[..len]
 }
 
-impl<D> core::fmt::Debug for Router<D> {
+impl core::fmt::Debug for Router {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.debug_struct("Router")
             .field("links", &self.links.iter().flatten().count())

@@ -12,7 +12,7 @@ use mavstack_dialects::common::{
     Attitude, CommandAck, CommandLong, Heartbeat, MavMessage, ProtocolVersion, SysStatus,
 };
 use mavstack_router::{
-    DialectInfo, LinkConfig, LinkId, Router, RouterConfig, VersionMode, fuzz_router,
+    LinkConfig, LinkId, MessageTable, Router, RouterConfig, VersionMode, fuzz_router,
 };
 use proptest::prelude::*;
 
@@ -20,13 +20,13 @@ const T0: Instant = Instant::from_secs(1_767_225_600);
 
 /// Link i: 0 `version=1`, 1 `version=2`, 2 auto, 3 key A, 4 key B, 5 trusted. Its peer is
 /// system 10 + i, so a frame of system 10 + i on link i went back to its source.
-fn setup(dedup: bool) -> (Router<DialectInfo<MavMessage>>, Vec<LinkId>, [SecretKey; 2]) {
+fn setup(dedup: bool) -> (Router, Vec<LinkId>, [SecretKey; 2]) {
     let keys = [SecretKey::new([0xA; 32]), SecretKey::new([0xB; 32])];
     let mut config = RouterConfig::default();
     if dedup {
         config.dedup = Some(core::time::Duration::from_secs(10));
     }
-    let mut r = Router::new(config, DialectInfo::new());
+    let mut r = Router::new(config, MessageTable::of::<MavMessage>());
     let links = (0..6)
         .map(|i| {
             let mut c = LinkConfig::new(format!("l{i}"));

@@ -12,14 +12,16 @@ use mavstack_dialects::common::{
     Attitude, CommandAck, CommandLong, Heartbeat, MavCmd, MavMessage, MavSysStatusSensorExtended,
     ProtocolVersion, SysStatus,
 };
-use mavstack_router::{DialectInfo, LinkConfig, LinkId, Router, RouterConfig, SendTo, VersionMode};
+use mavstack_router::{
+    LinkConfig, LinkId, MessageTable, Router, RouterConfig, SendTo, VersionMode,
+};
 
-type R = Router<DialectInfo<MavMessage>>;
+type R = Router;
 
 const T0: Instant = Instant::from_secs(1_767_225_600);
 
 fn router() -> R {
-    Router::new(RouterConfig::default(), DialectInfo::new())
+    Router::new(RouterConfig::default(), MessageTable::of::<MavMessage>())
 }
 
 fn key(b: u8) -> SecretKey {
@@ -315,7 +317,7 @@ fn signed_links_carry_only_frames_that_verify_with_their_key() {
 fn dedup_lets_a_frame_reach_each_link_once() {
     let mut config = RouterConfig::default();
     config.dedup = Some(Duration::from_millis(200));
-    let mut r = Router::new(config, DialectInfo::new());
+    let mut r = Router::new(config, MessageTable::of::<MavMessage>());
     let (radio1, radio2, gcs) = (
         link(&mut r, "r1", |_| {}),
         link(&mut r, "r2", |_| {}),
@@ -573,7 +575,7 @@ fn vehicle_links_answer_the_handshake_in_their_own_version_and_set_the_capabilit
     use mavstack_router::{Event, LinkRole};
     let mut config = RouterConfig::default();
     config.component_id = 1;
-    let mut r = Router::new(config, DialectInfo::<MavMessage>::new());
+    let mut r = Router::new(config, MessageTable::of::<MavMessage>());
     let vehicle = LinkRole::Vehicle {
         protocol_version: mavstack_router::ProtocolVersionSupport::Answer,
     };
@@ -682,10 +684,10 @@ fn a_ground_station_link_runs_the_handshake_with_a_vehicle_link() {
     let mut gcs_config = RouterConfig::default();
     gcs_config.system_id = 255;
     gcs_config.component_id = 190;
-    let mut gcs = Router::new(gcs_config, DialectInfo::<MavMessage>::new());
+    let mut gcs = Router::new(gcs_config, MessageTable::of::<MavMessage>());
     let mut veh_config = RouterConfig::default();
     veh_config.component_id = 1;
-    let mut veh = Router::new(veh_config, DialectInfo::<MavMessage>::new());
+    let mut veh = Router::new(veh_config, MessageTable::of::<MavMessage>());
     let g = link(&mut gcs, "to vehicle", |c| c.role = LinkRole::GroundStation);
     let v = link(&mut veh, "to gcs", |c| {
         c.role = LinkRole::Vehicle {
@@ -760,7 +762,7 @@ fn with_forwarding_off_links_carry_only_the_routers_own_traffic() {
     let mut config = RouterConfig::default();
     config.forward = false;
     config.local = LocalDelivery::All;
-    let mut r = Router::new(config, DialectInfo::<MavMessage>::new());
+    let mut r = Router::new(config, MessageTable::of::<MavMessage>());
     let a = link(&mut r, "a", |_| {});
     let b = link(&mut r, "b", |_| {});
     r.handle_datagram(T0, a, &frame(&hb(), Version::V2, (1, 1), 0, None));

@@ -15,7 +15,7 @@ use mavstack_core::wire::{FrameHeader, Version};
 use mavstack_dialects::ardupilotmega::{
     Heartbeat, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType,
 };
-use mavstack_transport::frame::{FrameBuf, FrameCommand, FrameEvent, FrameProtocol, crc_extra_of};
+use mavstack_transport::frame::{FrameBuf, FrameCommand, FrameEvent, FrameProtocol, MessageTable};
 use mavstack_transport::{ConnSpec, Connection};
 
 #[tokio::main]
@@ -25,7 +25,8 @@ async fn main() -> Result<(), Box<dyn core::error::Error>> {
         std::process::exit(2);
     };
     let spec: ConnSpec = arg.parse()?;
-    let mut conn = Connection::open(&spec, FrameProtocol::new(crc_extra_of::<MavMessage>)).await?;
+    let mut conn =
+        Connection::open(&spec, FrameProtocol::new(MessageTable::of::<MavMessage>())).await?;
     let heartbeat = Heartbeat {
         r#type: MavType::GCS,
         autopilot: MavAutopilot::INVALID,

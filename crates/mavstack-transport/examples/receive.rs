@@ -8,7 +8,7 @@
 
 use mavstack_core::MessageSet as _;
 use mavstack_dialects::ardupilotmega::MavMessage;
-use mavstack_transport::frame::{FrameEvent, FrameProtocol, crc_extra_of};
+use mavstack_transport::frame::{FrameEvent, FrameProtocol, MessageTable};
 use mavstack_transport::{ConnSpec, Connection};
 
 #[tokio::main]
@@ -18,7 +18,7 @@ async fn main() -> Result<(), Box<dyn core::error::Error>> {
         std::process::exit(2);
     };
     let spec: ConnSpec = arg.parse()?;
-    let protocol = FrameProtocol::new(crc_extra_of::<MavMessage>).keep_unknown(true);
+    let protocol = FrameProtocol::new(MessageTable::of::<MavMessage>()).keep_unknown(true);
     let mut conn = Connection::open(&spec, protocol).await?;
     eprintln!("receiving on {spec}");
     while let Some(event) = conn.recv().await {

@@ -9,7 +9,7 @@
 //! writes out the rest and stops.
 
 use mavstack_dialects::ardupilotmega::MavMessage;
-use mavstack_transport::frame::{FrameEvent, FrameProtocol, crc_extra_of};
+use mavstack_transport::frame::{FrameEvent, FrameProtocol, MessageTable};
 use mavstack_transport::tlog;
 use mavstack_transport::{ConnSpec, Connection};
 
@@ -22,7 +22,7 @@ async fn main() -> Result<(), Box<dyn core::error::Error>> {
     };
     let spec: ConnSpec = conn_arg.parse()?;
     // Unknown message ids are recorded too: a log keeps everything that was on the wire.
-    let protocol = FrameProtocol::new(crc_extra_of::<MavMessage>).keep_unknown(true);
+    let protocol = FrameProtocol::new(MessageTable::of::<MavMessage>()).keep_unknown(true);
     let mut conn = Connection::open(&spec, protocol).await?;
     let mut log = tlog::Writer::new(std::fs::File::create(path)?);
     eprintln!("recording {spec} into {path}; Ctrl-C stops");

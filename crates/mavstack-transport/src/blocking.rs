@@ -8,13 +8,13 @@
 //! ```
 //! use core::time::Duration;
 //! use mavstack_transport::blocking::Connection;
-//! use mavstack_transport::frame::{FrameBuf, FrameCommand, FrameEvent, FrameProtocol};
+//! use mavstack_transport::frame::{FrameBuf, FrameCommand, FrameEvent, FrameProtocol, MessageTable};
 //!
 //! let heartbeat = [0xfd, 9, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0, 0, 0, 2, 12, 0x51, 4, 3, 0x1b, 0x74];
-//! let lookup = |id: u32| (id == 0).then_some(50u8);
-//! let mut server = Connection::open(&"udpin:127.0.0.1:0".parse()?, FrameProtocol::new(lookup))?;
+//! let common = MessageTable::of::<mavstack_dialects::common::MavMessage>();
+//! let mut server = Connection::open(&"udpin:127.0.0.1:0".parse()?, FrameProtocol::new(common))?;
 //! let port = server.local_addr().unwrap().port();
-//! let client = Connection::open(&format!("udpout:127.0.0.1:{port}").parse()?, FrameProtocol::new(lookup))?;
+//! let client = Connection::open(&format!("udpout:127.0.0.1:{port}").parse()?, FrameProtocol::new(common))?;
 //! client.send(FrameCommand::to_all(FrameBuf::new(&heartbeat)?))?;
 //! loop {
 //!     match server.recv_timeout(Duration::from_secs(5))? {

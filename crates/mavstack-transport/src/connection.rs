@@ -103,11 +103,11 @@ pub struct ConnectionStats<S> {
 /// been taken, and [`Connection::close`] tells how it ended.
 ///
 /// ```no_run
-/// use mavstack_transport::{Connection, frame::{FrameEvent, FrameProtocol, crc_extra_of}};
+/// use mavstack_transport::{Connection, frame::{FrameEvent, FrameProtocol, MessageTable}};
 /// use mavstack_dialects::common::MavMessage;
 /// # async fn run() -> Result<(), Box<dyn core::error::Error>> {
 /// let spec = "udpin:0.0.0.0:14550".parse()?;
-/// let mut conn = Connection::open(&spec, FrameProtocol::new(crc_extra_of::<MavMessage>)).await?;
+/// let mut conn = Connection::open(&spec, FrameProtocol::new(MessageTable::of::<MavMessage>())).await?;
 /// while let Some(event) = conn.recv().await {
 ///     if let FrameEvent::Frame(f) = event {
 ///         println!("{} from {}/{}", f.frame.msg_id(), f.frame.sysid(), f.frame.compid());

@@ -2,22 +2,23 @@
 //!
 //! [`FrameProtocol`] finds MAVLink frames in what each peer sends (a
 //! [`Deframer`] per stream peer; a [`SliceParser`] per datagram, so a frame never spans two
-//! datagrams), checks their checksums with a CRC_EXTRA lookup the caller supplies, and reports
+//! datagrams), checks their checksums with the [`MessageTable`] the caller supplies, and reports
 //! each as a [`FrameEvent::Frame`] holding an owned copy in a fixed [`FrameBuf`] (no heap
 //! allocation per frame). It sends whatever frames it is given. It keeps no sequence numbers,
 //! versions or signing state: that is the channel layer's job, which will implement
 //! [`Protocol`] itself.
 //!
-//! The lookup is anything that implements [`CrcExtra`]: a closure over a run-time dialect
-//! model, or a typed dialect's table through [`crc_extra_of`].
+//! The table is a typed dialect's ([`MessageTable::of`]) or one made from XML at run time
+//! (`mavstack_dialect::Dialect::message_table`).
 //!
 //! ```
 //! use mavstack_core::time::Instant;
+//! use mavstack_core::MessageTable;
 //! use mavstack_transport::frame::{FrameEvent, FrameProtocol};
 //! use mavstack_transport::protocol::{Framing, PeerAddr, PeerId, PeerInfo, Protocol};
 //!
 //! let heartbeat = [0xfd, 9, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0, 0, 0, 2, 12, 0x51, 4, 3, 0x1b, 0x74];
-//! let mut proto = FrameProtocol::new(|id: u32| (id == 0).then_some(50u8));
+//! let mut proto = FrameProtocol::new(MessageTable::of::<mavstack_dialects::common::MavMessage>());
 //! let peer = PeerInfo { id: PeerId::new(1), addr: PeerAddr::Serial("/dev/ttyS0".into()), framing: Framing::Stream };
 //! proto.handle_peer_added(Instant::ZERO, &peer);
 //! assert_eq!(proto.poll_event(), Some(FrameEvent::PeerAdded(peer.clone())));
@@ -31,10 +32,11 @@
 
 use std::collections::{HashMap, VecDeque};
 
-use mavstack_core::parse::{CrcExtra, Deframer, Item, SliceParser, Stats as ParseStats};
+use mavstack_core::Message;
+pub use mavstack_core::MessageTable;
+use mavstack_core::parse::{Deframer, Item, SliceParser, Stats as ParseStats};
 use mavstack_core::time::Instant;
 use mavstack_core::wire::{self, EmitError, Frame, FrameHeader, MAX_FRAME_LEN};
-use mavstack_core::{Message, MessageSet};
 
 use crate::protocol::{Dest, Framing, PeerId, PeerInfo, Protocol, Transmit};
 
@@ -196,7 +198,7 @@ pub struct ReceivedFrame {
 pub enum FrameEvent {
     /// A frame of a known message id with a good checksum.
     Frame(ReceivedFrame),
-    /// A frame of a message id the lookup does not know (checksum unchecked); only with
+    /// A frame of a message id the table does not define (checksum unchecked); only with
     /// [`FrameProtocol::keep_unknown`].
     Unknown(ReceivedFrame),
     /// A peer appeared.
@@ -265,17 +267,10 @@ impl FrameStats {
     }
 }
 
-/// A CRC_EXTRA lookup over a typed dialect's message set, as a plain function pointer:
-/// `FrameProtocol::new(crc_extra_of::<mavstack_dialects::common::MavMessage>)`.
-#[must_use]
-pub fn crc_extra_of<M: MessageSet>(id: u32) -> Option<u8> {
-    M::info(id).map(|info| info.crc_extra)
-}
-
 /// The default protocol: frames from every peer become events; frames to send go out as they
 /// are. See the [module docs](self).
-pub struct FrameProtocol<L> {
-    lookup: L,
+pub struct FrameProtocol {
+    table: MessageTable,
     keep_unknown: bool,
     peer_events: bool,
     /// Every live peer: a deframer for stream peers, nothing for datagram peers.
@@ -285,7 +280,7 @@ pub struct FrameProtocol<L> {
     stats: FrameStats,
 }
 
-impl<L> core::fmt::Debug for FrameProtocol<L> {
+impl core::fmt::Debug for FrameProtocol {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.debug_struct("FrameProtocol")
             .field("keep_unknown", &self.keep_unknown)
@@ -295,12 +290,13 @@ impl<L> core::fmt::Debug for FrameProtocol<L> {
     }
 }
 
-impl<L: CrcExtra> FrameProtocol<L> {
-    /// A protocol that checks checksums with `lookup` and drops frames of unknown ids
+impl FrameProtocol {
+    /// A protocol that checks checksums with `table` and drops frames of unknown ids
     /// (counting them); peer events are on.
-    pub fn new(lookup: L) -> Self {
+    #[must_use]
+    pub fn new(table: MessageTable) -> Self {
         Self {
-            lookup,
+            table,
             keep_unknown: false,
             peer_events: true,
             peers: HashMap::new(),
@@ -347,7 +343,7 @@ fn push(
     }
 }
 
-impl<L: CrcExtra + Send + 'static> Protocol for FrameProtocol<L> {
+impl Protocol for FrameProtocol {
     type Command = FrameCommand;
     type Event = FrameEvent;
     type Stats = FrameStats;
@@ -367,7 +363,7 @@ impl<L: CrcExtra + Send + 'static> Protocol for FrameProtocol<L> {
         if let Some(Some(mut deframer)) = self.peers.remove(&peer) {
             // The stream ended: frames still buffered behind a cut one come out now.
             let before = *deframer.stats();
-            while let Some(item) = deframer.finish(&self.lookup) {
+            while let Some(item) = deframer.finish(&self.table) {
                 push(&mut self.events, self.keep_unknown, item, peer, now);
             }
             self.stats.add(deframer.stats(), &before);
@@ -385,8 +381,7 @@ impl<L: CrcExtra + Send + 'static> Protocol for FrameProtocol<L> {
         let (events, keep_unknown) = (&mut self.events, self.keep_unknown);
         match state {
             None => {
-                let lookup = &self.lookup;
-                let mut parser = SliceParser::new(data, |id| lookup.crc_extra(id));
+                let mut parser = SliceParser::new(data, self.table);
                 for item in parser.by_ref() {
                     push(events, keep_unknown, item, peer, now);
                 }
@@ -398,7 +393,7 @@ impl<L: CrcExtra + Send + 'static> Protocol for FrameProtocol<L> {
                 loop {
                     let taken = deframer.push(rest);
                     rest = &rest[taken..];
-                    while let Some(item) = deframer.next_item(&self.lookup) {
+                    while let Some(item) = deframer.next_item(&self.table) {
                         push(events, keep_unknown, item, peer, now);
                     }
                     if rest.is_empty() {
@@ -457,8 +452,8 @@ mod tests {
         0xfd, 9, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0, 0, 0, 2, 12, 0x51, 4, 3, 0x1b, 0x74,
     ];
 
-    fn lookup(id: u32) -> Option<u8> {
-        (id == 0).then_some(50)
+    fn table() -> MessageTable {
+        MessageTable::of::<mavstack_dialects::common::MavMessage>()
     }
 
     fn unknown_frame() -> [u8; 13] {
@@ -474,13 +469,13 @@ mod tests {
         }
     }
 
-    fn drain(p: &mut FrameProtocol<fn(u32) -> Option<u8>>) -> Vec<FrameEvent> {
+    fn drain(p: &mut FrameProtocol) -> Vec<FrameEvent> {
         core::iter::from_fn(|| p.poll_event()).collect()
     }
 
     #[test]
     fn datagrams_never_join() {
-        let mut p = FrameProtocol::new(lookup as fn(u32) -> Option<u8>).peer_events(false);
+        let mut p = FrameProtocol::new(table()).peer_events(false);
         let a = peer(1, Framing::Datagram);
         p.handle_peer_added(Instant::ZERO, &a);
         // A frame cut across two datagrams is two pieces of noise.
@@ -501,7 +496,7 @@ mod tests {
 
     #[test]
     fn streams_are_per_peer() {
-        let mut p = FrameProtocol::new(lookup as fn(u32) -> Option<u8>);
+        let mut p = FrameProtocol::new(table());
         let (a, b) = (peer(1, Framing::Stream), peer(2, Framing::Stream));
         p.handle_peer_added(Instant::ZERO, &a);
         p.handle_peer_added(Instant::ZERO, &b);
@@ -531,7 +526,7 @@ mod tests {
         let mut two = unknown_frame().to_vec();
         two.extend_from_slice(&HEARTBEAT);
         for keep in [false, true] {
-            let mut p = FrameProtocol::new(lookup as fn(u32) -> Option<u8>)
+            let mut p = FrameProtocol::new(table())
                 .keep_unknown(keep)
                 .peer_events(false);
             let d = peer(1, Framing::Datagram);
@@ -553,7 +548,7 @@ mod tests {
     fn stream_end_flushes_the_deframer() {
         // An unknown-id frame at the very end of a stream waits for the next byte; the end of
         // the stream decides it.
-        let mut p = FrameProtocol::new(lookup as fn(u32) -> Option<u8>)
+        let mut p = FrameProtocol::new(table())
             .keep_unknown(true)
             .peer_events(false);
         let s = peer(1, Framing::Stream);
@@ -569,7 +564,7 @@ mod tests {
 
     #[test]
     fn sends_what_it_is_given() {
-        let mut p = FrameProtocol::new(lookup as fn(u32) -> Option<u8>);
+        let mut p = FrameProtocol::new(table());
         let frame = FrameBuf::new(&HEARTBEAT).unwrap();
         p.handle_command(Instant::ZERO, FrameCommand::to_all(frame));
         let mut small = [0u8; 4];

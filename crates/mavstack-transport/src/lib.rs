@@ -28,7 +28,7 @@
 //! - [`protocol`]: the [`Protocol`] trait a driver runs (sans-IO: `handle_*` in, `poll_*`
 //!   out), peers ([`PeerId`], [`PeerInfo`]) and transmits ([`Transmit`], [`Dest`]).
 //! - [`frame`]: [`FrameProtocol`], the default protocol: frames from every peer, checked
-//!   with the caller's CRC_EXTRA lookup, as events; frames to send as commands.
+//!   with the caller's `MessageTable`, as events; frames to send as commands.
 //! - [`Connection`] (async) and [`blocking::Connection`]: open a link, drive a protocol on
 //!   it, talk to it.
 //! - [`tlog`]: tlog [`tlog::Reader`] and [`tlog::Writer`] for recording and replaying.
@@ -54,12 +54,12 @@
 //! ## Example: a ground station's receive loop
 //!
 //! ```no_run
-//! use mavstack_transport::{Connection, frame::{FrameEvent, FrameProtocol, crc_extra_of}};
+//! use mavstack_transport::{Connection, frame::{FrameEvent, FrameProtocol, MessageTable}};
 //! use mavstack_dialects::common::MavMessage;
 //! # #[tokio::main(flavor = "current_thread")]
 //! # async fn main() -> Result<(), Box<dyn core::error::Error>> {
 //! let spec = "udp://:14550".parse()?;
-//! let mut conn = Connection::open(&spec, FrameProtocol::new(crc_extra_of::<MavMessage>)).await?;
+//! let mut conn = Connection::open(&spec, FrameProtocol::new(MessageTable::of::<MavMessage>())).await?;
 //! while let Some(event) = conn.recv().await {
 //!     match event {
 //!         FrameEvent::Frame(f) => println!("{}: msg {} from {}", f.peer, f.frame.msg_id(), f.frame.sysid()),

@@ -39,7 +39,7 @@ use tokio::sync::oneshot;
 use tokio::task::JoinHandle;
 
 /// One side of the radio: frames of any id, forwarded as they are.
-type RadioSide = Connection<FrameProtocol<fn(u32) -> Option<u8>>>;
+type RadioSide = Connection<FrameProtocol>;
 
 /// What a [`RadioBridge`] reports as it runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -194,10 +194,9 @@ impl RadioBridge {
 }
 
 async fn open_side(spec: &ConnSpec, side: Side) -> Result<RadioSide, RadioError> {
-    let lookup: fn(u32) -> Option<u8> = mavstack_transport::frame::crc_extra_of::<MavMessage>;
     Connection::open(
         spec,
-        FrameProtocol::new(lookup)
+        FrameProtocol::new(mavstack_core::MessageTable::of::<MavMessage>())
             .keep_unknown(true)
             .peer_events(false),
     )

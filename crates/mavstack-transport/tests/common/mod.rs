@@ -5,17 +5,17 @@ use core::time::Duration;
 
 use mavstack_core::wire::{FrameHeader, Version};
 use mavstack_dialects::common::{Heartbeat, MavMessage};
-use mavstack_transport::frame::{FrameBuf, FrameEvent, FrameProtocol, ReceivedFrame, crc_extra_of};
+use mavstack_transport::frame::{FrameBuf, FrameEvent, FrameProtocol, MessageTable, ReceivedFrame};
 use mavstack_transport::{ConnSpec, Connection, PeerId, PeerInfo};
 
-pub type Proto = FrameProtocol<fn(u32) -> Option<u8>>;
+pub type Proto = FrameProtocol;
 pub type Conn = Connection<Proto>;
 
 /// How long a test waits for anything before failing.
 pub const WAIT: Duration = Duration::from_secs(5);
 
 pub fn proto() -> Proto {
-    FrameProtocol::new(crc_extra_of::<MavMessage> as fn(u32) -> Option<u8>)
+    FrameProtocol::new(MessageTable::of::<MavMessage>())
 }
 
 pub fn spec(s: &str) -> ConnSpec {

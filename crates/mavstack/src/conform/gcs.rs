@@ -111,7 +111,7 @@ pub async fn grade_ground_station(
     let vehicle = SimVehicle::start(builder, config).await?;
     let mut wire = Wire::new(
         started,
-        mavstack_transport::frame::crc_extra_of::<mavstack_dialects::common::MavMessage>,
+        mavstack_core::MessageTable::of::<mavstack_dialects::common::MavMessage>(),
         None,
     );
     let mut facts = GcsFacts {

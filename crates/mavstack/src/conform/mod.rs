@@ -41,7 +41,6 @@ use core::fmt;
 
 pub use gcs::{GcsOptions, VehicleMode, grade_ground_station};
 pub use vehicle::{VehicleOptions, grade_vehicle};
-pub use wire::CrcLookup;
 
 /// How much a rule matters: failing a `must` or `should` rule fails the run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

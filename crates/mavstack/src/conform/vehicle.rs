@@ -3,9 +3,9 @@
 use core::time::Duration;
 use std::collections::BTreeMap;
 
-use mavstack_core::Message;
 use mavstack_core::signing::{self, SecretKey};
 use mavstack_core::wire::{FrameHeader, MAX_FRAME_LEN, Version, emit_message};
+use mavstack_core::{Message, MessageTable};
 use mavstack_dialects::common::{
     AutopilotVersion, CommandAck, CommandInt, CommandLong, Heartbeat, MavAutopilot, MavCmd,
     MavFrame, MavMessage, MavProtocolCapability, MavResult, MavState, MavType, ProtocolVersion,
@@ -13,7 +13,7 @@ use mavstack_dialects::common::{
 };
 use mavstack_transport::clock;
 
-use super::wire::{CrcLookup, Seen, Wire, protocol_version};
+use super::wire::{Seen, Wire, protocol_version};
 use super::{Report, Role, Rule, Verdict, secs, version_name};
 use crate::router::LinkId;
 use crate::{NodeHandle, TapSubscription, message_name};
@@ -29,7 +29,7 @@ pub struct VehicleOptions {
     /// The signing link id (default 0).
     pub link_id: u8,
     /// The dialect whose CRC_EXTRA the checksums are checked with (default `common`).
-    pub crc_extra: CrcLookup,
+    pub dialect: MessageTable,
     /// The ground station's own (sysid, compid) (default 255/190).
     pub own: (u8, u8),
 }
@@ -40,7 +40,7 @@ impl Default for VehicleOptions {
             timeout: Duration::from_secs(10),
             key: None,
             link_id: 0,
-            crc_extra: mavstack_transport::frame::crc_extra_of::<MavMessage>,
+            dialect: MessageTable::of::<MavMessage>(),
             own: (255, 190),
         }
     }
@@ -183,7 +183,7 @@ pub async fn grade_vehicle(node: &NodeHandle, options: &VehicleOptions) -> Repor
     let mut s = Session {
         node,
         tap,
-        wire: Wire::new(started, options.crc_extra, options.key.clone()),
+        wire: Wire::new(started, options.dialect, options.key.clone()),
         options,
         links: Vec::new(),
         next_link_scan: 0.0,
@@ -1196,7 +1196,7 @@ pub(super) fn fuzz_grade(data: &[u8]) -> Vec<Verdict> {
     let key = SecretKey::new([7; 32]);
     let mut wire = Wire::new(
         mavstack_core::time::Instant::ZERO,
-        mavstack_transport::frame::crc_extra_of::<MavMessage>,
+        MessageTable::of::<MavMessage>(),
         Some(key),
     );
     let (first, rest) = data.split_first().map_or((1, data), |(&p, r)| (p, r));

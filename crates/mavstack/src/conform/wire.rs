@@ -8,13 +8,10 @@ use mavstack_core::parse::{Deframer, Item};
 use mavstack_core::signing::{self, SecretKey};
 use mavstack_core::time::Instant;
 use mavstack_core::wire::{Frame, STX_V1, Version};
-use mavstack_core::{Crc16, Message as _};
+use mavstack_core::{Crc16, Message as _, MessageTable};
 use mavstack_dialects::common::{MissionCount, ProtocolVersion};
 
 use crate::router::LinkId;
-
-/// The CRC_EXTRA of a message id in the dialect conform grades with.
-pub type CrcLookup = fn(u32) -> Option<u8>;
 
 /// The message id the C library writes for PROTOCOL_VERSION in a MAVLink 1 frame (300 mod
 /// 256, which is MISSION_COUNT's id).
@@ -62,7 +59,7 @@ impl Seen {
 /// Every frame received on the graded links, and what could not be a frame.
 pub(crate) struct Wire {
     started: Instant,
-    lookup: CrcLookup,
+    table: MessageTable,
     key: Option<SecretKey>,
     deframers: HashMap<LinkId, Box<Deframer>>,
     pub frames: Vec<Seen>,
@@ -72,10 +69,10 @@ pub(crate) struct Wire {
 }
 
 impl Wire {
-    pub(crate) fn new(started: Instant, lookup: CrcLookup, key: Option<SecretKey>) -> Self {
+    pub(crate) fn new(started: Instant, table: MessageTable, key: Option<SecretKey>) -> Self {
         Self {
             started,
-            lookup,
+            table,
             key,
             deframers: HashMap::new(),
             frames: Vec::new(),
@@ -103,14 +100,14 @@ impl Wire {
     /// stream read.
     pub(crate) fn feed(&mut self, link: LinkId, at: Instant, mut data: &[u8], end: bool) {
         let t = self.secs(at);
-        let lookup = self.lookup;
+        let table = self.table;
         // Id 44 is looked at in `take`: it is both MISSION_COUNT and the bogus MAVLink 1
         // PROTOCOL_VERSION.
         let parser_lookup = move |id: u32| {
             if id == V1_PROTOCOL_VERSION_ID {
                 None
             } else {
-                lookup(id)
+                table.crc_extra(id)
             }
         };
         let owned = |item: Item<'_>| match item {

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use mavstack_core::wire::MAX_FRAME_LEN;
 use mavstack_core::{MAX_PAYLOAD_LEN, Message, MessageSet};
-use mavstack_router::{InfoFn, LinkConfig, LinkRole, LocalDelivery, Router, RouterConfig};
+use mavstack_router::{LinkConfig, LinkRole, LocalDelivery, MessageTable, Router, RouterConfig};
 use mavstack_transport::{Link, Options, clock};
 use tokio::sync::mpsc;
 
@@ -36,7 +36,7 @@ use super::{EventSubscription, NodeError, NodeEvent, SUBSCRIPTION_DEPTH, TapSubs
 #[derive(Debug)]
 pub struct NodeBuilder {
     pub(super) router: RouterConfig,
-    pub(super) dialect: InfoFn,
+    pub(super) dialect: MessageTable,
     pub(super) links: Vec<NewLink>,
     pub(super) log_dir: Option<PathBuf>,
     pub(super) options: Options,
@@ -179,7 +179,7 @@ impl NodeBuilder {
     /// The dialect whose CRC_EXTRA, lengths and target offsets the links use (default
     /// `common`).
     #[must_use]
-    pub const fn dialect(mut self, dialect: InfoFn) -> Self {
+    pub const fn dialect(mut self, dialect: MessageTable) -> Self {
         self.dialect = dialect;
         self
     }

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use mavstack_core::time::Instant;
 use mavstack_core::wire::MAX_FRAME_LEN;
 use mavstack_core::{Message, MessageSet};
-use mavstack_router::{Event, InfoFn, LinkConfig, LinkId, Router, SendTo};
+use mavstack_router::{Event, LinkConfig, LinkId, Router, SendTo};
 use mavstack_transport::protocol::Framing;
 use mavstack_transport::{Dest, Input, Link, PeerId, PeerInfo, clock, tlog};
 use tokio::sync::mpsc;
@@ -28,7 +28,7 @@ pub(super) struct Slot {
 }
 
 pub(super) struct Driver {
-    pub(super) router: Router<InfoFn>,
+    pub(super) router: Router,
     pub(super) slots: Vec<Slot>,
     /// Router link → (slot, peer).
     pub(super) owners: Vec<Option<(usize, PeerId)>>,
@@ -65,7 +65,7 @@ pub(super) struct Heartbeat {
 
 /// The [`Input`] a slot's link feeds: peers become router links.
 pub(super) struct Feed<'a> {
-    pub(super) router: &'a mut Router<InfoFn>,
+    pub(super) router: &'a mut Router,
     pub(super) slot: usize,
     pub(super) template: &'a LinkConfig,
     pub(super) peers: &'a mut PeerLinks,

@@ -5,7 +5,7 @@ use core::time::Duration;
 
 use mavstack_channel::{CommandEncoding, HandshakeMethod, HandshakeOutcome, SigningConfig, Target};
 use mavstack_core::{MAX_PAYLOAD_LEN, Message, MessageSet};
-use mavstack_router::{InfoFn, LinkId, LinkRole, RouterConfig, SendTo};
+use mavstack_router::{LinkId, LinkRole, MessageTable, RouterConfig, SendTo};
 use mavstack_transport::Options;
 use tokio::sync::{mpsc, oneshot};
 use tokio::task::JoinHandle;
@@ -33,9 +33,7 @@ impl Node {
     pub fn builder() -> NodeBuilder {
         NodeBuilder {
             router: RouterConfig::default(),
-            dialect: InfoFn(|id| {
-                <mavstack_dialects::common::MavMessage as MessageSet>::info(id).copied()
-            }),
+            dialect: MessageTable::of::<mavstack_dialects::common::MavMessage>(),
             links: Vec::new(),
             log_dir: None,
             options: Options::default(),
