@@ -86,8 +86,12 @@ pub fn load(name: &str) -> Result<Dialect, Error> {
 }
 
 /// Fuzzing entry point: loads `data` as a dialect XML file (with an include of itself and of a
-/// missing file reachable, so cycles and read errors are exercised) and, if it loads, runs
-/// the codec over every message. Never panics; errors are the expected outcome.
+/// missing file reachable, so cycles and read errors are exercised) and, if it loads, checks
+/// that every message encodes and decodes to itself through the run-time codec: the values
+/// decoded from a payload (the input's bytes, repeated) encode without error to the message's
+/// full length, and decode from that encoding to the same values (compared as their
+/// encoding, so a NaN equals itself). Errors while loading are the expected outcome; a
+/// broken round trip panics.
 #[doc(hidden)]
 pub fn fuzz_dialect_xml(data: &[u8]) {
     struct OneFile<'a>(&'a str);
