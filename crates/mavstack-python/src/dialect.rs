@@ -4,6 +4,7 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
+use mavstack_core::MessageTable;
 use mavstack_dialect::PrimitiveType;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -42,8 +43,6 @@ pub(crate) struct MessageType {
     pub(crate) id: u32,
     /// Its name, e.g. `ATTITUDE`.
     pub(crate) name: String,
-    /// CRC_EXTRA.
-    pub(crate) crc_extra: u8,
     /// Length of the full payload, extensions included.
     pub(crate) max_len: usize,
     /// Fields in XML order (pymavlink's `fieldnames`).
@@ -68,6 +67,9 @@ pub(crate) struct Dialect {
     pub(crate) name: String,
     /// Its messages.
     pub(crate) messages: Vec<Arc<MessageType>>,
+    /// The stack's message-entry table of the dialect (what the frame parsers check
+    /// checksums with).
+    pub(crate) table: MessageTable,
     by_id: HashMap<u32, usize>,
     by_name: HashMap<String, usize>,
 }
@@ -119,7 +121,6 @@ impl Dialect {
             messages.push(Arc::new(MessageType {
                 id: m.id,
                 name: m.name.clone(),
-                crc_extra: m.crc_extra,
                 max_len: m.max_len,
                 fields,
                 wire_order,
@@ -139,6 +140,7 @@ impl Dialect {
         Self {
             name: name.to_owned(),
             messages,
+            table: loaded.message_table(),
             by_id,
             by_name,
         }
@@ -158,6 +160,6 @@ impl Dialect {
     /// CRC_EXTRA of message `id`, for the frame parsers.
     #[inline]
     pub(crate) fn crc_extra(&self, id: u32) -> Option<u8> {
-        self.index_of_id(id).map(|i| self.messages[i].crc_extra)
+        self.table.crc_extra(id)
     }
 }
