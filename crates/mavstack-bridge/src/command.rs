@@ -3,7 +3,10 @@
 //! tracker lets it into the vehicle's network, resends it until the target answers (as a
 //! ground station does: COMMAND_LONG's `confirmation` counted up), and gives back one
 //! final reply per request: the target's COMMAND_ACK frame, or a timeout. IN_PROGRESS acks
-//! are passed on as intermediate replies and extend the wait. An ACK that was delivered
+//! are passed on as intermediate replies and extend the wait. A request whose checksum is
+//! wrong is refused ([`RequestError::BadCrc`]) before anything else, so a resend (built anew,
+//! with a valid checksum) is only ever made of a frame that was valid; an ACK whose checksum
+//! is wrong answers nothing. An ACK that was delivered
 //! is what the target said; nothing here turns "sent" into "done".
 //!
 //! ```
@@ -69,6 +72,9 @@ pub enum RequestError {
     /// Not a whole MAVLink frame.
     #[error("not a MAVLink frame")]
     NotAFrame,
+    /// A COMMAND_LONG or COMMAND_INT frame whose checksum is wrong (corrupt on the way).
+    #[error("the frame's checksum is wrong")]
+    BadCrc,
     /// A frame of another message.
     #[error("message {msg_id} is not COMMAND_LONG or COMMAND_INT")]
     NotACommand {
@@ -89,12 +95,13 @@ pub enum RequestError {
 }
 
 impl RequestError {
-    /// The `error` user property of the reply: `not_a_frame`, `not_a_command`,
+    /// The `error` user property of the reply: `not_a_frame`, `bad_crc`, `not_a_command`,
     /// `target_mismatch`, `busy`.
     #[must_use]
     pub const fn code(&self) -> &'static str {
         match self {
             Self::NotAFrame => "not_a_frame",
+            Self::BadCrc => "bad_crc",
             Self::NotACommand { .. } => "not_a_command",
             Self::TargetMismatch { .. } => "target_mismatch",
             Self::Busy => "busy",
@@ -159,8 +166,8 @@ impl<T: Clone> Commands<T> {
     /// the network.
     ///
     /// # Errors
-    /// [`RequestError`]: not a command frame, a target other than the key's, or the same
-    /// command already waiting.
+    /// [`RequestError`]: not a command frame, a wrong checksum, a target other than the
+    /// key's, or the same command already waiting.
     pub fn handle_request(
         &mut self,
         now: Instant,
@@ -170,6 +177,14 @@ impl<T: Clone> Commands<T> {
     ) -> Result<Vec<u8>, RequestError> {
         let view = Frame::new_checked(frame).map_err(|_| RequestError::NotAFrame)?;
         let frame = &frame[..view.frame_len()];
+        let crc_extra = match view.msg_id() {
+            CommandLong::ID => CommandLong::INFO.crc_extra,
+            CommandInt::ID => CommandInt::INFO.crc_extra,
+            msg_id => return Err(RequestError::NotACommand { msg_id }),
+        };
+        if !view.check_crc(crc_extra) {
+            return Err(RequestError::BadCrc);
+        }
         let (target, command, long) = match view.msg_id() {
             CommandLong::ID => {
                 let c = CommandLong::decode(view.payload());
@@ -222,7 +237,7 @@ impl<T: Clone> Commands<T> {
         let Ok(view) = Frame::new_checked(frame) else {
             return;
         };
-        if view.msg_id() != CommandAck::ID {
+        if view.msg_id() != CommandAck::ID || !view.check_crc(CommandAck::INFO.crc_extra) {
             return;
         }
         let ack = CommandAck::decode(view.payload());
@@ -428,5 +443,40 @@ mod tests {
             c.handle_request(t(0), (1, 1), &req, 0),
             Err(RequestError::Busy)
         );
+    }
+
+    #[test]
+    fn corrupt_requests_are_refused_and_corrupt_acks_answer_nothing() {
+        let mut c = Commands::new(CommandTiming::default());
+        let mut corrupt = frame(255, 190, &arm());
+        corrupt[14] ^= 0x01; // param1: the checksum no longer matches
+        assert_eq!(
+            c.handle_request(t(0), (1, 1), &corrupt, 0),
+            Err(RequestError::BadCrc)
+        );
+        assert_eq!(RequestError::BadCrc.code(), "bad_crc");
+        let int = CommandInt {
+            target_system: 1,
+            target_component: 1,
+            ..Default::default()
+        };
+        let mut corrupt_int = frame(255, 190, &int);
+        corrupt_int[11] ^= 0x80;
+        assert_eq!(
+            c.handle_request(t(0), (1, 1), &corrupt_int, 0),
+            Err(RequestError::BadCrc)
+        );
+        // Nothing waits, so nothing is ever resent with a fresh checksum.
+        assert!(c.is_empty());
+        let (mut resend, mut replies) = (Vec::new(), Vec::new());
+        c.handle_timeout(t(5000), &mut resend, &mut replies);
+        assert!(resend.is_empty() && replies.is_empty());
+        c.handle_request(t(0), (1, 1), &frame(255, 190, &arm()), 1)
+            .unwrap();
+        let mut bad_ack = ack(MavResult::ACCEPTED, 255);
+        bad_ack[10] ^= 0x01;
+        c.handle_frame(t(1), &bad_ack, &mut replies);
+        assert!(replies.is_empty(), "a corrupt ACK answered");
+        assert!(!c.is_empty());
     }
 }

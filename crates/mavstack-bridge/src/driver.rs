@@ -9,11 +9,12 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use mavstack_core::wire::Frame;
-use mavstack_router::{LinkConfig, MessageTable, is_control};
+use mavstack_router::{InfoFn, LinkConfig, is_control};
 use mavstack_transport::{ExternalPeer, Link, PeerId, clock};
 use tokio::task::JoinHandle;
 
-use crate::command::{CommandTiming, Commands, Reply};
+use crate::checksum;
+use crate::command::{CommandTiming, Commands, Reply, RequestError};
 use crate::keys::{FleetTopic, fleet_topic};
 use crate::outbox::{Lane, Outbox, Outgoing};
 use crate::remap::{Remapped, SysidMap};
@@ -26,6 +27,8 @@ const OUTBOX_CONTROL: usize = 4096;
 const OUTBOX_KEYS: usize = 8192;
 /// How often a full client queue is tried again.
 const RETRY: Duration = Duration::from_millis(2);
+/// How often vehicles refused for `max_vehicles` are warned about, at most.
+const REFUSAL_WARN_EVERY: Duration = Duration::from_secs(10);
 
 /// Counters of one bridge link (read while it runs).
 #[derive(Debug, Default)]
@@ -44,6 +47,12 @@ pub struct BridgeStats {
     pub replies: AtomicU64,
     /// Connections made to the broker (the first included).
     pub connections: AtomicU64,
+    /// Frames dropped because their checksum was wrong: from the broker (`in`, `@cmd`, a
+    /// vehicle's keys on the ground side) or towards a vehicle on the ground side.
+    pub bad_crc: AtomicU64,
+    /// Ground side: messages of vehicles that would have been a link beyond
+    /// `max_vehicles`, ignored.
+    pub vehicles_refused: AtomicU64,
     /// [`BridgeStats::replaced`] per key.
     pub replaced_by_key: std::sync::Mutex<std::collections::BTreeMap<String, u64>>,
 }
@@ -66,6 +75,8 @@ impl BridgeStats {
             dropped_telemetry: n(&self.dropped_telemetry),
             replies: n(&self.replies),
             connections: n(&self.connections),
+            bad_crc: n(&self.bad_crc),
+            vehicles_refused: n(&self.vehicles_refused),
         }
     }
 }
@@ -90,6 +101,10 @@ pub struct BridgeCounters {
     pub replies: u64,
     /// Connections made to the broker.
     pub connections: u64,
+    /// Frames dropped because their checksum was wrong.
+    pub bad_crc: u64,
+    /// Ground side: messages of vehicles beyond `max_vehicles`, ignored.
+    pub vehicles_refused: u64,
 }
 
 /// An open bridge link: give `config` and `link` to a node, keep `handle`.
@@ -187,7 +202,7 @@ pub(crate) trait Broker: Send + Sync + 'static {
 /// (the client counts its connections there).
 pub(crate) fn start<B: Broker>(
     spec: &BridgeSpec,
-    dialect: MessageTable,
+    dialect: InfoFn,
     broker: B,
     stats: Arc<BridgeStats>,
 ) -> Bridge {
@@ -222,6 +237,9 @@ pub(crate) fn start<B: Broker>(
                 vehicles: HashMap::new(),
                 by_peer: HashMap::new(),
                 sysids: SysidMap::default(),
+                name: spec.name.clone(),
+                max_vehicles: spec.max_vehicles,
+                refusals: Refusals::default(),
             }
             .run(),
         ),
@@ -295,7 +313,7 @@ impl<B: Broker> Io<B> {
 struct Vehicle<B: Broker> {
     io: Io<B>,
     keys: Keys,
-    dialect: MessageTable,
+    dialect: InfoFn,
     commands: Commands<B::ReplyTo>,
 }
 
@@ -349,7 +367,7 @@ impl<B: Broker> Vehicle<B> {
         };
         self.commands.handle_frame(clock::now(), frame, replies);
         let id = view.msg_id();
-        let name = self.dialect.info(id).map(|i| i.name);
+        let name = (self.dialect.0)(id).map(|i| i.name);
         let key = self.keys.message(view.sysid(), view.compid(), name, id);
         self.io.queue(&frame[..view.frame_len()], id, key, None);
     }
@@ -362,7 +380,14 @@ impl<B: Broker> Vehicle<B> {
                 payload,
                 reply,
             } => match self.keys.parse(&topic) {
-                Some(Topic::In) => self.deliver(payload).await,
+                Some(Topic::In) => {
+                    if checksum::any_bad(&payload, self.dialect.0) {
+                        self.io.stats.bad_crc.fetch_add(1, Ordering::Relaxed);
+                        tracing::debug!("{}: a corrupt frame on {topic} dropped", B::NAME);
+                        return;
+                    }
+                    self.deliver(payload).await;
+                }
                 Some(Topic::Command { sysid, compid }) => {
                     let Some(to) = reply else {
                         tracing::debug!("{}: a command request with no reply address", B::NAME);
@@ -375,13 +400,18 @@ impl<B: Broker> Vehicle<B> {
                         to.clone(),
                     ) {
                         Ok(frame) => self.deliver(frame).await,
-                        Err(e) => self.answer(
-                            &to,
-                            Answer::Error {
-                                text: e.to_string().into_bytes(),
-                                code: e.code(),
-                            },
-                        ),
+                        Err(e) => {
+                            if e == RequestError::BadCrc {
+                                self.io.stats.bad_crc.fetch_add(1, Ordering::Relaxed);
+                            }
+                            self.answer(
+                                &to,
+                                Answer::Error {
+                                    text: e.to_string().into_bytes(),
+                                    code: e.code(),
+                                },
+                            );
+                        }
                     }
                 }
                 None => {}
@@ -415,11 +445,23 @@ struct Ground<B> {
     fleet: String,
     /// The vehicles wanted (all when empty).
     vids: Vec<String>,
-    dialect: MessageTable,
+    dialect: InfoFn,
     vehicles: HashMap<String, PeerId>,
     by_peer: HashMap<PeerId, Keys>,
     /// Vehicles that share a sysid get distinct ones here.
     sysids: SysidMap,
+    /// The link's name, for logs.
+    name: String,
+    /// Vehicles that may be links at once.
+    max_vehicles: usize,
+    refusals: Refusals,
+}
+
+/// Vehicles refused for `max_vehicles` since the last warning.
+#[derive(Debug, Default)]
+struct Refusals {
+    since_warning: u64,
+    last_warning: Option<tokio::time::Instant>,
 }
 
 impl<B: Broker> Ground<B> {
@@ -455,13 +497,13 @@ impl<B: Broker> Ground<B> {
         let topic = keys.input();
         let key = format!("{topic}/{}/{}/{id}", view.sysid(), view.compid());
         let frame = &frame[..view.frame_len()];
-        match self
-            .sysids
-            .to_vehicle(keys.vid(), frame, |id| self.dialect.info(id).copied())
-        {
+        match self.sysids.to_vehicle(keys.vid(), frame, self.dialect.0) {
             Remapped::Same => self.io.queue(frame, id, key, Some(topic)),
             Remapped::Rewritten(f) => self.io.queue(&f, id, key, Some(topic)),
             Remapped::Dropped => {}
+            Remapped::Corrupt => {
+                self.io.stats.bad_crc.fetch_add(1, Ordering::Relaxed);
+            }
         }
     }
 
@@ -471,13 +513,15 @@ impl<B: Broker> Ground<B> {
             Incoming::Message { topic, payload, .. } => match fleet_topic(&self.fleet, &topic) {
                 Some(FleetTopic::Frame { vid }) => {
                     if let Some(peer) = self.vehicle(vid).await {
-                        let frame = match self
-                            .sysids
-                            .from_vehicle(vid, &payload, |id| self.dialect.info(id).copied())
-                        {
+                        let frame = match self.sysids.from_vehicle(vid, &payload, self.dialect.0) {
                             Remapped::Same => payload,
                             Remapped::Rewritten(f) => f,
                             Remapped::Dropped => return,
+                            Remapped::Corrupt => {
+                                self.io.stats.bad_crc.fetch_add(1, Ordering::Relaxed);
+                                tracing::debug!("{}: a corrupt frame on {topic} dropped", B::NAME);
+                                return;
+                            }
                         };
                         self.io.stats.received.fetch_add(1, Ordering::Relaxed);
                         self.io.peer.deliver(peer, frame).await;
@@ -508,6 +552,10 @@ impl<B: Broker> Ground<B> {
             return None;
         }
         let keys = Keys::new(&self.fleet, vid).ok()?;
+        if self.vehicles.len() >= self.max_vehicles {
+            self.refuse(vid);
+            return None;
+        }
         let peer = self
             .io
             .peer
@@ -517,6 +565,34 @@ impl<B: Broker> Ground<B> {
         self.vehicles.insert(vid.to_owned(), peer);
         self.by_peer.insert(peer, keys);
         Some(peer)
+    }
+}
+
+impl<B> Ground<B> {
+    /// Vehicle `vid` would be one link too many: counted, and warned about once per
+    /// [`REFUSAL_WARN_EVERY`].
+    fn refuse(&mut self, vid: &str) {
+        self.io
+            .stats
+            .vehicles_refused
+            .fetch_add(1, Ordering::Relaxed);
+        let r = &mut self.refusals;
+        r.since_warning += 1;
+        let now = tokio::time::Instant::now();
+        if r.last_warning
+            .is_none_or(|at| now.duration_since(at) >= REFUSAL_WARN_EVERY)
+        {
+            tracing::warn!(
+                "link \"{}\": {} vehicles are links already (max_vehicles); {} messages of \
+                 further vehicles ignored (this one from {vid}); a vehicle that goes offline \
+                 frees its place",
+                self.name,
+                self.vehicles.len(),
+                r.since_warning,
+            );
+            r.since_warning = 0;
+            r.last_warning = Some(now);
+        }
     }
 }
 

@@ -43,6 +43,7 @@
 //! ```
 #![forbid(unsafe_code)]
 
+pub mod checksum;
 pub mod command;
 #[cfg(any(feature = "mqtt", feature = "zenoh"))]
 mod driver;
@@ -103,10 +104,7 @@ pub enum OpenError {
 /// # Errors
 /// [`OpenError`]: a kind of link this build does not carry, or Zenoh settings refused.
 #[cfg(any(feature = "mqtt", feature = "zenoh"))]
-pub fn open(
-    spec: &BridgeSpec,
-    dialect: mavstack_router::MessageTable,
-) -> Result<Bridge, OpenError> {
+pub fn open(spec: &BridgeSpec, dialect: mavstack_router::InfoFn) -> Result<Bridge, OpenError> {
     #[cfg(not(all(feature = "mqtt", feature = "zenoh", feature = "tls")))]
     let not_built = |scheme, feature| OpenError::NotBuilt {
         name: spec.name.clone(),
@@ -165,8 +163,9 @@ pub enum Transport {
 }
 
 /// A parsed bridge link string: `mqtt://HOST:PORT?fleet=F&vid=V[&trusted=true][&user=U]
-/// [&password=P][&client_id=C][&name=N]`, `zenoh://HOST:PORT?fleet=F&vid=V[&trusted=true]
-/// [&name=N]` or `zenoh:?fleet=F&vid=V[&listen=ENDPOINT]...`.
+/// [&password=P][&client_id=C][&name=N][&max_vehicles=N]`,
+/// `zenoh://HOST:PORT?fleet=F&vid=V[&trusted=true][&name=N]` or
+/// `zenoh:?fleet=F&vid=V[&listen=ENDPOINT]...` (`max_vehicles`: ground side only).
 #[derive(Clone, PartialEq, Eq)]
 #[non_exhaustive]
 pub struct BridgeSpec {
@@ -195,7 +194,14 @@ pub struct BridgeSpec {
     pub client_id: String,
     /// The link's name in statistics and logs (default the string without its options).
     pub name: String,
+    /// Ground side: vehicles that may be links of the router at once (default
+    /// [`DEFAULT_MAX_VEHICLES`]); further ones are refused, counted and warned about, until
+    /// a vehicle goes offline.
+    pub max_vehicles: usize,
 }
+
+/// Vehicles a ground-side link makes links of at once unless `max_vehicles` says otherwise.
+pub const DEFAULT_MAX_VEHICLES: usize = 64;
 
 impl core::fmt::Debug for BridgeSpec {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
@@ -213,6 +219,7 @@ impl core::fmt::Debug for BridgeSpec {
             .field("user", &self.credentials.as_ref().map(|(u, _)| u))
             .field("client_id", &self.client_id)
             .field("name", &self.name)
+            .field("max_vehicles", &self.max_vehicles)
             .finish()
     }
 }
@@ -325,6 +332,7 @@ impl BridgeSpec {
         let (mut fleet, mut vid, mut trusted, mut ground) = (None, None, false, false);
         let (mut user, mut password, mut client_id, mut name) = (None, None, None, None);
         let mut listen = None;
+        let mut max_vehicles = None;
         let (mut ca, mut client_cert, mut client_key) = (None, None, None);
         let mqtt = matches!(transport, Transport::Mqtt | Transport::Mqtts);
         let tls = transport == Transport::Mqtts;
@@ -359,6 +367,15 @@ impl BridgeSpec {
                         "vehicle" => false,
                         _ => return Err(option_err(k, "expected vehicle or ground")),
                     };
+                    continue;
+                }
+                "max_vehicles" => {
+                    if max_vehicles.is_some() {
+                        return Err(option_err(k, "given twice"));
+                    }
+                    let n = v.parse::<usize>().ok().filter(|&n| n > 0);
+                    max_vehicles =
+                        Some(n.ok_or_else(|| option_err(k, "expected a number from 1 up"))?);
                     continue;
                 }
                 "trusted" => {
@@ -404,6 +421,12 @@ impl BridgeSpec {
         } else {
             Side::Vehicle(Keys::new(&fleet, &vid).map_err(key_err)?)
         };
+        if max_vehicles.is_some() && matches!(side, Side::Vehicle(_)) {
+            return Err(option_err(
+                "max_vehicles",
+                "applies to the ground side only (vid=*, a list, or side=ground)",
+            ));
+        }
         let credentials = match (user, password) {
             (Some(u), p) => Some((u, p.unwrap_or_default())),
             (None, Some(_)) => return Err(option_err("password", "needs user")),
@@ -438,6 +461,7 @@ impl BridgeSpec {
             credentials,
             client_id,
             name: name.unwrap_or(shown),
+            max_vehicles: max_vehicles.unwrap_or(DEFAULT_MAX_VEHICLES),
         })
     }
 
@@ -523,5 +547,12 @@ mod tests {
         let e = err("mqtt://h:1?fleet=a&vid=b&password=hunter2");
         assert!(e.contains("needs user") && !e.contains("hunter2"));
         assert!(is_bridge_link("mqtt://x") && !is_bridge_link("udpin:0.0.0.0:14550"));
+        assert!(err("mqtt://h?fleet=a&vid=*&max_vehicles=0").contains("from 1 up"));
+        assert!(err("mqtt://h?fleet=a&vid=*&max_vehicles=x").contains("from 1 up"));
+        assert!(err("mqtt://h?fleet=a&vid=b&max_vehicles=3").contains("ground side only"));
+        let g = BridgeSpec::parse("zenoh://h?fleet=a&vid=*&max_vehicles=3").unwrap();
+        assert_eq!(g.max_vehicles, 3);
+        let g = BridgeSpec::parse("mqtt://h?fleet=a&vid=*").unwrap();
+        assert_eq!(g.max_vehicles, DEFAULT_MAX_VEHICLES);
     }
 }

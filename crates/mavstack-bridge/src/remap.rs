@@ -6,9 +6,13 @@
 //! (never 0, and never 255 nor 254 — ground stations' ids). The mapping is kept for as long as
 //! the router runs, so it is stable, and reversible:
 //!
+//! - every frame of a message the dialect knows has its checksum checked first: a corrupt
+//!   one is dropped ([`Remapped::Corrupt`]), whether or not it would have been rewritten, so
+//!   that no rewrite ever gives a corrupt frame a valid checksum;
 //! - frames from a vehicle: the header's sysid becomes the local one and the checksum is
-//!   written again (the dialect's CRC_EXTRA; an id it does not know cannot be remapped and
-//!   is dropped, as is a signed frame, whose signature covers the header);
+//!   written again (the dialect's CRC_EXTRA; an id it does not know cannot be checked, so
+//!   cannot be remapped, and is dropped, as is a signed frame, whose signature covers the
+//!   header);
 //! - frames to a vehicle: a `target_system` that is a local id of that vehicle becomes the
 //!   vehicle's own again (the dialect's target offset), checksum rewritten; a signed frame
 //!   goes as it is.
@@ -40,6 +44,7 @@ pub struct SysidMap {
     by_local: HashMap<u8, (String, u8)>,
     remapped: u64,
     dropped: u64,
+    corrupt: u64,
 }
 
 /// What became of a frame.
@@ -51,6 +56,8 @@ pub enum Remapped {
     Rewritten(Vec<u8>),
     /// It cannot go (signed or of an unknown id, from a remapped vehicle; no free id).
     Dropped,
+    /// Its checksum is wrong: it is dropped, never rewritten.
+    Corrupt,
 }
 
 impl SysidMap {
@@ -90,6 +97,12 @@ impl SysidMap {
         let Ok(view) = Frame::new_checked(frame) else {
             return Remapped::Same;
         };
+        // Before anything else: a corrupt sysid must not take a local id either.
+        let info = info(view.msg_id());
+        if info.is_some_and(|i| !view.check_crc(i.crc_extra)) {
+            self.corrupt += 1;
+            return Remapped::Corrupt;
+        }
         let Some(local) = self.local(vid, view.sysid()) else {
             self.dropped += 1;
             return Remapped::Dropped;
@@ -97,7 +110,7 @@ impl SysidMap {
         if local == view.sysid() {
             return Remapped::Same;
         }
-        let Some(info) = info(view.msg_id()).filter(|_| !view.is_signed()) else {
+        let Some(info) = info.filter(|_| !view.is_signed()) else {
             self.dropped += 1;
             return Remapped::Dropped;
         };
@@ -119,6 +132,10 @@ impl SysidMap {
         let Some(info) = info(view.msg_id()) else {
             return Remapped::Same;
         };
+        if !view.check_crc(info.crc_extra) {
+            self.corrupt += 1;
+            return Remapped::Corrupt;
+        }
         let Some(at) = info.target_system_offset.map(usize::from) else {
             return Remapped::Same;
         };
@@ -156,6 +173,12 @@ impl SysidMap {
     #[must_use]
     pub const fn counts(&self) -> (u64, u64) {
         (self.remapped, self.dropped)
+    }
+
+    /// Frames dropped because their checksum was wrong.
+    #[must_use]
+    pub const fn corrupt(&self) -> u64 {
+        self.corrupt
     }
 }
 
@@ -232,5 +255,39 @@ mod tests {
             }
         }
         assert_eq!(map.local("late", 9), None, "every id taken");
+    }
+
+    #[test]
+    fn corrupt_frames_are_dropped_never_given_a_fresh_checksum() {
+        let mut map = SysidMap::default();
+        let att = Attitude {
+            roll: 0.5,
+            ..Default::default()
+        };
+        map.local("a", 1);
+        let mut corrupt = frame(1, &att);
+        corrupt[14] ^= 0x01; // a payload byte: the checksum no longer matches
+        // Vehicle b's system 1 would be rewritten as 2; corrupt, it is dropped.
+        assert_eq!(map.from_vehicle("b", &corrupt, info), Remapped::Corrupt);
+        // Vehicle a's would go as it is; corrupt, it is dropped all the same.
+        assert_eq!(map.from_vehicle("a", &corrupt, info), Remapped::Corrupt);
+        // A corrupt sysid never takes a local id.
+        let mut bad_sysid = frame(9, &att);
+        bad_sysid[5] = 77;
+        assert_eq!(map.from_vehicle("b", &bad_sysid, info), Remapped::Corrupt);
+        assert_eq!(map.vehicle(77), None);
+        // Towards a remapped vehicle: the target would be rewritten; corrupt, dropped.
+        assert_eq!(map.local("b", 1), Some(2));
+        let cmd = CommandLong {
+            target_system: 2,
+            target_component: 1,
+            command: MavCmd::COMPONENT_ARM_DISARM,
+            ..Default::default()
+        };
+        let mut to_b = frame(255, &cmd);
+        to_b[12] ^= 0x40;
+        assert_eq!(map.to_vehicle("b", &to_b, info), Remapped::Corrupt);
+        assert_eq!(map.corrupt(), 4);
+        assert_eq!(map.counts(), (0, 0));
     }
 }

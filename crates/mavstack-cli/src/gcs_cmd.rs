@@ -14,8 +14,7 @@ use mavstack::system::{System, SystemError, Wanted};
 use mavstack::{LinkSpec, Node};
 use mavstack_channel::SigningConfig;
 use mavstack_dialects::common::{
-    CommandInt, CommandLong, MavAutopilot, MavCmd, MavFrame, MavMissionType, MavModeFlag,
-    MavParamType, MavResult,
+    CommandInt, CommandLong, MavCmd, MavFrame, MavMissionType, MavParamType, MavResult,
 };
 use mavstack_services::Address;
 use mavstack_services::command::{Command, CommandError};
@@ -27,11 +26,11 @@ use crate::link_cmd::runtime;
 use crate::mission_file;
 use crate::vehicle_cmd::secret_key;
 use crate::{Failure, other};
-use mavstack_sim::Autopilot;
-use mavstack_sim::modes;
+use mavstack::modes::{self, Flavour};
+use mavstack_services::plan::{self, Convention};
 
 /// How to reach the remote system (shared by `param`, `mission` and `command`).
-#[derive(Debug, Args)]
+#[derive(Clone, Debug, Args)]
 pub(crate) struct RemoteArgs {
     /// The ground station's side of the link: udpin:HOST:PORT waits for the vehicle,
     /// udpout:HOST:PORT reaches one listening there, tcp:HOST:PORT, serial:DEV:BAUD.
@@ -51,15 +50,16 @@ pub(crate) struct RemoteArgs {
     /// Our component id.
     #[arg(long, default_value_t = 190)]
     compid: u8,
-    /// Sign with this key (64 hex digits), for vehicles that accept only signed frames.
+    /// Sign with this key (64 hex digits), for vehicles that accept only signed frames
+    /// (`signing setup`: the key to set up; `signing remove`: the key in use).
     #[arg(long)]
-    key: Option<String>,
+    pub(crate) key: Option<String>,
     /// Signing link id (with `--key`).
     #[arg(long, default_value_t = 0)]
-    link_id: u8,
+    pub(crate) link_id: u8,
     /// Print results as JSON (one object per line).
     #[arg(long)]
-    json: bool,
+    pub(crate) json: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -170,7 +170,7 @@ pub(crate) struct CommandArgs {
 /// An open link to the target: a ground-station [`Node`] and the [`System`] found on it.
 pub(crate) struct Remote {
     node: Node,
-    system: System,
+    pub(crate) system: System,
     start: Instant,
 }
 
@@ -216,12 +216,8 @@ impl Remote {
         self.system.target()
     }
 
-    fn flavour(&self) -> Option<Autopilot> {
-        match self.system.autopilot() {
-            MavAutopilot::ARDUPILOTMEGA => Some(Autopilot::Ardupilot),
-            MavAutopilot::PX4 => Some(Autopilot::Px4),
-            _ => None,
-        }
+    fn flavour(&self) -> Option<Flavour> {
+        self.system.flavour()
     }
 
     /// Seconds since the link opened.
@@ -273,7 +269,7 @@ fn param_json(index: usize, name: Name, value: Value) -> serde_json::Value {
 }
 
 /// Prints lines to stdout, turning a closed pipe into the failure `main` forgives.
-fn print_lines(lines: &[String]) -> Result<(), Failure> {
+pub(crate) fn print_lines(lines: &[String]) -> Result<(), Failure> {
     let mut out = std::io::stdout().lock();
     for line in lines {
         writeln!(out, "{line}").map_err(|e| Failure::Other(e.into()))?;
@@ -460,8 +456,17 @@ pub(crate) fn mission(action: MissionAction) -> Result<(), Failure> {
                     .await;
                 end_progress();
                 let seconds = remote.since(began);
+                let json_out = file.as_deref().map_or(args.json, |f| f.ends_with(".json"));
+                // A plan file starts with home (QGC WPL): the vehicle's convention undone.
+                let convention = plan_convention(&remote, plan, !json_out);
+                let home = if convention == Convention::Px4 {
+                    remote.system.home_item(core::time::Duration::from_secs(3)).await
+                } else {
+                    None
+                };
                 remote.close().await?;
                 let items = result.map_err(|e| other(format!("download from {target}: {e}")))?;
+                let items = plan::from_vehicle(convention, &items, home);
                 let text = match &file {
                     Some(path) if path.ends_with(".json") => {
                         format!("{:#}\n", mission_file::to_json(plan.mav(), &items))
@@ -493,6 +498,9 @@ pub(crate) fn mission(action: MissionAction) -> Result<(), Failure> {
                 let mut remote = Remote::connect(&args).await?;
                 let target = remote.target();
                 let began = remote.elapsed();
+                // A plan file starts with home (QGC WPL): the vehicle's convention applied.
+                let convention = plan_convention(&remote, plan, !file.ends_with(".json"));
+                let items = plan::to_vehicle(convention, &items);
                 let count = items.len();
                 let result = remote
                     .system
@@ -527,6 +535,17 @@ pub(crate) fn mission(action: MissionAction) -> Result<(), Failure> {
             }
         }
     })
+}
+
+/// The mission convention between a plan and the vehicle: QGC WPL plans (item 0: home) of
+/// the MISSION type follow the autopilot's; JSON plans and fences and rally points go as
+/// they are.
+fn plan_convention(remote: &Remote, plan: PlanType, wpl: bool) -> Convention {
+    if wpl && plan.mav() == MavMissionType::MISSION {
+        Convention::of(remote.system.autopilot())
+    } else {
+        Convention::Plain
+    }
 }
 
 fn number(text: &str, what: &str) -> Result<f32, Failure> {
@@ -598,7 +617,7 @@ fn build_command(args: &CommandArgs, remote: &Remote) -> Result<(MavCmd, [f32; 7
             p[5] = f32::NAN;
             p[6] = match (remote.flavour(), alt) {
                 // PX4 takes an altitude above mean sea level.
-                (Some(Autopilot::Px4), Some(a)) => match remote.system.home_amsl() {
+                (Some(Flavour::Px4), Some(a)) => match remote.system.home_amsl() {
                     Some(home) => home + a,
                     None => f32::NAN,
                 },
@@ -631,19 +650,16 @@ fn build_command(args: &CommandArgs, remote: &Remote) -> Result<(MavCmd, [f32; 7
             };
             only(1)?;
             let flavour = remote.flavour().ok_or_else(|| {
-                other("the target is neither ArduPilot nor PX4: give DO_SET_MODE's params")
+                other("the target's modes are not known (neither ArduPilot nor PX4): give DO_SET_MODE's params")
             })?;
             let mode = modes::by_name(flavour, name).ok_or_else(|| {
                 let names: Vec<&str> = modes::modes(flavour).iter().map(|m| m.name).collect();
                 Failure::Input(anyhow!(
-                    "unknown {flavour:?} mode {name:?}; one of {}",
+                    "unknown {flavour} mode {name:?}; one of {}",
                     names.join(", ")
                 ))
             })?;
-            let (p2, p3) = modes::command_params(flavour, mode);
-            p[0] = MavModeFlag::CUSTOM_MODE_ENABLED.0 as f32;
-            p[1] = p2;
-            p[2] = p3;
+            (p[0], p[1], p[2]) = flavour.command_params(mode.custom_mode);
             MavCmd::DO_SET_MODE
         }
         _ => {
@@ -680,6 +696,14 @@ pub(crate) fn command(args: &CommandArgs) -> Result<(), Failure> {
     runtime()?.block_on(async {
         let mut remote = Remote::connect(&args.remote).await?;
         remote.system.update();
+        if args.name.eq_ignore_ascii_case("takeoff") && remote.flavour() == Some(Flavour::Px4) {
+            // PX4 reads NAV_TAKEOFF's altitude as above mean sea level: the user's "10" is
+            // 10 m above home, which needs home's altitude first.
+            remote
+                .system
+                .find_home_amsl(core::time::Duration::from_secs(3))
+                .await;
+        }
         let (id, p) = build_command(args, &remote)?;
         let target = remote.target();
         let command = if args.int {

@@ -20,6 +20,7 @@ mod probe_cmd;
 mod progress;
 mod radio_cmd;
 mod router_cmd;
+mod signing_cmd;
 mod vehicle_cmd;
 
 use std::process::ExitCode;
@@ -87,6 +88,12 @@ enum Command {
         #[command(subcommand)]
         action: log_cmd::LogAction,
     },
+    /// Message signing with a remote system: set up (SETUP_SIGNING, then proven by a signed
+    /// answer) or remove.
+    Signing {
+        #[command(subcommand)]
+        action: signing_cmd::SigningAction,
+    },
 }
 
 /// A failure with the exit code it maps to.
@@ -138,6 +145,7 @@ fn main() -> ExitCode {
         Command::Cmd(args) => gcs_cmd::command(&args),
         Command::Router(args) => router_cmd::router(&args),
         Command::Log { action } => log_cmd::run(action),
+        Command::Signing { action } => signing_cmd::signing(&action),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -319,6 +319,7 @@ fn print_stats(report: &NodeReport, bridges: &[(String, Arc<BridgeStats>)]) {
                     "replaced": c.replaced, "replaced_by_key": c.replaced_by_key,
                     "dropped": {"control": c.dropped_control, "telemetry": c.dropped_telemetry},
                     "replies": c.replies, "connections": c.connections,
+                    "bad_crc": c.bad_crc, "vehicles_refused": c.vehicles_refused,
                 })
             })
             .collect();

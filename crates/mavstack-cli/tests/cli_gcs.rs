@@ -226,3 +226,120 @@ fn no_vehicle_is_a_clear_failure() {
         format!("error: no vehicle heard on udpout:127.0.0.1:{port} within 1.0 s")
     );
 }
+
+#[test]
+fn a_refused_command_shows_the_statustext_that_says_why() {
+    // As ArduPilot while its EKF settles: COMMAND_ACK FAILED, the reason in STATUSTEXT.
+    let v = Vehicle::start(&["--autopilot", "ardupilot", "--estimator-settle", "600"]);
+    let refused = gcs(v.port, &["command", "arm"]);
+    assert_eq!(refused.status.code(), Some(1));
+    let text = String::from_utf8_lossy(&refused.stdout);
+    assert!(
+        text.starts_with("COMPONENT_ARM_DISARM → FAILED (")
+            && text
+                .trim_end()
+                .ends_with("s): PreArm: Need Position Estimate"),
+        "{text}"
+    );
+    let json = gcs(v.port, &["command", "arm", "--json"]);
+    let line = &json_lines(&String::from_utf8_lossy(&json.stdout))[0];
+    assert_eq!(line["result"], "FAILED");
+    assert_eq!(
+        line["statustext"],
+        serde_json::json!(["PreArm: Need Position Estimate"])
+    );
+    // Forced, it arms (both autopilots' 21196), and an accepted command says nothing more.
+    let forced = json_lines(&ok(&gcs(v.port, &["command", "arm", "--force", "--json"])));
+    assert_eq!(forced[0]["result"], "ACCEPTED");
+    assert_eq!(forced[0]["statustext"], serde_json::json!([]));
+}
+
+#[test]
+fn modes_by_name_follow_the_autopilot() {
+    let v = Vehicle::start(&["--autopilot", "px4"]);
+    let hold = json_lines(&ok(&gcs(v.port, &["command", "mode", "Hold", "--json"])));
+    assert_eq!(hold[0]["result"], "ACCEPTED");
+    let unknown = gcs(v.port, &["command", "mode", "guided"]);
+    assert_eq!(unknown.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&unknown.stderr);
+    assert!(
+        err.contains("unknown PX4 mode \"guided\"") && err.contains("AUTO.MISSION"),
+        "{err}"
+    );
+}
+
+const KEY: &str = "0b0e0c0a0f0d0e0a0d0b0e0e0f000b0a0d0a0c0a0b0e0e0f0c0a0f0e0b0a0b0e";
+
+/// Runs `mavstack ARGS... --timeout 5` with the connection `conn` after ARGS' first `n`.
+fn gcs_on(conn: &str, n: usize, args: &[&str]) -> Output {
+    let (command, rest) = args.split_at(n);
+    Command::new(env!("CARGO_BIN_EXE_mavstack"))
+        .args(command)
+        .arg(conn)
+        .args(rest)
+        .args(["--timeout", "5"])
+        .output()
+        .expect("mavstack runs")
+}
+
+/// A `mavstack vehicle udpout:127.0.0.1:PORT --secure`: one link, whose signing outlives each
+/// ground-station process (a `udpin` vehicle makes a link per client).
+struct SecureVehicle(std::process::Child);
+
+impl Drop for SecureVehicle {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[test]
+fn signing_setup_is_proven_by_a_signed_answer_and_remove_by_an_unsigned_one() {
+    let port = free_port();
+    let _vehicle = SecureVehicle(
+        Command::new(env!("CARGO_BIN_EXE_mavstack"))
+            .args(["vehicle", &format!("udpout:127.0.0.1:{port}"), "--secure"])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("vehicle starts"),
+    );
+    let conn = format!("udpin:127.0.0.1:{port}");
+    let on = ok(&gcs_on(
+        &conn,
+        2,
+        &["signing", "setup", "--key", KEY, "--link-id", "2"],
+    ));
+    assert_eq!(on.trim(), "signing on: 1/1 answers signed");
+    // Now the vehicle signs and wants signed frames: an unsigned ground station hears
+    // nothing it accepts, a signed one is answered.
+    let unsigned = gcs_on(&conn, 1, &["command", "MAV_CMD_REQUEST_MESSAGE", "148"]);
+    assert_eq!(unsigned.status.code(), Some(1));
+    ok(&gcs_on(
+        &conn,
+        1,
+        &["command", "MAV_CMD_REQUEST_MESSAGE", "148", "--key", KEY],
+    ));
+    let off = json_lines(&ok(&gcs_on(
+        &conn,
+        2,
+        &["signing", "remove", "--key", KEY, "--json"],
+    )));
+    assert_eq!(off[0]["signing"], "off");
+    assert_eq!(off[0]["proven"], true);
+    ok(&gcs_on(
+        &conn,
+        1,
+        &["command", "MAV_CMD_REQUEST_MESSAGE", "148"],
+    ));
+    // A vehicle that refuses SETUP_SIGNING (an insecure link) leaves the proof unanswered.
+    let insecure = Vehicle::start(&[]);
+    let out = gcs(insecure.port, &["signing", "setup", "--key", KEY]);
+    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(
+        String::from_utf8_lossy(&out.stdout).trim(),
+        "signing on: 0/1 answers signed"
+    );
+    let missing = gcs(insecure.port, &["signing", "setup"]);
+    assert_eq!(missing.status.code(), Some(2));
+}

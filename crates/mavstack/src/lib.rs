@@ -113,6 +113,8 @@
 #[cfg(feature = "sim")]
 pub mod conform;
 pub mod link_spec;
+#[cfg(feature = "services")]
+pub mod modes;
 pub mod node;
 #[cfg(target_os = "linux")]
 mod own_thread;

@@ -30,8 +30,8 @@ use mavstack_channel::{CommandEncoding, HandshakeMethod, HandshakeOutcome, Targe
 use mavstack_core::wire::Version;
 use mavstack_core::{Message, MessageSet as _};
 use mavstack_dialects::common::{
-    CommandAck, CommandLong, GlobalPositionInt, MavAutopilot, MavCmd, MavMessage, MavMissionType,
-    MavType, MissionItemInt,
+    AutopilotVersion, CommandAck, CommandLong, GlobalPositionInt, HomePosition, MavAutopilot,
+    MavCmd, MavFrame, MavMessage, MavMissionType, MavType, MissionItemInt,
 };
 use mavstack_router::LinkId;
 use mavstack_services::command::{
@@ -48,6 +48,7 @@ use mavstack_services::statustext::Lines;
 use mavstack_services::{Address, Service};
 use mavstack_transport::clock;
 
+use crate::modes::Flavour;
 use crate::node::{NodeHandle, Subscription};
 
 /// Retries per message of parameter and mission operations by default: with 10, a 500-item
@@ -107,6 +108,15 @@ pub enum SystemError {
         /// (flight stacks say why they refuse there: `PreArm: Need Position Estimate`).
         statustext: Vec<String>,
     },
+    /// A mode name the system's autopilot does not have (or an autopilot whose modes are
+    /// not known: `known` is empty).
+    #[error("unknown mode {name:?}{}", if known.is_empty() { " (the autopilot's modes are not known)".to_owned() } else { format!("; one of {}", known.join(", ")) })]
+    UnknownMode {
+        /// The name asked for.
+        name: String,
+        /// The names the autopilot has.
+        known: Vec<&'static str>,
+    },
     /// The request could not start (another like it is running).
     #[error("{0}")]
     Busy(String),
@@ -121,6 +131,25 @@ fn said(lines: &[String]) -> String {
         String::new()
     } else {
         format!(" ({})", lines.join("; "))
+    }
+}
+
+/// What a signing change proved: requests sent in the link's new signing after it, and
+/// the answers that came back. On a signed link only frames that verify with the key are
+/// accepted, so an answer there is a signed one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SigningCheck {
+    /// Requests sent.
+    pub asked: u8,
+    /// Requests answered.
+    pub answered: u8,
+}
+
+impl SigningCheck {
+    /// Every request was answered.
+    #[must_use]
+    pub const fn proven(&self) -> bool {
+        self.asked > 0 && self.answered == self.asked
     }
 }
 
@@ -144,6 +173,8 @@ pub struct System {
     found_in: Version,
     handshake: Option<HandshakeOutcome>,
     home_amsl: Option<f32>,
+    /// Its HOME_POSITION, once seen.
+    home: Option<HomePosition>,
     retries: u8,
     /// STATUSTEXT chunks put together.
     lines: Lines,
@@ -214,6 +245,7 @@ impl System {
             found_in,
             handshake: None,
             home_amsl: None,
+            home: None,
             retries: PATIENT_RETRIES,
             lines: Lines::default(),
             said: Vec::new(),
@@ -277,11 +309,119 @@ impl System {
         self.handshake.as_ref()
     }
 
-    /// Its home altitude above mean sea level (m), once a GLOBAL_POSITION_INT of it was seen
-    /// during an operation.
+    /// Its home altitude above mean sea level (m), once a GLOBAL_POSITION_INT or
+    /// HOME_POSITION of it was seen during an operation.
     #[must_use]
     pub const fn home_amsl(&self) -> Option<f32> {
         self.home_amsl
+    }
+
+    /// Its home altitude above mean sea level: the known one, or else asked for (HOME_POSITION
+    /// and GLOBAL_POSITION_INT requested once with REQUEST_MESSAGE, then awaited) for up to
+    /// `wait`; `None` when it never came. A vehicle that streams nothing until asked
+    /// (ArduPilot) still answers a one-shot request.
+    pub async fn find_home_amsl(&mut self, wait: Duration) -> Option<f32> {
+        self.update();
+        if self.home_amsl.is_some() {
+            return self.home_amsl;
+        }
+        for id in [HomePosition::ID, GlobalPositionInt::ID] {
+            self.request_once(id).await;
+        }
+        let until = tokio::time::Instant::now() + wait;
+        while self.home_amsl.is_none() {
+            let Ok(Some(incoming)) = tokio::time::timeout_at(until, self.frames.recv()).await
+            else {
+                break;
+            };
+            let f = incoming.frame.frame.view();
+            if let Ok(msg) = MavMessage::decode(f.msg_id(), f.payload()) {
+                self.note(Address::new(f.sysid(), f.compid()), &msg);
+            }
+        }
+        self.home_amsl
+    }
+
+    /// Its home as a plan's item 0 (a NAV_WAYPOINT in MAV_FRAME_GLOBAL at home's latitude,
+    /// longitude and altitude above mean sea level): HOME_POSITION asked for when not seen
+    /// yet, awaited up to `wait`; `None` when it never came.
+    pub async fn home_item(&mut self, wait: Duration) -> Option<MissionItemInt> {
+        self.update();
+        if self.home.is_none() {
+            self.request_once(HomePosition::ID).await;
+            let until = tokio::time::Instant::now() + wait;
+            while self.home.is_none() {
+                let Ok(Some(incoming)) = tokio::time::timeout_at(until, self.frames.recv()).await
+                else {
+                    break;
+                };
+                let f = incoming.frame.frame.view();
+                if let Ok(msg) = MavMessage::decode(f.msg_id(), f.payload()) {
+                    self.note(Address::new(f.sysid(), f.compid()), &msg);
+                }
+            }
+        }
+        let home = self.home?;
+        Some(MissionItemInt {
+            frame: MavFrame::GLOBAL,
+            command: MavCmd::NAV_WAYPOINT,
+            autocontinue: 1,
+            x: home.latitude,
+            y: home.longitude,
+            z: home.altitude as f32 / 1000.0,
+            ..MissionItemInt::default()
+        })
+    }
+
+    /// Sends one REQUEST_MESSAGE for `id` (no retries, no wait for its answer).
+    async fn request_once(&self, id: u32) {
+        let request = MavMessage::CommandLong(CommandLong {
+            target_system: self.target.system,
+            target_component: self.target.component,
+            command: MavCmd::REQUEST_MESSAGE,
+            param1: id as f32,
+            ..CommandLong::default()
+        });
+        self.node.send_on(self.link, &request).await;
+    }
+
+    /// Whose mode numbers it uses, from its HEARTBEAT's autopilot and type (`None` when
+    /// they are not known here).
+    #[must_use]
+    pub fn flavour(&self) -> Option<Flavour> {
+        Flavour::of(self.autopilot, self.mav_type)
+    }
+
+    /// Switches it to the mode called `name` (see [`crate::modes::by_name`]) with
+    /// MAV_CMD_DO_SET_MODE, and waits for the answer (STATUSTEXT with a refusal, as
+    /// [`command`](Self::command)).
+    ///
+    /// # Errors
+    /// [`SystemError::UnknownMode`] (the name, or the autopilot's modes, are not known),
+    /// and those of [`command`](Self::command).
+    pub async fn set_mode(&mut self, name: &str) -> Result<CommandAck, SystemError> {
+        let unknown = |known: Vec<&'static str>| SystemError::UnknownMode {
+            name: name.to_owned(),
+            known,
+        };
+        let flavour = self.flavour().ok_or_else(|| unknown(Vec::new()))?;
+        let mode = crate::modes::by_name(flavour, name).ok_or_else(|| {
+            unknown(
+                crate::modes::modes(flavour)
+                    .iter()
+                    .map(|m| m.name)
+                    .collect(),
+            )
+        })?;
+        let (param1, param2, param3) = flavour.command_params(mode.custom_mode);
+        let command = Command::Long(CommandLong {
+            command: MavCmd::DO_SET_MODE,
+            param1,
+            param2,
+            param3,
+            ..CommandLong::default()
+        });
+        self.command(command, |_| {}).await
     }
 
     /// Takes in what the system sent since the last operation (its home altitude, for
@@ -688,8 +828,10 @@ impl System {
 
     /// Sets up signing with the system: sends SETUP_SIGNING with `key` and a timestamp of
     /// now over the link (which should be a secure one: a wire, or a link already signed),
-    /// then signs the link with `key` and link id `link_id`. The system confirms nothing:
-    /// a signed answer to the next request is the proof.
+    /// signs the link with `key` and link id `link_id`, then proves it: the system confirms
+    /// nothing, so one request (REQUEST_MESSAGE for AUTOPILOT_VERSION, with the command
+    /// protocol's retries) goes out signed, and only a signed answer that verifies with `key`
+    /// can reach us on the signed link ([`SigningCheck::answered`]).
     ///
     /// # Errors
     /// [`SystemError::Busy`] on a link that cannot sign (`version=1`),
@@ -698,27 +840,66 @@ impl System {
         &mut self,
         key: mavstack_core::signing::SecretKey,
         link_id: u8,
-    ) -> Result<(), SystemError> {
+    ) -> Result<SigningCheck, SystemError> {
         let timestamp =
             mavstack_core::signing::timestamp_from_unix_micros(clock::now().as_micros());
+        self.send_setup_signing(*key.as_bytes(), timestamp).await?;
+        let mut signing = mavstack_channel::SigningConfig::new(key, link_id);
+        signing.initial_timestamp = timestamp;
+        self.sign_link(Some(signing)).await?;
+        Ok(self.check_answers().await)
+    }
+
+    /// Turns signing off with the system: sends SETUP_SIGNING with the all-zero key and
+    /// timestamp (signed with the link's current key, as the system requires), stops signing
+    /// the link, then proves it with one unsigned request ([`SigningCheck::answered`]: the
+    /// system answered it, so it accepts unsigned frames again).
+    ///
+    /// # Errors
+    /// As [`setup_signing`](Self::setup_signing).
+    pub async fn remove_signing(&mut self) -> Result<SigningCheck, SystemError> {
+        self.send_setup_signing([0; 32], 0).await?;
+        self.sign_link(None).await?;
+        Ok(self.check_answers().await)
+    }
+
+    async fn send_setup_signing(
+        &self,
+        secret_key: [u8; 32],
+        timestamp: u64,
+    ) -> Result<(), SystemError> {
         let setup = MavMessage::SetupSigning(mavstack_dialects::common::SetupSigning {
             target_system: self.target.system,
             target_component: self.target.component,
-            secret_key: *key.as_bytes(),
+            secret_key,
             initial_timestamp: timestamp,
         });
         if self.node.send_on(self.link, &setup).await == 0 {
             return Err(SystemError::Stopped);
         }
-        let mut signing = mavstack_channel::SigningConfig::new(key, link_id);
-        signing.initial_timestamp = timestamp;
+        Ok(())
+    }
+
+    async fn sign_link(
+        &self,
+        signing: Option<mavstack_channel::SigningConfig>,
+    ) -> Result<(), SystemError> {
         self.node
-            .set_signing(self.link, Some(signing))
+            .set_signing(self.link, signing)
             .await
             .map_err(|e| match e {
                 crate::node::RequestError::Stopped => SystemError::Stopped,
                 e => SystemError::Busy(e.to_string()),
             })
+    }
+
+    /// One request in the link's current signing; whether it was answered.
+    async fn check_answers(&mut self) -> SigningCheck {
+        let answered = self.request_message(AutopilotVersion::ID).await.is_ok();
+        SigningCheck {
+            asked: 1,
+            answered: u8::from(answered),
+        }
     }
 
     // ----- telemetry -----------------------------------------------------------------------
@@ -794,12 +975,18 @@ impl System {
             }
             self.said.push(line.text);
         }
-        if let MavMessage::GlobalPositionInt(GlobalPositionInt {
-            alt, relative_alt, ..
-        }) = msg
-            && from.system == self.target.system
-        {
-            self.home_amsl = Some((alt - relative_alt) as f32 / 1000.0);
+        if from.system != self.target.system {
+            return;
+        }
+        match msg {
+            MavMessage::GlobalPositionInt(GlobalPositionInt {
+                alt, relative_alt, ..
+            }) => self.home_amsl = Some((alt - relative_alt) as f32 / 1000.0),
+            MavMessage::HomePosition(home) => {
+                self.home_amsl = Some(home.altitude as f32 / 1000.0);
+                self.home = Some(*home);
+            }
+            _ => {}
         }
     }
 }

@@ -266,9 +266,14 @@ async fn signing_is_set_up_over_a_secure_link_and_the_list_reports_its_progress(
     .expect("found");
     assert_eq!(v.link_version().await, Some("2"), "after the handshake");
 
-    v.setup_signing(mavstack::core::signing::SecretKey::new([7; 32]), 3)
+    let check = v
+        .setup_signing(mavstack::core::signing::SecretKey::new([7; 32]), 3)
         .await
         .expect("signing set up");
+    assert!(
+        check.proven(),
+        "a signed request got a signed answer: {check:?}"
+    );
     assert_eq!(v.link_version().await, Some("signed"));
     let mut seen = Vec::new();
     let table = v
@@ -288,6 +293,18 @@ async fn signing_is_set_up_over_a_secure_link_and_the_list_reports_its_progress(
     // The vehicle's side is signed too: its frames to us verified with the key.
     let report = vehicle.node().report().await.expect("report");
     assert!(report.links.iter().any(|l| l.version == "signed"));
+    // And off again: the all-zero key, signed with the current one; then unsigned answers.
+    let check = v.remove_signing().await.expect("signing removed");
+    assert!(
+        check.proven(),
+        "an unsigned request was answered: {check:?}"
+    );
+    assert_eq!(v.link_version().await, Some("2"));
+    let report = vehicle.node().report().await.expect("report");
+    assert!(
+        report.links.iter().all(|l| l.version != "signed"),
+        "{report:?}"
+    );
 
     drop(v);
     gcs.shutdown().await.expect("ground station stops");

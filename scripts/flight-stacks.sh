@@ -1,0 +1,120 @@
+#!/usr/bin/env bash
+# The flight-stack scenarios (tests-interop/flight_stacks.py) against ArduPilot copter SITL, PX4
+# SITL (SIH) and `mavstack vehicle` in both flavours, then one table of the results.
+#
+# The flight stacks are not built here (nor is any of their code in this repository): give the
+# binaries you built in the environment; a target whose variable is unset is skipped and said so.
+#   ARDUPILOT_SITL      ArduPilot's SITL binary (build/sitl/bin/arducopter)
+#   ARDUPILOT_DEFAULTS  its defaults file (Tools/autotest/default_params/copter.parm)
+#   PX4_SITL_DIR        PX4's build directory (build/px4_sitl_default: bin/px4, etc/)
+#   MAVSTACK            the mavstack binary (default: target/release/mavstack, built if missing)
+#   ONLY                scenarios to run (comma-separated; default: all)
+# ArduPilot listens on tcp:127.0.0.1:5760 (SERIAL0); PX4 sends to udp 127.0.0.1:14550; the
+# simulator runs as `mavstack vehicle udpout:127.0.0.1:14550`. Results: target/flight-stacks/.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+py="${MAVSTACK_PYTHON:-$(scripts/setup-peers.sh)}"
+bin="${MAVSTACK:-$root/target/release/mavstack}"
+if [ ! -x "$bin" ]; then
+    cargo build --release --locked -q -p mavstack-cli
+fi
+out="$root/target/flight-stacks"
+rm -rf "$out"
+mkdir -p "$out"
+only=()
+if [ -n "${ONLY:-}" ]; then
+    only=(--only "$ONLY")
+fi
+pids=()
+stop_all() {
+    for p in "${pids[@]}"; do
+        kill "$p" 2>/dev/null || true
+    done
+    pids=()
+}
+trap stop_all EXIT
+
+# Waits until a HEARTBEAT arrives on CONN (pymavlink), up to 60 s.
+wait_heartbeat() {
+    "$py" - "$1" <<'PY'
+import sys
+from pymavlink import mavutil
+m = mavutil.mavlink_connection(sys.argv[1])
+hb = m.wait_heartbeat(timeout=60)
+sys.exit(0 if hb else 1)
+PY
+}
+
+scenarios() {
+    local name="$1" conn="$2"
+    "$py" tests-interop/flight_stacks.py --mavstack "$bin" --name "$name" --conn "$conn" \
+        --out "$out/$name.json" "${only[@]}" || true
+}
+
+if [ -n "${ARDUPILOT_SITL:-}" ]; then
+    dir="$out/ardupilot-run"
+    mkdir -p "$dir"
+    # SITL exits when its parent does: a shell that waits for it stays its parent. SERIAL0 on
+    # TCP 5760, listening at once (--serial0 tcp:0 does not wait for a client).
+    setsid bash -c 'cd "$1"; shift; exec "$@"' wrapper "$dir" "$ARDUPILOT_SITL" --model quad \
+        --defaults "${ARDUPILOT_DEFAULTS:?ARDUPILOT_DEFAULTS: the copter defaults file}" \
+        --serial0 tcp:0 -I0 --home -35.363261,149.165230,584,353 </dev/null >"$dir/sitl.log" 2>&1 &
+    pids+=($!)
+    for _ in $(seq 100); do (exec 3<>/dev/tcp/127.0.0.1/5760) 2>/dev/null && break; sleep 0.2; done
+    wait_heartbeat tcp:127.0.0.1:5760
+    scenarios ardupilot tcp:127.0.0.1:5760
+    stop_all
+    sleep 1
+else
+    echo "ardupilot: skipped (ARDUPILOT_SITL is not set)" | tee "$out/ardupilot.skipped"
+fi
+
+if [ -n "${PX4_SITL_DIR:-}" ]; then
+    dir="$out/px4-run"
+    mkdir -p "$dir"
+    (cd "$dir" && PX4_SIMULATOR=sihsim PX4_SIM_MODEL=sihsim_quadx PX4_SYS_AUTOSTART=10040 \
+        setsid "$PX4_SITL_DIR/bin/px4" -d -i 0 -w "$dir" "$PX4_SITL_DIR/etc" \
+        </dev/null >"$dir/px4.log" 2>&1) &
+    pids+=($!)
+    wait_heartbeat udpin:127.0.0.1:14550
+    scenarios px4 udpin:127.0.0.1:14550
+    stop_all
+    pkill -f "$PX4_SITL_DIR/bin/px4" 2>/dev/null || true
+    sleep 1
+else
+    echo "px4: skipped (PX4_SITL_DIR is not set)" | tee "$out/px4.skipped"
+fi
+
+for flavour in ardupilot px4; do
+    # The simulator as each flavour, refusing PROTOCOL_VERSION as ArduPilot does for that
+    # flavour, with an estimator that settles for 5 s as the flight stacks' do.
+    extra=()
+    if [ "$flavour" = ardupilot ]; then
+        extra=(--protocol-version refuse --start-mavlink2)
+    fi
+    "$bin" vehicle udpout:127.0.0.1:14550 --autopilot "$flavour" --estimator-settle 5 --secure \
+        "${extra[@]}" >"$out/sim-$flavour.log" 2>&1 &
+    pids+=($!)
+    scenarios "sim-$flavour" udpin:127.0.0.1:14550
+    stop_all
+done
+
+"$py" - "$out" <<'PY'
+import glob, json, os, sys
+rows = {}
+targets = []
+for path in sorted(glob.glob(os.path.join(sys.argv[1], "*.json"))):
+    for r in json.load(open(path)):
+        if r["target"] not in targets:
+            targets.append(r["target"])
+        rows.setdefault(r["scenario"], {})[r["target"]] = r
+print("| scenario | " + " | ".join(targets) + " |")
+print("| --- |" + " --- |" * len(targets))
+for scenario, by in rows.items():
+    cells = []
+    for t in targets:
+        r = by.get(t)
+        cells.append("—" if r is None else "%s: %s" % (r["status"], r["detail"].replace("|", "/")))
+    print("| %s | %s |" % (scenario, " | ".join(cells)))
+PY

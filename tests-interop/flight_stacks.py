@@ -1,0 +1,309 @@
+#!/usr/bin/env python3
+"""The flight-stack scenarios: `mavstack` against one running vehicle (ArduPilot SITL, PX4 SITL
+or `mavstack vehicle` in either flavour), with pymavlink as the independent peer where a
+scenario compares.
+
+usage: flight_stacks.py --mavstack BIN --name NAME --conn CONN [--out FILE.json] [--only S,...]
+
+CONN is the ground station's side (`tcp:127.0.0.1:5760` for ArduPilot's SERIAL0,
+`udpin:127.0.0.1:14550` for PX4 and the simulator on udpout). Each scenario prints one line
+`NAME scenario: pass|fail|n/a (seconds) detail`; --out writes them all as JSON. Exit 0 when
+none failed.
+
+Scenarios (in this order, each independent of the ones before but the flight, last):
+  probe        the handshake: PROTOCOL_VERSION, or the documents' fallback (AUTOPILOT_VERSION
+               in MAVLink 2) where the system refuses it
+  conform      `mavstack conform --json`: no must or should rule fails
+  params       the whole table, timed; the same names, values and count as pymavlink's fetch
+               (PARAM_REQUEST_LIST, gaps re-read) of the same vehicle
+  param_set    an integer and a float parameter set to another value, read back, set back
+  mission      a 60-item plan (QGC WPL: home, take-off, 57 waypoints, RTL) uploaded and read
+               back equal under the autopilot's convention (ArduPilot's home at 0, PX4's none)
+  arm_refused  right after start, arming is refused with the reason shown (STATUSTEXT); n/a
+               when the vehicle is ready at once
+  signing      `mavstack signing setup` proven by a signed answer, then removed
+"""
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+from pymavlink import mavutil
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+KEY = "a1" * 32
+
+
+def run(argv, timeout=120):
+    t = time.monotonic()
+    try:
+        p = subprocess.run(argv, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return None, "", "timed out after %d s" % timeout, time.monotonic() - t
+    return p.returncode, p.stdout, p.stderr, time.monotonic() - t
+
+
+class Runner:
+    def __init__(self, bin_, name, conn):
+        self.bin, self.name, self.conn = bin_, name, conn
+        self.results = []
+
+    def mavstack(self, *args, timeout=120):
+        return run([self.bin, *args], timeout)
+
+    def report(self, scenario, status, seconds, detail):
+        self.results.append({"target": self.name, "scenario": scenario, "status": status,
+                             "seconds": round(seconds, 2), "detail": detail})
+        print("%s %s: %s (%.2f s) %s" % (self.name, scenario, status, seconds, detail), flush=True)
+
+    # ----- scenarios ------------------------------------------------------------------------
+
+    def probe(self):
+        rc, out, err, s = self.mavstack("probe", self.conn, "--timeout", "15")
+        try:
+            r = json.loads(out.splitlines()[0])
+        except (ValueError, IndexError):
+            return self.report("probe", "fail", s, "no report (exit %s): %s" % (rc, err.strip()[-300:]))
+        hs = r.get("handshake", {})
+        ok = rc == 0 and hs.get("result") in ("protocol_version", "message_v2")
+        self.report("probe", "pass" if ok else "fail", s,
+                    "%s -> %s, MAVLink %s -> %s, mavlink2_capability %s%s" % (
+                        hs.get("method"), hs.get("result"), r.get("version_before"), r.get("version_after"),
+                        r.get("mavlink2_capability"),
+                        ", protocol_version_supported false" if r.get("protocol_version_supported") is False
+                        else ""))
+
+    def conform(self):
+        rc, out, err, s = self.mavstack("conform", self.conn, "--json", "--timeout", "15")
+        try:
+            r = json.loads(out)
+        except ValueError:
+            return self.report("conform", "fail", s, "no report (exit %s): %s" % (rc, err.strip()[-300:]))
+        failed = ["%s (%s): %s" % (x["id"], x["level"], x["evidence"]) for x in r["rules"]
+                  if x["status"] == "fail" and x["level"] != "info"]
+        info = [x["id"] for x in r["rules"] if x["status"] == "fail" and x["level"] == "info"]
+        sm = r["summary"]
+        detail = "%d pass, %d fail, %d n/a" % (sm["pass"], sm["fail"], sm["n/a"])
+        if info:
+            detail += "; info: %s" % ", ".join(info)
+        if failed:
+            detail += "; failing: " + "; ".join(failed)
+        self.report("conform", "pass" if rc == 0 and not failed else "fail", s, detail)
+
+    def our_params(self):
+        rc, out, err, s = self.mavstack("param", "list", self.conn, "--json", timeout=180)
+        if rc != 0:
+            return None, s, err.strip()[-300:]
+        table = {}
+        for line in out.splitlines():
+            p = json.loads(line)
+            table[p["name"]] = (p["value"], p["type"])
+        return table, s, ""
+
+    def pymavlink_params(self, timeout=60.0):
+        """pymavlink's fetch: PARAM_REQUEST_LIST, then PARAM_REQUEST_READ for the gaps."""
+        m = mavutil.mavlink_connection(self.conn, source_system=254, source_component=190,
+                                       dialect="ardupilotmega")
+        try:
+            hb = m.wait_heartbeat(timeout=15)
+            if hb is None:
+                return None
+            target = (hb.get_srcSystem(), hb.get_srcComponent())
+            bytewise = hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_PX4
+            m.mav.param_request_list_send(*target)
+            got, count = {}, None
+            deadline = time.monotonic() + timeout
+            last_new = time.monotonic()
+            while time.monotonic() < deadline:
+                msg = m.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.5)
+                if msg is not None and msg.get_srcSystem() == target[0]:
+                    count = msg.param_count
+                    if msg.param_index not in got or msg.param_index == 65535:
+                        last_new = time.monotonic()
+                    got[msg.param_index] = (msg.param_id, msg.param_value, msg.param_type)
+                if count is not None and all(i in got for i in range(count)):
+                    break
+                if count is not None and time.monotonic() - last_new > 1.0:
+                    for i in range(count):
+                        if i not in got:
+                            m.mav.param_request_read_send(target[0], target[1], b"", i)
+                    last_new = time.monotonic()
+            return {name: (decode_value(value, ptype, bytewise), ptype)
+                    for i, (name, value, ptype) in got.items() if i != 65535}
+        finally:
+            m.close()
+
+    def params(self):
+        ours, s, err = self.our_params()
+        if ours is None:
+            return self.report("params", "fail", s, "param list failed: %s" % err)
+        theirs = self.pymavlink_params()
+        if theirs is None:
+            return self.report("params", "fail", s, "pymavlink heard no vehicle")
+        missing = sorted(set(theirs) - set(ours))
+        extra = sorted(set(ours) - set(theirs))
+        differ = []
+        for name in set(ours) & set(theirs):
+            a, b = ours[name][0], theirs[name][0]
+            if not (a == b or (isinstance(a, float) and isinstance(b, float) and
+                               (math.isclose(a, b, rel_tol=1e-6, abs_tol=1e-6) or (math.isnan(a) and math.isnan(b))))):
+                differ.append("%s %r vs %r" % (name, a, b))
+        ok = not missing and not extra and not differ
+        self.report("params", "pass" if ok else "fail", s,
+                    "%d parameters in %.2f s (pymavlink: %d)%s" % (
+                        len(ours), s, len(theirs),
+                        "" if ok else "; missing %s, extra %s, differ %s" % (missing[:5], extra[:5], differ[:5])))
+        self.table = ours
+
+    def param_set(self):
+        table = getattr(self, "table", None)
+        if not table:
+            return self.report("param_set", "n/a", 0.0, "no parameter table")
+        int_name = next((n for n, (v, t) in sorted(table.items()) if t in ("INT32", "INT16", "UINT8", "INT8")
+                         and isinstance(v, int) and 1 <= v < 100 and not n.startswith(("SYSID", "MAV_SYS", "SERIAL",
+                                                                                         "SR", "MAV_"))), None)
+        float_name = next((n for n, (v, t) in sorted(table.items()) if t == "REAL32" and isinstance(v, float)
+                           and 1.0 <= v < 1000.0), None)
+        done, t0 = [], time.monotonic()
+        for name in (int_name, float_name):
+            if name is None:
+                continue
+            old = table[name][0]
+            new = old + 1 if isinstance(old, int) else round(old * 1.5, 3)
+            rc, out, err, _ = self.mavstack("param", "set", self.conn, name, str(new), "--json")
+            rc2, out2, _, _ = self.mavstack("param", "get", self.conn, name, "--json")
+            back = json.loads(out2.splitlines()[0])["value"] if rc2 == 0 and out2 else None
+            self.mavstack("param", "set", self.conn, name, str(old))
+            ok = rc == 0 and back is not None and math.isclose(float(back), float(new), rel_tol=1e-6)
+            done.append((name, old, new, back, ok, err.strip()[-200:]))
+        s = time.monotonic() - t0
+        if not done:
+            return self.report("param_set", "n/a", s, "no suitable int/float parameter")
+        ok = all(d[4] for d in done)
+        self.report("param_set", "pass" if ok else "fail", s,
+                    "; ".join("%s %s -> %s, read back %s%s" % (d[0], d[1], d[2], d[3], "" if d[4] else " FAIL " + d[5])
+                              for d in done))
+
+    def mission(self, n=60):
+        home = (-35.363261, 149.165230, 584.0)
+        if self.name.startswith("px4"):
+            home = (47.397742, 8.545594, 488.0)
+        lines = ["QGC WPL 110", "0\t1\t0\t16\t0\t0\t0\t0\t%.7f\t%.7f\t%.2f\t1" % home,
+                 "1\t0\t3\t22\t0\t0\t0\t0\t%.7f\t%.7f\t20\t1" % home[:2]]
+        for i in range(2, n - 1):
+            lines.append("%d\t0\t3\t16\t0\t0\t0\t0\t%.7f\t%.7f\t%d\t1" % (
+                i, home[0] + 0.0001 * i, home[1] + 0.00005 * i, 20 + i % 7))
+        lines.append("%d\t0\t2\t20\t0\t0\t0\t0\t0\t0\t0\t1" % (n - 1))
+        with tempfile.TemporaryDirectory() as d:
+            plan = os.path.join(d, "plan.waypoints")
+            back = os.path.join(d, "back.waypoints")
+            with open(plan, "w") as f:
+                f.write("\n".join(lines) + "\n")
+            rc, out, err, s_up = self.mavstack("mission", "upload", self.conn, plan, "--json")
+            if rc != 0:
+                return self.report("mission", "fail", s_up, "upload: %s" % err.strip()[-300:])
+            up = json.loads(out)["seconds"]
+            rc, out, err, s_down = self.mavstack("mission", "download", self.conn, back)
+            if rc != 0:
+                return self.report("mission", "fail", s_down, "download: %s" % err.strip()[-300:])
+            sent = [l.split("\t") for l in lines[1:]]
+            with open(back) as f:
+                got = [l.rstrip("\n").split("\t") for l in f.read().splitlines()[1:]]
+        diffs = compare_plans(sent, got)
+        self.report("mission", "pass" if not diffs else "fail", s_up + s_down,
+                    "%d items, upload %.2f s, read back %s" % (n, up, "equal" if not diffs else "different: %s" % diffs[:3]))
+
+    def arm_refused(self):
+        rc, out, err, s = self.mavstack("command", self.conn, "arm", "--json", timeout=60)
+        try:
+            r = json.loads(out.splitlines()[0])
+        except (ValueError, IndexError):
+            return self.report("arm_refused", "fail", s, "no answer: %s" % err.strip()[-300:])
+        if r["result"] == "ACCEPTED":
+            self.mavstack("command", self.conn, "disarm", "--force")
+            return self.report("arm_refused", "n/a", s, "armed at once (ready)")
+        ok = bool(r.get("statustext"))
+        self.report("arm_refused", "pass" if ok else "fail", s,
+                    "%s, reason: %s" % (r["result"], r.get("statustext")))
+
+    def signing(self):
+        rc, out, err, s = self.mavstack("signing", "setup", self.conn, "--key", KEY, "--link-id", "1", timeout=60)
+        if rc != 0 and self.name == "px4":
+            # PX4 (1.16) has no message signing: its mavlink module ignores SETUP_SIGNING.
+            return self.report("signing", "n/a", s, "no signing in PX4's mavlink module: %s" % out.strip())
+        if rc != 0:
+            return self.report("signing", "fail", s, "setup: %s %s" % (out.strip(), err.strip()[-300:]))
+        rc2, out2, err2, s2 = self.mavstack("signing", "remove", self.conn, "--key", KEY, "--link-id", "1", timeout=60)
+        ok = rc2 == 0
+        self.report("signing", "pass" if ok else "fail", s + s2,
+                    "%s; %s" % (out.strip(), (out2.strip() or err2.strip()[-300:])))
+
+
+def decode_value(value, ptype, bytewise):
+    """A PARAM_VALUE's float as the parameter's value: integers C-cast (ArduPilot) or their bytes
+    in the float (PX4, MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)."""
+    import struct
+    ints = {1: "<B", 2: "<b", 3: "<H", 4: "<h", 5: "<I", 6: "<i"}
+    if ptype not in ints:
+        return value
+    if not bytewise:
+        return int(value)
+    raw = struct.pack("<f", value)
+    fmt = ints[ptype]
+    return struct.unpack(fmt, raw[:struct.calcsize(fmt)])[0]
+
+
+def compare_plans(sent, got):
+    """Differences between two plans (WPL rows, item 0 home) under the autopilots' conventions:
+    home's position is the vehicle's; GLOBAL and GLOBAL_INT (3 and 6, 0 and 5) are the same
+    frame; the frame of an item without a position (RTL, 20) does not count; `current`
+    does not count."""
+    same_frame = {"5": "0", "6": "3", "11": "10"}
+    if len(sent) != len(got):
+        return ["%d items sent, %d read back" % (len(sent), len(got))]
+    diffs = []
+    for i, (a, b) in enumerate(zip(sent, got)):
+        if i == 0:
+            continue
+        if int(a[3]) != int(b[3]):
+            diffs.append("item %d: command %s vs %s" % (i, a[3], b[3]))
+            continue
+        if a[3] != "20" and same_frame.get(a[2], a[2]) != same_frame.get(b[2], b[2]):
+            diffs.append("item %d: frame %s vs %s" % (i, a[2], b[2]))
+        for k, what in ((8, "lat"), (9, "lon"), (10, "alt")):
+            if a[3] == "20":
+                continue
+            if abs(float(a[k]) - float(b[k])) > (1e-6 if k < 10 else 1e-3):
+                diffs.append("item %d: %s %s vs %s" % (i, what, a[k], b[k]))
+    return diffs
+
+
+SCENARIOS = ["probe", "conform", "params", "param_set", "mission", "arm_refused", "signing"]
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--mavstack", required=True)
+    ap.add_argument("--name", required=True)
+    ap.add_argument("--conn", required=True)
+    ap.add_argument("--out")
+    ap.add_argument("--only")
+    a = ap.parse_args()
+    r = Runner(a.mavstack, a.name, a.conn)
+    chosen = a.only.split(",") if a.only else SCENARIOS
+    # arm_refused needs the vehicle fresh: it goes first when asked for.
+    order = (["arm_refused"] if "arm_refused" in chosen else []) + [s for s in chosen if s != "arm_refused"]
+    for s in order:
+        getattr(r, s)()
+    if a.out:
+        with open(a.out, "w") as f:
+            json.dump(r.results, f, indent=1)
+    return 1 if any(x["status"] == "fail" for x in r.results) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
