@@ -128,16 +128,6 @@ fn dialect(name: &str) -> Result<MessageTable, Failure> {
     crate::dialect_cmd::load(name).map(|d| d.message_table())
 }
 
-/// The id of a message name in the router's dialect (case does not matter), for the
-/// filters and `rate` options.
-fn message_id(dialect: &MessageTable, name: &str) -> Option<u32> {
-    dialect
-        .entries()
-        .iter()
-        .find(|m| m.name.eq_ignore_ascii_case(name))
-        .map(|m| m.id)
-}
-
 fn seconds(value: f64, what: &str) -> Result<Duration, Failure> {
     Duration::try_from_secs_f64(value)
         .ok()
@@ -197,10 +187,9 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
     }
     // Filters and rates given by message name resolve in the router's own dialect.
     let dialect = dialect(&dialect_name)?;
-    let message_id = |name: &str| message_id(&dialect, name);
     if let Some(path) = &args.conf {
         for link in conf_links {
-            let spec = LinkSpec::parse(&link.link, &message_id)
+            let spec = LinkSpec::parse_in(&link.link, &dialect)
                 .map_err(|e| Failure::Input(anyhow!("{}:{}: {e}", path.display(), link.line)))?;
             specs.push(spec);
         }
@@ -214,12 +203,12 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
             );
             continue;
         }
-        specs.push(LinkSpec::parse(text, &message_id).map_err(|e| Failure::Input(anyhow!("{e}")))?);
+        specs.push(LinkSpec::parse_in(text, &dialect).map_err(|e| Failure::Input(anyhow!("{e}")))?);
     }
     if let Some(port) = tcp_server {
         let text = format!("tcpin:0.0.0.0:{port}?name=tcp-server");
         specs
-            .push(LinkSpec::parse(&text, &message_id).map_err(|e| Failure::Input(anyhow!("{e}")))?);
+            .push(LinkSpec::parse_in(&text, &dialect).map_err(|e| Failure::Input(anyhow!("{e}")))?);
     }
     if specs.is_empty() && bridges.is_empty() {
         return Err(Failure::Input(anyhow!(

@@ -202,6 +202,7 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
         mavlink2: true,
         params,
         estimator_settle: Duration::from_secs_f64(args.estimator_settle),
+        data_streams_only: false,
     };
     runtime()?.block_on(async {
         let log = stderr_log(args.verbose);

@@ -284,7 +284,9 @@ impl LogConnection {
         if self.log.is_empty() {
             100.0
         } else {
-            100.0 * self.scan.position() as f64 / self.log.len() as f64
+            #[allow(clippy::cast_precision_loss)]
+            let p = 100.0 * self.scan.position() as f64 / self.log.len() as f64;
+            p
         }
     }
 

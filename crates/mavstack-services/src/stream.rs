@@ -32,8 +32,15 @@
 use alloc::collections::{BTreeMap, VecDeque};
 use core::time::Duration;
 
+use mavstack_core::Message as _;
 use mavstack_core::time::Instant;
-use mavstack_dialects::common::{CommandLong, MavCmd, MavMessage, MavResult, MessageInterval};
+use mavstack_dialects::common::{
+    Attitude, BatteryStatus, CommandLong, DistanceSensor, ExtendedSysState, GlobalPositionInt,
+    GpsRawInt, LocalPositionNed, MavCmd, MavDataStream, MavMessage, MavResult, MessageInterval,
+    MissionCurrent, NavControllerOutput, PowerStatus, RawImu, RcChannels, RcChannelsRaw,
+    RequestDataStream, ScaledImu2, ScaledPressure, ServoOutputRaw, SysStatus, SystemTime, VfrHud,
+    Vibration,
+};
 
 use crate::command::{
     Command, CommandHandler, CommandServer, CommandServerConfig, CommandServerEvent, Request,
@@ -492,6 +499,68 @@ pub fn request_message(msg_id: u32, params: [f32; 5]) -> Command {
         param7: 1.0,
         ..CommandLong::default()
     })
+}
+
+/// REQUEST_DATA_STREAM's groups as ArduPilot fills them (the messages of the `common`
+/// dialect among them): the older way to ask for telemetry, which ArduPilot before 4.0 and
+/// some links need where SET_MESSAGE_INTERVAL is refused or ignored. A group's rate applies to
+/// all its messages.
+#[must_use]
+pub fn data_stream_members(group: MavDataStream) -> &'static [u32] {
+    match group {
+        MavDataStream::RAW_SENSORS => &[RawImu::ID, ScaledImu2::ID, ScaledPressure::ID],
+        MavDataStream::EXTENDED_STATUS => &[
+            SysStatus::ID,
+            PowerStatus::ID,
+            MissionCurrent::ID,
+            GpsRawInt::ID,
+            NavControllerOutput::ID,
+        ],
+        MavDataStream::RC_CHANNELS => &[ServoOutputRaw::ID, RcChannels::ID, RcChannelsRaw::ID],
+        MavDataStream::POSITION => &[GlobalPositionInt::ID, LocalPositionNed::ID],
+        MavDataStream::EXTRA1 => &[Attitude::ID],
+        MavDataStream::EXTRA2 => &[VfrHud::ID],
+        MavDataStream::EXTRA3 => &[
+            SystemTime::ID,
+            BatteryStatus::ID,
+            DistanceSensor::ID,
+            Vibration::ID,
+            ExtendedSysState::ID,
+        ],
+        _ => &[],
+    }
+}
+
+/// The REQUEST_DATA_STREAM group that carries `msg_id` ([`data_stream_members`]).
+#[must_use]
+pub fn data_stream_of(msg_id: u32) -> Option<MavDataStream> {
+    [
+        MavDataStream::RAW_SENSORS,
+        MavDataStream::EXTENDED_STATUS,
+        MavDataStream::RC_CHANNELS,
+        MavDataStream::POSITION,
+        MavDataStream::EXTRA1,
+        MavDataStream::EXTRA2,
+        MavDataStream::EXTRA3,
+    ]
+    .into_iter()
+    .find(|g| data_stream_members(*g).contains(&msg_id))
+}
+
+/// REQUEST_DATA_STREAM starting `group` at `hz` (at least 1) for `target`.
+#[must_use]
+pub fn request_data_stream(target: Address, group: MavDataStream, hz: f32) -> RequestDataStream {
+    RequestDataStream {
+        target_system: target.system,
+        target_component: target.component,
+        req_stream_id: group,
+        req_message_rate: if hz.is_finite() {
+            hz.round().clamp(1.0, 1000.0) as u16
+        } else {
+            1
+        },
+        start_stop: 1,
+    }
 }
 
 /// Names one subscription.

@@ -62,7 +62,7 @@ use mavstack_dialects::common::{
 use mavstack_services::command::{Command, CommandHandler, CommandServer, Request, Response};
 use mavstack_services::mission::{MissionServer, MissionServerEvent};
 use mavstack_services::param::{Encoding, Name, ParamServer, ParamServerEvent, Value};
-use mavstack_services::stream::{Interval, StreamScheduler, request_message};
+use mavstack_services::stream::{self, Interval, StreamScheduler, request_message};
 use mavstack_services::timesync::{Timesync, TimesyncConfig};
 use mavstack_services::{Address, Outgoing, Service};
 
@@ -90,6 +90,9 @@ pub struct SimConfig {
     /// saying why, as flight stacks do (ArduPilot SITL takes about 40 s: `PreArm: Need
     /// Position Estimate`). Zero: ready at once.
     pub estimator_settle: Duration,
+    /// Refuse SET_MESSAGE_INTERVAL (MAV_RESULT_UNSUPPORTED) and take rates only through
+    /// REQUEST_DATA_STREAM, as ArduPilot before 4.0 did.
+    pub data_streams_only: bool,
 }
 
 /// The messages the vehicle streams and their default intervals (`None`: on request only).
@@ -116,28 +119,6 @@ fn plan_name(mission_type: MavMissionType) -> &'static str {
     }
 }
 
-/// The messages of each REQUEST_DATA_STREAM group the vehicle has (ArduPilot's grouping).
-fn data_stream(group: MavDataStream) -> &'static [u32] {
-    match group {
-        MavDataStream::EXTENDED_STATUS => &[SysStatus::ID, GpsRawInt::ID, MissionCurrent::ID],
-        MavDataStream::POSITION => &[GlobalPositionInt::ID],
-        MavDataStream::EXTRA1 => &[Attitude::ID],
-        MavDataStream::EXTRA2 => &[VfrHud::ID],
-        MavDataStream::EXTRA3 => &[BatteryStatus::ID, ExtendedSysState::ID],
-        MavDataStream::ALL => &[
-            SysStatus::ID,
-            GpsRawInt::ID,
-            MissionCurrent::ID,
-            GlobalPositionInt::ID,
-            Attitude::ID,
-            VfrHud::ID,
-            BatteryStatus::ID,
-            ExtendedSysState::ID,
-        ],
-        _ => &[],
-    }
-}
-
 /// The craft and its telemetry: the command handler of the vehicle.
 #[derive(Debug)]
 struct Craft {
@@ -149,6 +130,8 @@ struct Craft {
     new_current: Option<u16>,
     /// When the estimator is ready (arming is refused before).
     ready_at: Instant,
+    /// SET_MESSAGE_INTERVAL refused: rates only through REQUEST_DATA_STREAM.
+    data_streams_only: bool,
 }
 
 /// The numeric params of a command: p1–p4, latitude and longitude in degrees (`None` when
@@ -425,9 +408,16 @@ impl Craft {
         } else {
             Interval::Every(Duration::from_secs(1) / u32::from(r.req_message_rate))
         };
-        for &id in data_stream(r.req_stream_id) {
-            // Every id of the groups is supported.
-            let _ = self.streams.set_interval(now, id, interval);
+        let groups: Vec<MavDataStream> = if r.req_stream_id == MavDataStream::ALL {
+            (1..=12).map(MavDataStream).collect()
+        } else {
+            vec![r.req_stream_id]
+        };
+        for group in groups {
+            for &id in stream::data_stream_members(group) {
+                // Ids of a group the simulator does not send are refused: nothing to do.
+                let _ = self.streams.set_interval(now, id, interval);
+            }
         }
     }
 }
@@ -438,6 +428,7 @@ impl CommandHandler for Craft {
         let accepted = done(MavResult::ACCEPTED);
         let Params { p, lat, lon, z } = params_of(&request.command);
         match request.command.id() {
+            MavCmd::SET_MESSAGE_INTERVAL if self.data_streams_only => done(MavResult::UNSUPPORTED),
             MavCmd::SET_MESSAGE_INTERVAL | MavCmd::REQUEST_MESSAGE => self
                 .streams
                 .handle_command(now, request)
@@ -585,6 +576,7 @@ impl Vehicle {
             streams,
             new_current: None,
             ready_at: now + config.estimator_settle,
+            data_streams_only: config.data_streams_only,
         };
         let mut vehicle = Self {
             own: config.own,

@@ -13,6 +13,7 @@
 //! assert!(!err.to_string().contains(&key), "keys never appear in messages");
 //! ```
 
+use mavstack_core::MessageTable;
 use mavstack_router::{LinkConfig, OptionError, options};
 use mavstack_transport::{ConnSpec, ConnSpecError};
 
@@ -65,6 +66,31 @@ pub fn redacted(text: &str) -> String {
 }
 
 impl LinkSpec {
+    /// Parses `text` for links of dialect `table`: message names in filters and `rate`
+    /// resolve in it, without regard to case (`docs/contracts/link-options.md`).
+    ///
+    /// ```
+    /// use mavstack::LinkSpec;
+    /// use mavstack::core::MessageTable;
+    /// let common = MessageTable::of::<mavstack::dialects::common::MavMessage>();
+    /// let spec = LinkSpec::parse_in("udpin:0.0.0.0:14550?block_msg_out=attitude", &common).unwrap();
+    /// assert!(!spec.config.filters_out.msg.passes(30));
+    /// let err = LinkSpec::parse_in("udpin:0.0.0.0:14550?block_msg_out=NOT_A_MESSAGE", &common);
+    /// assert!(err.unwrap_err().to_string().contains("\"NOT_A_MESSAGE\""));
+    /// ```
+    ///
+    /// # Errors
+    /// [`LinkSpecError`] naming the connection string or the option at fault.
+    pub fn parse_in(text: &str, table: &MessageTable) -> Result<Self, LinkSpecError> {
+        Self::parse(text, &|name| {
+            table
+                .entries()
+                .iter()
+                .find(|m| m.name.eq_ignore_ascii_case(name))
+                .map(|m| m.id)
+        })
+    }
+
     /// Parses `text`. `message_id` turns a message name into its id (filters and `rate`
     /// take names as well as numbers).
     ///

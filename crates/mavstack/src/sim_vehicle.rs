@@ -117,6 +117,7 @@ impl SimVehicle {
             mavlink2: true,
             params,
             estimator_settle: core::time::Duration::ZERO,
+            data_streams_only: false,
         }
     }
 

@@ -153,6 +153,24 @@ impl SigningCheck {
     }
 }
 
+/// How [`System::request_rate`] got the message going.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RateMethod {
+    /// MAV_CMD_SET_MESSAGE_INTERVAL, accepted.
+    MessageInterval,
+    /// REQUEST_DATA_STREAM for this group, after SET_MESSAGE_INTERVAL was refused or ignored.
+    DataStream(mavstack_dialects::common::MavDataStream),
+}
+
+/// What [`System::request_rate`] did and saw.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RateRequest {
+    /// The request that was made last.
+    pub how: RateMethod,
+    /// Whether the message then arrived.
+    pub arrived: bool,
+}
+
 /// STATUSTEXT lines kept while a command runs.
 const MAX_SAID: usize = 32;
 
@@ -903,6 +921,71 @@ impl System {
     }
 
     // ----- telemetry -----------------------------------------------------------------------
+
+    /// Asks the system to send message `msg_id` `hz` times a second, and checks that it
+    /// comes: SET_MESSAGE_INTERVAL first; where the system refuses it, or accepts it and the
+    /// message still does not come within a few of its intervals (at least 1.5 s), the older
+    /// REQUEST_DATA_STREAM for the group that carries it (ArduPilot before 4.0, some links).
+    ///
+    /// # Errors
+    /// [`SystemError::Stopped`]; a system that sends the message neither way is not an error
+    /// ([`RateRequest::arrived`] is false).
+    pub async fn request_rate(&mut self, msg_id: u32, hz: f32) -> Result<RateRequest, SystemError> {
+        let hz = if hz.is_finite() {
+            hz.clamp(0.01, 1000.0)
+        } else {
+            1.0
+        };
+        let interval = Duration::from_secs_f32(1.0 / hz);
+        let wait = (interval * 3).max(Duration::from_millis(1500));
+        let answer = self.set_message_interval(msg_id, Some(interval)).await;
+        let accepted = match answer {
+            Ok(_) => true,
+            Err(SystemError::Stopped) => return Err(SystemError::Stopped),
+            Err(_) => false,
+        };
+        if accepted && self.comes(msg_id, wait).await {
+            return Ok(RateRequest {
+                how: RateMethod::MessageInterval,
+                arrived: true,
+            });
+        }
+        let Some(group) = mavstack_services::stream::data_stream_of(msg_id) else {
+            return Ok(RateRequest {
+                how: RateMethod::MessageInterval,
+                arrived: false,
+            });
+        };
+        let request = mavstack_services::stream::request_data_stream(self.target, group, hz);
+        if self
+            .node
+            .send_on(self.link, &MavMessage::RequestDataStream(request))
+            .await
+            == 0
+        {
+            return Err(SystemError::Stopped);
+        }
+        let arrived = self.comes(msg_id, wait).await;
+        Ok(RateRequest {
+            how: RateMethod::DataStream(group),
+            arrived,
+        })
+    }
+
+    /// Whether message `msg_id` from the system arrives within `wait`.
+    async fn comes(&mut self, msg_id: u32, wait: Duration) -> bool {
+        let until = tokio::time::Instant::now() + wait;
+        while let Ok(Some(incoming)) = tokio::time::timeout_at(until, self.frames.recv()).await {
+            let f = incoming.frame.frame.view();
+            if let Ok(msg) = MavMessage::decode(f.msg_id(), f.payload()) {
+                self.note(Address::new(f.sysid(), f.compid()), &msg);
+            }
+            if f.msg_id() == msg_id && f.sysid() == self.target.system {
+                return true;
+            }
+        }
+        false
+    }
 
     /// Messages `T` from this system from now on, decoded (see [`Telemetry`]).
     pub async fn subscribe<T: Message>(&self) -> Telemetry<T> {

@@ -397,3 +397,28 @@ async fn a_refused_command_carries_the_statustext_that_says_why() {
     gcs.shutdown().await.expect("stops");
     vehicle.shutdown().await.expect("stops");
 }
+
+#[tokio::test]
+async fn a_rate_is_asked_with_set_message_interval_and_else_with_request_data_stream() {
+    use mavstack::dialects::common::{Attitude, MavDataStream};
+    use mavstack::system::RateMethod;
+    for (streams_only, want) in [
+        (false, RateMethod::MessageInterval),
+        (true, RateMethod::DataStream(MavDataStream::EXTRA1)),
+    ] {
+        let mut config =
+            SimVehicle::config(Autopilot::Ardupilot, params::defaults(Autopilot::Ardupilot));
+        config.data_streams_only = streams_only;
+        let (vehicle, gcs) = vehicle_and_gcs(ProtocolVersionSupport::Answer, config).await;
+        let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
+            .await
+            .expect("the vehicle is found");
+        // Off first, so that only the request can bring it back.
+        v.set_message_interval(Attitude::ID, None).await.ok();
+        let rate = v.request_rate(Attitude::ID, 10.0).await.expect("asked");
+        assert_eq!(rate.how, want, "data streams only: {streams_only}");
+        assert!(rate.arrived, "ATTITUDE came: {rate:?}");
+        gcs.shutdown().await.expect("stops");
+        vehicle.shutdown().await.expect("stops");
+    }
+}
