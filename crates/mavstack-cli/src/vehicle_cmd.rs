@@ -165,9 +165,12 @@ pub(crate) fn vehicle_node(args: &VehicleArgs) -> Result<NodeBuilder, Failure> {
             args.protocol_version
         },
     });
+    // Message names in link options resolve in the node's dialect (`common`).
+    let dialect = mavstack::core::MessageTable::of::<mavstack::dialects::common::MavMessage>();
+    builder = builder.dialect(dialect);
     for text in &args.links {
         let mut spec =
-            LinkSpec::parse(text, &|_| None).map_err(|e| Failure::Input(anyhow!("{e}")))?;
+            LinkSpec::parse_in(text, &dialect).map_err(|e| Failure::Input(anyhow!("{e}")))?;
         if !sets_version_or_key(text) {
             if args.mavlink1_only {
                 spec.config.version = VersionMode::Mavlink1;
