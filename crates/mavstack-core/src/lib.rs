@@ -181,25 +181,132 @@ pub fn fuzz_deframer(data: &[u8]) {
     );
 }
 
-/// Fuzzing entry point for frame views: every accessor of a checked frame, and signature
-/// verification, on arbitrary bytes. Never panics.
+/// Fuzzing entry point for frame views and their serialisation: every accessor of a checked
+/// frame, signature verification, and the property that a parsed frame re-serialises to
+/// itself. [`wire::emit`] given the frame's header fields and payload writes the same header
+/// and payload bytes, the checksum the frame carries (under the CRC_EXTRA that makes it
+/// valid, when one does; else the one [`wire::Frame::compute_checksum`] gives), and
+/// [`signing::append_signature`] the same link id and timestamp and the signature computed
+/// over the same signed bytes. A frame that is not in the form `emit` writes (MAVLink 2
+/// trailing zeros, compat flags or unknown incompat flags) re-serialises to that form: same
+/// header fields, same payload once zero-extended. Panics when the property breaks.
 #[doc(hidden)]
 pub fn fuzz_frame(data: &[u8]) {
-    if let Ok(frame) = wire::Frame::new_checked(data) {
-        let _ = (
-            frame.version(),
-            frame.seq(),
-            frame.sysid(),
-            frame.compid(),
-            frame.msg_id(),
+    let Ok(frame) = wire::Frame::new_checked(data) else {
+        return;
+    };
+    let _ = (frame.as_bytes(), frame.signed_bytes(), frame.compat_flags());
+    let key = signing::SecretKey::new([0x5A; 32]);
+    let _ = signing::verify(&frame, &key);
+
+    let version = frame.version();
+    let header_len = version.header_len();
+    let payload = frame.payload();
+    let len = payload.len();
+    // The CRC_EXTRA under which the carried checksum is valid, if any: the CRC of the header
+    // and payload, then each candidate byte.
+    let mut crc = Crc16::new();
+    crc.update(&frame.as_bytes()[1..header_len + len]);
+    let crc_extra = (0..=u8::MAX)
+        .find(|&e| {
+            let mut c = crc;
+            c.update_byte(e);
+            c.value() == frame.checksum()
+        })
+        .unwrap_or(0);
+    let header = wire::FrameHeader {
+        version,
+        seq: frame.seq(),
+        sysid: frame.sysid(),
+        compid: frame.compid(),
+        signed: frame.is_signed(),
+    };
+    let len_byte = u8::try_from(len).unwrap_or(u8::MAX);
+    let info = MessageInfo {
+        id: frame.msg_id(),
+        name: "FUZZ",
+        crc_extra,
+        min_len: len_byte,
+        max_len: len_byte,
+        target_system_offset: None,
+        target_component_offset: None,
+    };
+    let mut out = [0u8; wire::MAX_FRAME_LEN];
+    let written = match wire::emit(&header, &info, payload, &mut out) {
+        Ok(n) => n,
+        Err(e) => panic!("a parsed frame does not re-serialise: {e}"),
+    };
+    let written = match frame.signature() {
+        Some(sig) => {
+            match signing::append_signature(&mut out, written, sig.link_id, sig.timestamp, &key) {
+                Ok(n) => n,
+                Err(e) => panic!("a parsed signature does not re-serialise: {e}"),
+            }
+        }
+        None => written,
+    };
+    let again = match wire::Frame::new_checked(&out[..written]) {
+        Ok(f) => f,
+        Err(e) => panic!("a re-serialised frame does not parse: {e:?}"),
+    };
+    assert_eq!(
+        (again.version(), again.seq(), again.sysid(), again.compid()),
+        (version, frame.seq(), frame.sysid(), frame.compid()),
+        "header"
+    );
+    assert_eq!(again.msg_id(), frame.msg_id(), "message id");
+    assert_eq!(again.is_signed(), frame.is_signed(), "signed flag");
+    let shorter = again.payload().len().min(len);
+    assert_eq!(&again.payload()[..shorter], &payload[..shorter], "payload");
+    assert!(
+        again.payload()[shorter..].iter().all(|&b| b == 0)
+            && payload[shorter..].iter().all(|&b| b == 0),
+        "payload beyond the shorter one is not zero"
+    );
+    assert!(
+        again.check_crc(crc_extra),
+        "checksum of the re-serialised frame"
+    );
+    if let (Some(a), Some(b)) = (again.signature(), frame.signature()) {
+        assert_eq!(
+            (a.link_id, a.timestamp),
+            (b.link_id, b.timestamp),
+            "signature block"
         );
-        let _ = (
-            frame.payload(),
-            frame.checksum(),
-            frame.compute_checksum(0),
-            frame.signature(),
+    }
+    let canonical = match version {
+        wire::Version::V1 => true,
+        wire::Version::V2 => {
+            frame.compat_flags() == 0
+                && frame.incompat_flags() & !wire::INCOMPAT_SIGNED == 0
+                && payload::truncated_len(payload) == len
+        }
+    };
+    if canonical {
+        let end = header_len + len + wire::CHECKSUM_LEN;
+        assert_eq!(
+            &out[..header_len + len],
+            &frame.as_bytes()[..header_len + len],
+            "header and payload bytes"
         );
-        let _ = (frame.as_bytes(), frame.signed_bytes(), frame.compat_flags());
-        let _ = signing::verify(&frame, &signing::SecretKey::new([0; 32]));
+        assert_eq!(
+            again.checksum(),
+            frame.compute_checksum(crc_extra),
+            "checksum"
+        );
+        // With a checksum valid under some CRC_EXTRA, the frame comes back byte for byte
+        // through the checksum, and so do the bytes its signature covers.
+        if frame.check_crc(crc_extra) {
+            assert_eq!(
+                &out[..end],
+                &frame.as_bytes()[..end],
+                "frame bytes through the checksum"
+            );
+            assert_eq!(again.signed_bytes(), frame.signed_bytes(), "signed bytes");
+        }
+    }
+    // The signature appended is the one over the bytes it covers.
+    if let (Some(a), Some(signed)) = (again.signature(), again.signed_bytes()) {
+        assert_eq!(a.value, signing::compute(&key, signed), "signature value");
     }
 }
