@@ -92,7 +92,6 @@ impl CommandRequest {
     /// Whether it asks for PROTOCOL_VERSION: MAV_CMD_REQUEST_PROTOCOL_VERSION (519), or
     /// MAV_CMD_REQUEST_MESSAGE (512) with param1 = 300.
     pub(crate) fn requests_protocol_version(&self) -> bool {
-        #[allow(clippy::float_cmp)] // an integer message id carried in a float, exactly
         let asks_300 = self.param1 == ProtocolVersion::ID as f32;
         self.command == MavCmd::REQUEST_PROTOCOL_VERSION
             || (self.command == MavCmd::REQUEST_MESSAGE && asks_300)

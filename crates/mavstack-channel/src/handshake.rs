@@ -110,12 +110,8 @@ impl HandshakeMethod {
     }
 
     /// The command's param1: 1 for MAV_CMD_REQUEST_PROTOCOL_VERSION, the message id for
-    /// MAV_CMD_REQUEST_MESSAGE.
+    /// MAV_CMD_REQUEST_MESSAGE (message ids are 24 bits: exact in an f32).
     #[must_use]
-    #[allow(
-        clippy::cast_precision_loss,
-        reason = "message ids are 24 bits: exact in an f32"
-    )]
     pub const fn param1(self) -> f32 {
         match self {
             Self::RequestProtocolVersion => 1.0,

@@ -314,7 +314,7 @@ impl Config {
             }
             out.push_str(
                 "#[allow(unused_imports, rustdoc::bare_urls, rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags, \
-                 unused_qualifications, clippy::doc_markdown, clippy::too_many_lines, clippy::unreadable_literal)]\n",
+                 unused_qualifications)]\n",
             );
             match self.layout {
                 Layout::Files => {

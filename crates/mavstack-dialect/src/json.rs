@@ -194,7 +194,6 @@ fn scalar_from_json(field: &Field, p: PrimitiveType, json: &Json) -> Result<Valu
         };
         return Ok(if p == PrimitiveType::F32 {
             // The shortest decimal of an f32 reads back exactly through f64.
-            #[allow(clippy::cast_possible_truncation)]
             Value::F32(v as f32)
         } else {
             Value::F64(v)

@@ -86,8 +86,12 @@ pub fn load(name: &str) -> Result<Dialect, Error> {
 }
 
 /// Fuzzing entry point: loads `data` as a dialect XML file (with an include of itself and of a
-/// missing file reachable, so cycles and read errors are exercised) and, if it loads, runs
-/// the codec over every message. Never panics; errors are the expected outcome.
+/// missing file reachable, so cycles and read errors are exercised) and, if it loads, checks
+/// that every message encodes and decodes to itself through the run-time codec: the values
+/// decoded from a payload (the input's bytes, repeated) encode without error to the message's
+/// full length, and decode from that encoding to the same values (compared as their
+/// encoding, so a NaN equals itself). Errors while loading are the expected outcome; a
+/// broken round trip panics.
 #[doc(hidden)]
 pub fn fuzz_dialect_xml(data: &[u8]) {
     struct OneFile<'a>(&'a str);
@@ -109,10 +113,35 @@ pub fn fuzz_dialect_xml(data: &[u8]) {
     let Ok(dialect) = Loader::new(OneFile(text)).load("fuzz.xml") else {
         return;
     };
-    let payload = [0xA5u8; mavstack_core::MAX_PAYLOAD_LEN];
+    let mut payload = [0xA5u8; mavstack_core::MAX_PAYLOAD_LEN];
+    for (slot, byte) in payload.iter_mut().zip(data.iter().cycle()) {
+        *slot = *byte;
+    }
     for m in &dialect.messages {
         let values = codec::decode(m, &payload[..m.max_len.min(payload.len())]);
-        let mut out = [0u8; mavstack_core::MAX_PAYLOAD_LEN];
-        let _ = codec::encode(m, &values, &mut out);
+        let mut first = [0u8; mavstack_core::MAX_PAYLOAD_LEN];
+        let len = match codec::encode(m, &values, &mut first) {
+            Ok(len) => len,
+            Err(e) => panic!("{}: decoded values do not encode: {e}", m.name),
+        };
+        assert_eq!(len, m.max_len, "{}: encoded length", m.name);
+        let again = codec::decode(m, &first[..len]);
+        assert_eq!(
+            again.len(),
+            m.fields.len(),
+            "{}: one value per field",
+            m.name
+        );
+        let mut second = [0u8; mavstack_core::MAX_PAYLOAD_LEN];
+        match codec::encode(m, &again, &mut second) {
+            Ok(n) => assert_eq!(n, len, "{}: encoded length", m.name),
+            Err(e) => panic!("{}: re-decoded values do not encode: {e}", m.name),
+        }
+        assert_eq!(
+            first[..len],
+            second[..len],
+            "{}: values do not decode to themselves",
+            m.name
+        );
     }
 }

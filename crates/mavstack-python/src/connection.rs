@@ -284,9 +284,7 @@ impl LogConnection {
         if self.log.is_empty() {
             100.0
         } else {
-            #[allow(clippy::cast_precision_loss)]
-            let p = 100.0 * self.scan.position() as f64 / self.log.len() as f64;
-            p
+            100.0 * self.scan.position() as f64 / self.log.len() as f64
         }
     }
 

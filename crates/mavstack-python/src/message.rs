@@ -173,7 +173,6 @@ impl Message {
             len,
             verified,
             // pymavlink: `tusec * 1.0e-6`, the same floating-point operation.
-            #[allow(clippy::cast_precision_loss)]
             timestamp: if tlog { ts_us as f64 * 1.0e-6 } else { 0.0 },
             link: (ts_us & 3) as u8,
         }

@@ -126,7 +126,6 @@ fn item(v: &Json, seq: usize) -> Result<MissionItemInt, String> {
                     .as_f64()
                     .ok_or_else(|| format!("\"{key}\" must be a number or null, got {x}"))?;
                 // The nearest f32, which is what MISSION_ITEM_INT carries.
-                #[allow(clippy::cast_possible_truncation)]
                 let narrowed = f as f32;
                 if narrowed.is_finite() {
                     Ok(narrowed)
