@@ -193,6 +193,17 @@ def bridge_seeds(rng):
     write("bridge", "remap_shared", b"\x03" + bytes([0, 0, 1, 0, 1, 0, 0, 0, 1, 1, 1, 0, 0, 0, 0, 2, 1, 2, 1, 0, 0]))
     write("bridge", "remap_to", b"\x03" + bytes([0, 0, 1, 0, 1, 0, 0, 0, 1, 1, 1, 0, 0, 0, 0x83, 1, 1, 2, 1, 0, 0]))
     write("bridge", "remap_raw", b"\x03" + b"".join(raw_record(6 + (i % 2), f) for i, f in enumerate(raw)))
+    # The same frames with one payload byte flipped (their checksums fail): requests and an ACK
+    # the tracker must refuse, frames the remap must drop; then built ones damaged (op bit 6).
+    def flipped(frame):
+        b = bytearray(frame)
+        b[12] ^= 0x01
+        return bytes(b)
+
+    write("bridge", "commands_corrupt", b"\x02" + raw_record(6, flipped(raw[0])) + raw_record(6, flipped(raw[1])) +
+          bytes([0, 1, 1, 1, 1, 0, 0]) + raw_record(7, flipped(raw[2])) + bytes([0x40, 1, 1, 1, 1, 9, 0]))
+    write("bridge", "remap_corrupt", b"\x03" + bytes([0, 0, 1, 0, 1, 0, 0]) +
+          b"".join(raw_record(6 + (i % 2), flipped(f)) for i, f in enumerate(raw)) + bytes([0x41, 1, 1, 2, 1, 12, 0]))
     for i in range(2):
         write("bridge", "random_%d" % i, bytes([2 + i]) + bytes(rng.randrange(256) for _ in range(200)))
 

@@ -1,7 +1,8 @@
 //! The fuzzing entry point of the bridge's parsers of outside input: link strings, keys
 //! heard from a broker, command requests and the frames that answer them, and the sysid
 //! remapping of frames from vehicles (cargo-fuzz target `bridge`; the seeds are replayed
-//! by `tests/fuzz_corpus.rs`).
+//! by `tests/fuzz_corpus.rs`). Across the last two: no frame that fails its checksum ever
+//! leaves the command tracker or the remap with a valid one.
 
 use core::time::Duration;
 
@@ -12,6 +13,7 @@ use mavstack_dialects::common::{
     CommandAck, CommandInt, CommandLong, Heartbeat, MavCmd, MavMessage, MavResult,
 };
 
+use crate::checksum::{Checksum, check};
 use crate::command::{CommandTiming, Commands, Reply};
 use crate::keys::{FleetTopic, fleet_topic};
 use crate::remap::{Remapped, SysidMap};
@@ -27,13 +29,17 @@ use crate::{BridgeSpec, Keys, Side, Topic, Transport};
 ///   key is exactly the key it writes for that; what a ground bridge takes for a vehicle's
 ///   frame or liveliness key names a vehicle id that is a key segment (and, for a frame, a
 ///   sysid, a compid and a message name or number).
-/// - `2`: records driving the command tracker (requests, ACKs built from the data, raw
-///   frames, time passing). Every request it takes gets exactly one final reply, only
-///   requests it took get replies, resends are whole COMMAND_LONG/INT frames, and after
-///   enough time nothing waits.
-/// - `3`: records of frames from and to four vehicles through the sysid map. A rewritten
-///   frame has a good checksum and the mapped sysid (or target); local ids are never 0,
-///   254 or 255, and each maps back to the one (vehicle, sysid) it was given for.
+/// - `2`: records driving the command tracker (requests, ACKs built from the data, some with
+///   a byte flipped, raw frames, time passing). Every request it takes gets exactly one
+///   final reply, only requests it took get replies, resends are whole COMMAND_LONG/INT
+///   frames, and after enough time nothing waits. A request whose checksum fails is never
+///   taken: every frame the tracker lets out (a request, a resend) has a good checksum and
+///   comes of a request that had one; a corrupt ACK answers nothing.
+/// - `3`: records of frames from and to four vehicles through the sysid map (some with a
+///   byte flipped). A rewritten frame has a good checksum and the mapped sysid (or target);
+///   a frame whose checksum fails is dropped as corrupt, one that cannot be checked (an
+///   unknown id) is never rewritten; local ids are never 0, 254 or 255, and each maps back
+///   to the one (vehicle, sysid) it was given for.
 #[doc(hidden)]
 pub fn fuzz_bridge(data: &[u8]) {
     let Some((&part, rest)) = data.split_first() else {
@@ -190,6 +196,20 @@ fn records(mut data: &[u8], mut each: impl FnMut(u8, &[u8])) {
     }
 }
 
+/// `frame` with one byte flipped when `op` says so (bit 6), at a place `at` picks.
+fn damaged(op: u8, mut frame: Vec<u8>, at: u8) -> Vec<u8> {
+    if op & 0x40 != 0 && !frame.is_empty() {
+        let i = usize::from(at) % frame.len();
+        frame[i] ^= 1 << (at % 8);
+    }
+    frame
+}
+
+/// The checksum of `frame` by the common dialect.
+fn checksum(frame: &[u8]) -> Checksum {
+    check(frame, |id| MavMessage::info(id).copied())
+}
+
 fn six(record: &[u8]) -> [u8; 6] {
     let mut b = [0u8; 6];
     for (d, s) in b.iter_mut().zip(record) {
@@ -226,27 +246,37 @@ fn commands(data: &[u8]) {
         for f in resend.drain(..) {
             let view = Frame::new_checked(&f[..]).unwrap_or_else(|e| panic!("{e:?}"));
             assert!([CommandLong::ID, CommandInt::ID].contains(&view.msg_id()));
+            assert_eq!(checksum(&f), Checksum::Good, "a resend's checksum");
         }
     };
     records(data, |op, record| {
         let b = six(record);
         match op % 8 {
             0 | 1 => {
-                let frame = built(op % 8, &b);
+                let frame = damaged(op, built(op % 8, &b), b[4]);
                 let key = (b[2] % 3, b[3] % 3);
-                if tracker.handle_request(now, key, &frame, next).is_ok() {
+                if let Ok(out) = tracker.handle_request(now, key, &frame, next) {
+                    taken_good(&frame, &out);
                     taken.push(next);
                 }
                 next += 1;
             }
-            2 | 3 => tracker.handle_frame(now, &built(2, &b), &mut replies),
+            2 | 3 => {
+                let ack = damaged(op, built(2, &b), b[4]);
+                let before = replies.len();
+                tracker.handle_frame(now, &ack, &mut replies);
+                if checksum(&ack) != Checksum::Good {
+                    assert_eq!(replies.len(), before, "a corrupt ACK answered a request");
+                }
+            }
             4 | 5 => {
                 now += Duration::from_millis(u64::from(b[0]) * 10);
                 tracker.handle_timeout(now, &mut resend, &mut replies);
             }
             6 => {
                 let key = (b[0] % 3, b[1] % 3);
-                if tracker.handle_request(now, key, record, next).is_ok() {
+                if let Ok(out) = tracker.handle_request(now, key, record, next) {
+                    taken_good(record, &out);
                     taken.push(next);
                 }
                 next += 1;
@@ -266,6 +296,17 @@ fn commands(data: &[u8]) {
     for t in &taken {
         assert!(finals.contains(t), "request {t} got no final reply");
     }
+}
+
+/// A request the tracker took had a good checksum, and what it lets out is that frame.
+fn taken_good(request: &[u8], out: &[u8]) {
+    assert_eq!(
+        checksum(request),
+        Checksum::Good,
+        "a request taken with a bad checksum"
+    );
+    assert_eq!(checksum(out), Checksum::Good);
+    assert!(request.starts_with(out), "the request let out changed");
 }
 
 fn remap(data: &[u8]) {
@@ -292,14 +333,21 @@ fn remap(data: &[u8]) {
             }
             3..=5 => {
                 let mut f = built(op % 2, &b);
-                if let Some(t) = f.get_mut(10 + 30) {
-                    // COMMAND_LONG's target_system sits after its seven floats and command.
-                    *t = b[2];
+                if let Ok(mut view) = Frame::new_checked(&mut f[..]) {
+                    // COMMAND_LONG's and COMMAND_INT's target_system sits at 30 (after their
+                    // params and command); the checksum made good again.
+                    let info = MavMessage::info(view.msg_id()).copied();
+                    if let (Some(t), Some(info)) = (view.payload_mut().get_mut(30), info) {
+                        *t = b[2];
+                        view.fill_checksum(info.crc_extra);
+                    }
                 }
                 f
             }
             _ => record.to_vec(),
         };
+        let frame = damaged(op, frame, b[4]);
+        let sum = checksum(&frame);
         let towards = op & 0x80 != 0;
         let before = Frame::new_checked(&frame[..])
             .ok()
@@ -309,6 +357,16 @@ fn remap(data: &[u8]) {
         } else {
             map.from_vehicle(vid, &frame, info)
         };
+        match sum {
+            Checksum::Bad => assert_eq!(result, Remapped::Corrupt, "a corrupt frame went on"),
+            Checksum::Unknown => assert!(
+                matches!(result, Remapped::Same | Remapped::Dropped),
+                "a frame that cannot be checked: {result:?}"
+            ),
+            Checksum::Good | Checksum::NotAFrame => {
+                assert_ne!(result, Remapped::Corrupt, "a good frame taken for corrupt");
+            }
+        }
         if let Remapped::Rewritten(out) = result {
             let view = Frame::new_checked(&out[..]).unwrap_or_else(|e| panic!("{e:?}"));
             let message = info(view.msg_id()).unwrap_or_else(|| panic!("{}", view.msg_id()));
