@@ -441,16 +441,17 @@ impl CommandHandler for Craft {
                 // 21196 in param2 forces, as both autopilots define it.
                 let (arm, force) = (p[0] >= 0.5, p[1] == 21196.0);
                 if arm && !force && !self.flight.is_armed() && now < self.ready_at {
-                    // Both autopilots refuse and say why in STATUSTEXT; ArduPilot's ACK
-                    // says FAILED, PX4's DENIED.
-                    let (text, result) = match self.autopilot {
+                    // As the flight stacks refuse (seen on their SITL): ArduPilot answers
+                    // FAILED and says why in STATUSTEXT; PX4 v1.16 answers
+                    // TEMPORARILY_REJECTED and says why in EVENT messages (libevents), not
+                    // in STATUSTEXT.
+                    return match self.autopilot {
                         Autopilot::Ardupilot => {
-                            ("PreArm: Need Position Estimate", MavResult::FAILED)
+                            self.flight.warn("PreArm: Need Position Estimate");
+                            done(MavResult::FAILED)
                         }
-                        Autopilot::Px4 => ("Arming denied: estimator not ready", MavResult::DENIED),
+                        Autopilot::Px4 => done(MavResult::TEMPORARILY_REJECTED),
                     };
-                    self.flight.warn(text);
-                    return done(result);
                 }
                 match self.flight.arm(arm, force) {
                     Ok(()) => accepted,
