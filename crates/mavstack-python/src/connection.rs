@@ -14,7 +14,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList, PySet, PyString, PyTuple};
 
 use crate::dialect::Dialect;
-use crate::log_data::{Found, LogBytes, Scan, is_tlog};
+use crate::log_data::{CHECK_EVERY, Found, LogBytes, Scan, is_tlog};
 use crate::message::Message;
 
 /// A key given as 32 bytes or 64 hex digits.
@@ -54,6 +54,8 @@ pub(crate) struct LogConnection {
     tlog: bool,
     key: Option<SecretKey>,
     scan: Scan,
+    /// The scan position at which the file's length is looked at next.
+    next_check: usize,
     /// Latest message per (sysid, message index): pymavlink's `sysid_state[s].messages`.
     by_sysid: HashMap<(u8, usize), Found>,
     /// Latest message per message index: pymavlink's `messages`.
@@ -75,6 +77,7 @@ impl LogConnection {
         let tlog = is_tlog(&path);
         Ok(Self {
             scan: Scan::new(tlog, key.clone()),
+            next_check: CHECK_EVERY,
             path,
             log,
             dialect,
@@ -100,12 +103,23 @@ impl LogConnection {
         )
     }
 
-    /// The next good frame, recorded as the latest of its type.
-    fn next_found(&mut self) -> Option<Found> {
-        let found = self.scan.next(&self.log, &self.dialect)?;
+    /// The next good frame, recorded as the latest of its type. `OSError` naming the file
+    /// when it was truncated since it was opened (looked at every [`CHECK_EVERY`] bytes and
+    /// at the end).
+    fn next_found(&mut self) -> PyResult<Option<Found>> {
+        let found = self.scan.next(&self.log, &self.dialect);
+        if found.is_none() || self.scan.position() >= self.next_check {
+            self.next_check = self.scan.position().saturating_add(CHECK_EVERY);
+            self.log
+                .check_length()
+                .map_err(|e| PyOSError::new_err(e.to_string()))?;
+        }
+        let Some(found) = found else {
+            return Ok(None);
+        };
         self.by_sysid.insert((found.sysid, found.message), found);
         self.latest.insert(found.message, found);
-        Some(found)
+        Ok(Some(found))
     }
 
     /// [`Self::wanted`], remembered for the same `type` argument as the last call's (a loop
@@ -223,8 +237,8 @@ impl LogConnection {
 #[pymethods]
 impl LogConnection {
     /// The next message, or `None` at the end of the log.
-    fn recv_msg(&mut self) -> Option<Message> {
-        self.next_found().map(|f| self.message(&f))
+    fn recv_msg(&mut self) -> PyResult<Option<Message>> {
+        Ok(self.next_found()?.map(|f| self.message(&f)))
     }
 
     /// The next message of the given type(s) for which `condition` (a Python expression over
@@ -246,7 +260,7 @@ impl LogConnection {
             _ => None,
         };
         loop {
-            let Some(found) = slf.borrow_mut().next_found() else {
+            let Some(found) = slf.borrow_mut().next_found()? else {
                 return Ok(None);
             };
             if wanted.as_ref().is_some_and(|w| !w[found.message]) {
@@ -265,7 +279,7 @@ impl LogConnection {
         slf
     }
 
-    fn __next__(&mut self) -> Option<Message> {
+    fn __next__(&mut self) -> PyResult<Option<Message>> {
         self.recv_msg()
     }
 
@@ -318,11 +332,12 @@ impl LogConnection {
     /// Back to the start of the log (counts and latest messages cleared).
     fn rewind(&mut self) {
         self.scan = Scan::new(self.tlog, self.key.clone());
+        self.next_check = CHECK_EVERY;
         self.by_sysid.clear();
         self.latest.clear();
     }
 
-    /// Nothing to release early: the mapping goes with the last message that uses it.
+    /// Nothing to release early: the log's bytes go with the last message that uses them.
     fn close(&mut self) {}
 
     fn __enter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {

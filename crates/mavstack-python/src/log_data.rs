@@ -1,10 +1,11 @@
-//! A log file's bytes (mapped, not read into memory) and the scan over them that finds each
+//! A log file's bytes (read into memory, never mapped) and the scan over them that finds each
 //! good frame: tlog records or a raw stream, checksums checked, signatures verified with a
 //! key, everything else counted.
 
 use std::collections::HashMap;
 use std::fs::File;
-use std::path::Path;
+use std::io::Read as _;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use mavstack_core::parse::{Item, SliceParser};
@@ -14,46 +15,87 @@ use mavstack_core::wire::Frame;
 
 use crate::dialect::Dialect;
 
-/// A log's bytes: the file mapped into memory (pages are read on demand and can be dropped
-/// by the kernel again, so a log larger than memory works), or owned bytes for what cannot
-/// be mapped (an empty file, a pipe).
-pub(crate) enum LogBytes {
-    /// A mapped file.
-    Mapped(memmap2::Mmap),
-    /// Bytes read.
-    Owned(Vec<u8>),
+/// How many bytes a scan goes between two looks at the file's length.
+pub(crate) const CHECK_EVERY: usize = 1 << 20;
+
+/// A log's bytes, read into memory when the log is opened, with the file kept open to notice
+/// a log that another program shortens while it is read.
+///
+/// Read, not mapped: a mapped file that is truncated kills the process with SIGBUS at the
+/// next access of a page past its new end, which no Python code can catch. Messages and
+/// tables decode from these bytes later, so they must stay valid whatever happens to the
+/// file.
+pub(crate) struct LogBytes {
+    bytes: Vec<u8>,
+    /// The file (`None` for what has no length to watch: a pipe, a device).
+    file: Option<File>,
+    path: PathBuf,
 }
 
 impl core::ops::Deref for LogBytes {
     type Target = [u8];
 
     fn deref(&self) -> &[u8] {
-        match self {
-            Self::Mapped(m) => m,
-            Self::Owned(v) => v,
-        }
+        &self.bytes
+    }
+}
+
+/// The log was shortened while it was read.
+#[derive(Debug)]
+pub(crate) struct Truncated {
+    /// The log's path.
+    pub(crate) path: PathBuf,
+    /// The bytes read when it was opened.
+    pub(crate) read: u64,
+    /// Its length now.
+    pub(crate) now: u64,
+}
+
+impl core::fmt::Display for Truncated {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "{}: the file was truncated while it was read ({} bytes when opened, {} now); \
+             copy a log that is still being written before reading it",
+            self.path.display(),
+            self.read,
+            self.now
+        )
     }
 }
 
 impl LogBytes {
     /// The bytes of the file at `path`.
     pub(crate) fn open(path: &Path) -> std::io::Result<Arc<Self>> {
-        let file = File::open(path)?;
+        let mut file = File::open(path)?;
         let meta = file.metadata()?;
-        if !meta.is_file() || meta.len() == 0 {
-            return Ok(Arc::new(Self::Owned(std::fs::read(path)?)));
+        let mut bytes = Vec::new();
+        if meta.is_file() {
+            bytes.reserve_exact(usize::try_from(meta.len()).unwrap_or(0));
         }
-        // SAFETY: the mapping is read-only and private to this process. Rust's aliasing rules
-        // would be broken only if another process truncated or rewrote the file while it is
-        // mapped; a log being analysed is not written to (the README says so: copy a log that
-        // is still being recorded). Truncation would raise SIGBUS, not corrupt memory.
-        #[allow(unsafe_code)]
-        let map = unsafe { memmap2::MmapOptions::new().map(&file)? };
-        #[cfg(unix)]
-        {
-            let _ = map.advise(memmap2::Advice::Sequential);
+        file.read_to_end(&mut bytes)?;
+        Ok(Arc::new(Self {
+            bytes,
+            file: meta.is_file().then_some(file),
+            path: path.to_owned(),
+        }))
+    }
+
+    /// `Err` when the file is now shorter than what was read (a log truncated by another
+    /// program while it is read: what is in memory is no longer the file).
+    pub(crate) fn check_length(&self) -> Result<(), Truncated> {
+        let Some(file) = &self.file else {
+            return Ok(());
+        };
+        let read = self.bytes.len() as u64;
+        match file.metadata() {
+            Ok(meta) if meta.len() < read => Err(Truncated {
+                path: self.path.clone(),
+                read,
+                now: meta.len(),
+            }),
+            _ => Ok(()),
         }
-        Ok(Arc::new(Self::Mapped(map)))
     }
 }
 

@@ -167,7 +167,7 @@ impl ColumnBuilder for TextColumn {
     fn extend(&mut self, rows: &[u8], stride: usize) {
         for row in rows.chunks_exact(stride) {
             let raw = until_nul(&row[self.offset..self.offset + self.count]);
-            match std::str::from_utf8(raw) {
+            match core::str::from_utf8(raw) {
                 Ok(text) if raw.is_ascii() => self.builder.append_value(text),
                 _ => self
                     .builder
@@ -396,7 +396,7 @@ pub(crate) fn read_tlog<'py>(
         }
         mask
     });
-    let (order, mut index) = py.detach(|| {
+    let (order, mut index, length) = py.detach(|| {
         let bar = progress.then(|| crate::progress::bar(log.len() as u64, &path));
         let mut scan = Scan::new(tlog, key);
         let mut order = Vec::new();
@@ -424,8 +424,9 @@ pub(crate) fn read_tlog<'py>(
         if let Some(bar) = bar {
             bar.finish_and_clear();
         }
-        (order, index)
+        (order, index, log.check_length())
     });
+    length.map_err(|e| PyOSError::new_err(e.to_string()))?;
     let out = PyDict::new(py);
     for m in order {
         let entries = index.remove(&m).unwrap_or_default();
