@@ -9,7 +9,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use mavstack_core::wire::Frame;
-use mavstack_router::{InfoFn, LinkConfig, is_control};
+use mavstack_router::{LinkConfig, MessageTable, is_control};
 use mavstack_transport::{ExternalPeer, Link, PeerId, clock};
 use tokio::task::JoinHandle;
 
@@ -202,7 +202,7 @@ pub(crate) trait Broker: Send + Sync + 'static {
 /// (the client counts its connections there).
 pub(crate) fn start<B: Broker>(
     spec: &BridgeSpec,
-    dialect: InfoFn,
+    dialect: MessageTable,
     broker: B,
     stats: Arc<BridgeStats>,
 ) -> Bridge {
@@ -313,7 +313,7 @@ impl<B: Broker> Io<B> {
 struct Vehicle<B: Broker> {
     io: Io<B>,
     keys: Keys,
-    dialect: InfoFn,
+    dialect: MessageTable,
     commands: Commands<B::ReplyTo>,
 }
 
@@ -367,7 +367,7 @@ impl<B: Broker> Vehicle<B> {
         };
         self.commands.handle_frame(clock::now(), frame, replies);
         let id = view.msg_id();
-        let name = (self.dialect.0)(id).map(|i| i.name);
+        let name = self.dialect.info(id).map(|i| i.name);
         let key = self.keys.message(view.sysid(), view.compid(), name, id);
         self.io.queue(&frame[..view.frame_len()], id, key, None);
     }
@@ -381,7 +381,7 @@ impl<B: Broker> Vehicle<B> {
                 reply,
             } => match self.keys.parse(&topic) {
                 Some(Topic::In) => {
-                    if checksum::any_bad(&payload, self.dialect.0) {
+                    if checksum::any_bad(&payload, |id| self.dialect.info(id).copied()) {
                         self.io.stats.bad_crc.fetch_add(1, Ordering::Relaxed);
                         tracing::debug!("{}: a corrupt frame on {topic} dropped", B::NAME);
                         return;
@@ -445,7 +445,7 @@ struct Ground<B> {
     fleet: String,
     /// The vehicles wanted (all when empty).
     vids: Vec<String>,
-    dialect: InfoFn,
+    dialect: MessageTable,
     vehicles: HashMap<String, PeerId>,
     by_peer: HashMap<PeerId, Keys>,
     /// Vehicles that share a sysid get distinct ones here.
@@ -497,7 +497,10 @@ impl<B: Broker> Ground<B> {
         let topic = keys.input();
         let key = format!("{topic}/{}/{}/{id}", view.sysid(), view.compid());
         let frame = &frame[..view.frame_len()];
-        match self.sysids.to_vehicle(keys.vid(), frame, self.dialect.0) {
+        match self
+            .sysids
+            .to_vehicle(keys.vid(), frame, |id| self.dialect.info(id).copied())
+        {
             Remapped::Same => self.io.queue(frame, id, key, Some(topic)),
             Remapped::Rewritten(f) => self.io.queue(&f, id, key, Some(topic)),
             Remapped::Dropped => {}
@@ -513,7 +516,10 @@ impl<B: Broker> Ground<B> {
             Incoming::Message { topic, payload, .. } => match fleet_topic(&self.fleet, &topic) {
                 Some(FleetTopic::Frame { vid }) => {
                     if let Some(peer) = self.vehicle(vid).await {
-                        let frame = match self.sysids.from_vehicle(vid, &payload, self.dialect.0) {
+                        let frame = match self
+                            .sysids
+                            .from_vehicle(vid, &payload, |id| self.dialect.info(id).copied())
+                        {
                             Remapped::Same => payload,
                             Remapped::Rewritten(f) => f,
                             Remapped::Dropped => return,

@@ -104,7 +104,10 @@ pub enum OpenError {
 /// # Errors
 /// [`OpenError`]: a kind of link this build does not carry, or Zenoh settings refused.
 #[cfg(any(feature = "mqtt", feature = "zenoh"))]
-pub fn open(spec: &BridgeSpec, dialect: mavstack_router::InfoFn) -> Result<Bridge, OpenError> {
+pub fn open(
+    spec: &BridgeSpec,
+    dialect: mavstack_router::MessageTable,
+) -> Result<Bridge, OpenError> {
     #[cfg(not(all(feature = "mqtt", feature = "zenoh", feature = "tls")))]
     let not_built = |scheme, feature| OpenError::NotBuilt {
         name: spec.name.clone(),

@@ -155,6 +155,7 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
     let mut log = args.log.clone();
     let mut dialect_name = args.dialect.clone();
     let mut conf_links = Vec::new();
+    let mut report_stats = false;
     if let Some(path) = &args.conf {
         let text = std::fs::read_to_string(path)
             .map_err(|e| Failure::Input(anyhow!("cannot read {}: {e}", path.display())))?;
@@ -183,6 +184,7 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         if let Some(d) = conf.general.dialect.filter(|d| d != "auto") {
             dialect_name = d;
         }
+        report_stats = conf.general.report_stats;
         conf_links = conf.links;
     }
     // Filters and rates given by message name resolve in the router's own dialect.
@@ -215,7 +217,13 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
             "no links: give connection strings, --conf FILE or --tcp-server PORT"
         )));
     }
-    let stats_every = args.stats.map(|s| seconds(s, "--stats")).transpose()?;
+    // The file's ReportStats prints the statistics as --stats does, once a second as
+    // mavlink-router does, unless --stats gives the period.
+    let stats_every = args
+        .stats
+        .map(|s| seconds(s, "--stats"))
+        .transpose()?
+        .or_else(|| report_stats.then_some(Duration::from_secs(1)));
     let http = args.http.addr()?;
     // The node runs on a thread of its own, waiting on its UDP sockets directly (no
     // scheduler between a datagram's wake-up and the forwarded frames); one runtime thread
