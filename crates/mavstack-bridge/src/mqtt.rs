@@ -74,8 +74,9 @@ pub(crate) fn open(spec: &BridgeSpec, dialect: MessageTable) -> Result<Bridge, O
     let (client, events) = AsyncClient::new(options, CLIENT_QUEUE);
     let stats = Arc::new(BridgeStats::default());
     let (tx, rx) = mpsc::channel(CLIENT_QUEUE);
-    let pump = tokio::spawn(pump(events, tx, Arc::clone(&stats)));
+    let pump = tokio::spawn(pump(events, tx, Arc::clone(&stats), spec.name.clone()));
     let broker = Mqtt {
+        link: spec.name.clone(),
         client,
         incoming: rx,
         pump,
@@ -131,8 +132,14 @@ mod tls {
 
 /// Runs rumqttc's event loop (which also reconnects) and hands on what the bridge needs.
 /// Alone on its task, so that publishing never waits on the network read and the other way
-/// round.
-async fn pump(mut events: EventLoop, tx: mpsc::Sender<Incoming<ReplyTo>>, stats: Arc<BridgeStats>) {
+/// round. A broker that cannot be reached or drops the connection is a warning naming the
+/// link, once per attempt (the back-off spaces them, at most [`MAX_BACKOFF`] apart).
+async fn pump(
+    mut events: EventLoop,
+    tx: mpsc::Sender<Incoming<ReplyTo>>,
+    stats: Arc<BridgeStats>,
+    link: String,
+) {
     let mut backoff = Duration::from_millis(100);
     loop {
         match events.poll().await {
@@ -160,7 +167,7 @@ async fn pump(mut events: EventLoop, tx: mpsc::Sender<Incoming<ReplyTo>>, stats:
                 if tx.is_closed() {
                     return;
                 }
-                tracing::info!("mqtt: {e}; reconnecting in {backoff:?}");
+                tracing::warn!(link = %link, "mqtt: broker connection: {e}; reconnecting in {backoff:?}");
                 tokio::time::sleep(backoff).await;
                 backoff = (backoff * 2).min(MAX_BACKOFF);
             }
@@ -185,6 +192,8 @@ pub(crate) struct ReplyTo {
 
 /// The client, and what its event loop hands on.
 struct Mqtt {
+    /// The link's name, for the log.
+    link: String,
     client: AsyncClient,
     incoming: mpsc::Receiver<Incoming<ReplyTo>>,
     pump: JoinHandle<()>,
@@ -230,7 +239,7 @@ impl Broker for Mqtt {
         };
         for f in filters {
             if let Err(e) = self.client.subscribe(f.clone(), QoS::AtLeastOnce).await {
-                tracing::warn!("mqtt: subscribing to {f}: {e}");
+                tracing::warn!(link = %self.link, "mqtt: subscribing to {f}: {e}");
             }
         }
         if let Interest::Vehicle(keys) = interest
@@ -239,7 +248,7 @@ impl Broker for Mqtt {
                 .publish(keys.alive(), QoS::AtLeastOnce, true, "online")
                 .await
         {
-            tracing::warn!("mqtt: publishing online: {e}");
+            tracing::warn!(link = %self.link, "mqtt: publishing online: {e}");
         }
     }
 
@@ -268,7 +277,7 @@ impl Broker for Mqtt {
             payload,
             props,
         ) {
-            tracing::warn!("mqtt: a command reply could not be queued: {e}");
+            tracing::warn!(link = %self.link, "mqtt: a command reply could not be queued: {e}");
         }
     }
 

@@ -47,6 +47,7 @@ pub(crate) fn open(spec: &BridgeSpec, dialect: MessageTable) -> Result<Bridge, O
     let (incoming_tx, incoming) = flume::bounded(CLIENT_QUEUE);
     let (done_tx, done) = oneshot::channel();
     let session = SessionThread {
+        link: spec.name.clone(),
         config,
         interest: Interest::of(spec),
         control: control_rx,
@@ -65,6 +66,7 @@ pub(crate) fn open(spec: &BridgeSpec, dialect: MessageTable) -> Result<Bridge, O
             reason: format!("starting its thread: {e}"),
         })?;
     let broker = Zenoh {
+        link: spec.name.clone(),
         control,
         telemetry,
         incoming,
@@ -126,6 +128,8 @@ impl core::fmt::Debug for Request {
 
 /// The bridge's side: the threads' queues and what Zenoh delivered.
 struct Zenoh {
+    /// The link's name, for the log.
+    link: String,
     control: flume::Sender<Job>,
     telemetry: flume::Sender<Job>,
     incoming: flume::Receiver<Incoming<Request>>,
@@ -161,7 +165,7 @@ impl Broker for Zenoh {
             answer,
         };
         if self.control.try_send(job).is_err() {
-            tracing::warn!("zenoh: a command reply could not be queued");
+            tracing::warn!(link = %self.link, "zenoh: a command reply could not be queued");
         }
     }
 
@@ -181,6 +185,8 @@ impl Broker for Zenoh {
 
 /// The thread that owns the session.
 struct SessionThread {
+    /// The link's name, for the log.
+    link: String,
     config: zenoh::Config,
     interest: Interest,
     control: flume::Receiver<Job>,
@@ -197,7 +203,7 @@ impl SessionThread {
         let declared = match self.declare(&session) {
             Ok(declared) => declared,
             Err(e) => {
-                tracing::error!("zenoh: declaring the link's keys: {e}");
+                tracing::error!(link = %self.link, "zenoh: declaring the link's keys: {e}");
                 return;
             }
         };
@@ -207,17 +213,18 @@ impl SessionThread {
         }
         let telemetry = {
             let (session, jobs) = (session.clone(), self.telemetry.clone());
+            let link = self.link.clone();
             std::thread::Builder::new()
                 .name("zenoh telemetry".into())
-                .spawn(move || serve(&session, &jobs, Lane::Telemetry))
+                .spawn(move || serve(&session, &jobs, Lane::Telemetry, &link))
         };
-        serve(&session, &self.control, Lane::Control);
+        serve(&session, &self.control, Lane::Control, &self.link);
         if let Ok(t) = telemetry {
             let _ = t.join();
         }
         drop(declared);
         if let Err(e) = session.close().wait() {
-            tracing::debug!("zenoh: closing the session: {e}");
+            tracing::debug!(link = %self.link, "zenoh: closing the session: {e}");
         }
     }
 
@@ -228,7 +235,10 @@ impl SessionThread {
         loop {
             match zenoh::open(self.config.clone()).wait() {
                 Ok(session) => return Some(session),
-                Err(e) => tracing::info!("zenoh: {e}; trying again in {backoff:?}"),
+                Err(e) => tracing::warn!(
+                    link = %self.link,
+                    "zenoh: opening the session: {e}; trying again in {backoff:?}"
+                ),
             }
             // Waiting on the control queue notices a close at once.
             match self.control.recv_timeout(backoff) {
@@ -327,8 +337,9 @@ struct Declared {
     token: Option<zenoh::liveliness::LivelinessToken>,
 }
 
-/// Sends the jobs of one lane until the bridge closes its queue.
-fn serve(session: &zenoh::Session, jobs: &flume::Receiver<Job>, lane: Lane) {
+/// Sends the jobs of one lane until the bridge closes its queue. A put or reply that fails
+/// is a warning naming `link` (a telemetry put dropped under congestion is not a failure).
+fn serve(session: &zenoh::Session, jobs: &flume::Receiver<Job>, lane: Lane, link: &str) {
     let (congestion, priority) = match lane {
         Lane::Control => (CongestionControl::Block, Priority::InteractiveHigh),
         Lane::Telemetry => (CongestionControl::Drop, Priority::Data),
@@ -343,7 +354,7 @@ fn serve(session: &zenoh::Session, jobs: &flume::Receiver<Job>, lane: Lane) {
             Job::Answer { to, answer } => reply(&to.0, answer),
         };
         if let Err(e) = sent {
-            tracing::debug!("zenoh: {e}");
+            tracing::warn!(link = %link, "zenoh: sending on the {lane:?} lane: {e}");
         }
     }
 }

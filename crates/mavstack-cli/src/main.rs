@@ -1,7 +1,8 @@
 //! `mavstack`: the command-line face of the mavstack MAVLink stack.
 //!
 //! Errors are one line on stderr starting with `error:`; the exit code is 0 on success, 1 on
-//! failure and 2 on bad usage or bad input (`docs/contracts/cli.md`).
+//! failure and 2 on bad usage or bad input (`docs/contracts/cli.md`). Diagnostics of every
+//! layer go to stderr through the `tracing` subscriber of `logging`.
 //!
 //! Architecture: `docs/architecture.md` in the repository.
 
@@ -15,6 +16,7 @@ mod link_cmd;
 mod log_cmd;
 mod log_plot;
 mod log_reader;
+mod logging;
 mod mission_file;
 mod probe_cmd;
 mod progress;
@@ -31,6 +33,8 @@ use clap::{Parser, Subcommand};
 #[derive(Debug, Parser)]
 #[command(name = "mavstack", version, about, propagate_version = true)]
 struct Cli {
+    #[command(flatten)]
+    log: logging::LogArgs,
     #[command(subcommand)]
     command: Command,
 }
@@ -127,6 +131,7 @@ fn is_broken_pipe(e: &anyhow::Error) -> bool {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    logging::init(&cli.log);
     let result = match cli.command {
         Command::Demo(args) => demo_cmd::demo(&args),
         Command::Dialect { action } => dialect_cmd::run(action),
