@@ -45,8 +45,8 @@ pub(crate) struct ConformArgs {
     #[arg(long, value_enum, default_value = "answer")]
     vehicle_mode: ModeArg,
     /// Seconds to wait for the first HEARTBEAT (the ground station's first frame with
-    /// `--role gcs`).
-    #[arg(long, default_value_t = 10.0)]
+    /// `--role gcs`; from 0.001 to 86400).
+    #[arg(long, default_value_t = 10.0, value_parser = crate::link_cmd::timeout_arg)]
     timeout: f64,
     /// Sign with this key (64 hex digits); every frame of the vehicle must verify with it.
     #[arg(long)]

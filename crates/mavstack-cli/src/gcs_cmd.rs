@@ -41,8 +41,8 @@ pub(crate) struct RemoteArgs {
     /// The component to talk to (default: the one whose HEARTBEAT was heard).
     #[arg(long)]
     target_component: Option<u8>,
-    /// Seconds to wait for the target's HEARTBEAT.
-    #[arg(long, default_value_t = 10.0)]
+    /// Seconds to wait for the target's HEARTBEAT (from 0.001 to 86400).
+    #[arg(long, default_value_t = 10.0, value_parser = crate::link_cmd::timeout_arg)]
     timeout: f64,
     /// Our system id.
     #[arg(long, default_value_t = 255)]

@@ -59,8 +59,8 @@ pub(crate) struct ListenArgs {
     /// Stop after this many frames (after filtering).
     #[arg(long)]
     count: Option<u64>,
-    /// Stop after this many seconds.
-    #[arg(long)]
+    /// Stop after this many seconds (more than 0, at most a year: 31536000).
+    #[arg(long, value_parser = duration_arg)]
     duration: Option<f64>,
 }
 
@@ -75,8 +75,8 @@ pub(crate) struct RecordArgs {
     /// Stop after this many frames.
     #[arg(long)]
     count: Option<u64>,
-    /// Stop after this many seconds.
-    #[arg(long)]
+    /// Stop after this many seconds (more than 0, at most a year: 31536000).
+    #[arg(long, value_parser = duration_arg)]
     duration: Option<f64>,
 }
 
@@ -89,8 +89,9 @@ pub(crate) struct ReplayArgs {
     conn: String,
     #[command(flatten)]
     dialect: DialectArg,
-    /// Playback speed: 2 plays twice as fast; 0 sends as fast as possible.
-    #[arg(long, default_value_t = 1.0)]
+    /// Playback speed: 2 plays twice as fast; 0 sends as fast as possible (else from 0.001
+    /// to 1000000).
+    #[arg(long, default_value_t = 1.0, value_parser = speed_arg)]
     speed: f64,
     /// Start again from the beginning at the end, until interrupted.
     #[arg(long = "loop")]
@@ -160,8 +161,51 @@ pub(crate) fn parse_spec(conn: &str) -> Result<ConnSpec, Failure> {
     conn.parse().map_err(|e| Failure::Input(anyhow!("{e}")))
 }
 
-/// A number of seconds given as option `what`.
+/// The longest wait any option gives, in seconds (a year): far enough for any use, near
+/// enough that a deadline `now + wait` is never out of the clock's range.
+pub(crate) const MAX_SECONDS: f64 = 31_536_000.0;
+
+/// A number within `min..=max` (a clap value parser's body): NaN, infinities and anything out
+/// of range are refused with the range in the message (clap names the option and exits 2).
+pub(crate) fn number_within(text: &str, min: f64, max: f64, unit: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v >= min && v <= max => Ok(v),
+        _ => Err(format!("not a number of {unit} from {min} to {max}")),
+    }
+}
+
+/// A timeout in seconds: from 0.001 to 86400 (a day).
+pub(crate) fn timeout_arg(text: &str) -> Result<f64, String> {
+    number_within(text, 0.001, 86_400.0, "seconds")
+}
+
+/// A period in seconds (`--interval`, `--stats`, `--route-ttl`): from 0.01 to 86400.
+pub(crate) fn period_arg(text: &str) -> Result<f64, String> {
+    number_within(text, 0.01, 86_400.0, "seconds")
+}
+
+/// How long a command runs (`--duration`): more than 0, at most a year.
+pub(crate) fn duration_arg(text: &str) -> Result<f64, String> {
+    number_within(text, 0.001, MAX_SECONDS, "seconds")
+}
+
+/// `replay --speed`: 0 (as fast as possible) or from 0.001 to 1000000.
+fn speed_arg(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v == 0.0 || (0.001..=1e6).contains(&v) => Ok(v),
+        _ => Err("not 0 (as fast as possible) nor a speed from 0.001 to 1000000".to_owned()),
+    }
+}
+
+/// A number of seconds given as option `what`, as a duration: the one conversion every
+/// command uses (its parser has checked the option's own range; this refuses what is not a
+/// wait at all: not finite, negative, zero or beyond [`MAX_SECONDS`]).
 pub(crate) fn seconds(s: f64, what: &str) -> Result<Duration, Failure> {
+    if !(s > 0.0 && s <= MAX_SECONDS) {
+        return Err(Failure::Input(anyhow!(
+            "{what}: {s} is not a number of seconds from 0 to {MAX_SECONDS}"
+        )));
+    }
     Duration::try_from_secs_f64(s)
         .map_err(|_| Failure::Input(anyhow!("{what}: {s} is not a number of seconds")))
 }
@@ -498,8 +542,13 @@ pub(crate) fn replay(args: &ReplayArgs) -> Result<(), Failure> {
                 if let (Some(ts), Some(first)) = (ts, first)
                     && args.speed > 0.0
                 {
+                    // A timestamp so far ahead that it is out of the clock's range is sent
+                    // without waiting (the log's clock jumped; the file is outside input).
                     let offset = ts.saturating_sub(first) as f64 / 1e6 / args.speed;
-                    let at = started + Duration::from_secs_f64(offset);
+                    let at = Duration::try_from_secs_f64(offset)
+                        .ok()
+                        .and_then(|d| started.checked_add(d))
+                        .unwrap_or(started);
                     tokio::select! {
                         () = tokio::time::sleep_until(at) => {}
                         () = &mut stop => break 'run,

@@ -55,11 +55,13 @@ pub(crate) struct FilterArgs {
     /// Only frames from this system id.
     #[arg(long, value_name = "N")]
     sysid: Option<u8>,
-    /// Only frames from this many seconds after the log's first timestamp on (tlogs).
-    #[arg(long, value_name = "S")]
+    /// Only frames from this many seconds after the log's first timestamp on (tlogs; from 0
+    /// to 1e13).
+    #[arg(long, value_name = "S", value_parser = offset_arg)]
     from: Option<f64>,
-    /// Only frames up to this many seconds after the log's first timestamp (tlogs).
-    #[arg(long, value_name = "S")]
+    /// Only frames up to this many seconds after the log's first timestamp (tlogs; from 0 to
+    /// 1e13).
+    #[arg(long, value_name = "S", value_parser = offset_arg)]
     to: Option<f64>,
     /// A built-in dialect name or a path to an XML file (message names and checksums).
     #[arg(long, default_value = "ardupilotmega")]
@@ -94,7 +96,12 @@ struct Source {
 #[derive(Default)]
 struct Summary {
     first_ts: Option<u64>,
-    last_ts: Option<u64>,
+    /// The latest timestamp seen (a log whose clock stepped back keeps its end).
+    max_ts: Option<u64>,
+    /// The previous record's timestamp.
+    prev_ts: Option<u64>,
+    /// Records whose timestamp is earlier than the record's before them.
+    backward_steps: u64,
     v1: u64,
     v2: u64,
     signed: u64,
@@ -105,7 +112,11 @@ impl Summary {
     fn add(&mut self, f: &LogFrame<'_>) {
         if let Some(ts) = f.ts_us {
             self.first_ts.get_or_insert(ts);
-            self.last_ts = Some(ts);
+            if self.prev_ts.is_some_and(|prev| ts < prev) {
+                self.backward_steps += 1;
+            }
+            self.prev_ts = Some(ts);
+            self.max_ts = Some(self.max_ts.map_or(ts, |m| m.max(ts)));
         }
         let frame = &f.frame;
         if frame.version() == mavstack_core::wire::Version::V2 {
@@ -130,8 +141,9 @@ impl Summary {
         *source.types.entry(frame.msg_id()).or_default() += 1;
     }
 
+    /// From the first timestamp to the latest one (0 when none is later than the first).
     fn duration_s(&self) -> Option<f64> {
-        Some((self.last_ts? - self.first_ts?) as f64 / 1e6)
+        Some(self.max_ts?.saturating_sub(self.first_ts?) as f64 / 1e6)
     }
 }
 
@@ -174,6 +186,7 @@ fn summary(args: &SummaryArgs) -> Result<(), Failure> {
             "skipped_bytes": counts.skipped_bytes,
             "bytes": counts.bytes,
             "signed_frames": s.signed,
+            "time_backward_steps": s.first_ts.map(|_| s.backward_steps),
             "versions": {"1": s.v1, "2": s.v2},
             "systems": systems,
         });
@@ -206,6 +219,13 @@ fn write_table(
             out,
             "  duration     unknown (a raw capture has no timestamps)"
         )?,
+    }
+    if s.backward_steps > 0 {
+        writeln!(
+            out,
+            "  time         goes back {} times (timestamps earlier than the record's before)",
+            s.backward_steps
+        )?;
     }
     writeln!(
         out,
@@ -264,6 +284,11 @@ pub(crate) fn type_ids(dialect: &Dialect, names: &[String]) -> Result<Vec<u32>, 
                 })
         })
         .collect()
+}
+
+/// `--from`/`--to`: seconds from 0 to 1e13 (a tlog's microsecond timestamps reach 1.8e13 s).
+fn offset_arg(text: &str) -> Result<f64, String> {
+    crate::link_cmd::number_within(text, 0.0, 1e13, "seconds")
 }
 
 fn seconds_arg(value: Option<f64>, what: &str) -> Result<Option<u64>, Failure> {

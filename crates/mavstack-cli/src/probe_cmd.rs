@@ -41,14 +41,15 @@ pub(crate) struct ProbeArgs {
     /// The ground station's side of the link (udpin:HOST:PORT waits for vehicles,
     /// udpout:HOST:PORT reaches one listening there, tcp:HOST:PORT, serial:...).
     conn: String,
-    /// Seconds to wait for the first system.
-    #[arg(long, default_value_t = 5.0)]
+    /// Seconds to wait for the first system (from 0.001 to 86400).
+    #[arg(long, default_value_t = 5.0, value_parser = crate::link_cmd::timeout_arg)]
     timeout: f64,
     /// Handshake request.
     #[arg(long, value_enum, default_value = "request-message-300")]
     method: Method,
-    /// With `--method request-message-other`: the message to ask for (id ≥ 256).
-    #[arg(long, default_value_t = 397)]
+    /// With `--method request-message-other`: the message to ask for (id from 256 to
+    /// 16777215, a MAVLink 2 id).
+    #[arg(long, default_value_t = 397, value_parser = clap::value_parser!(u32).range(256..=16_777_215))]
     other_id: u32,
     /// Send the requests as COMMAND_INT instead of COMMAND_LONG.
     #[arg(long)]

@@ -16,8 +16,8 @@ pub(crate) struct RadioArgs {
     conn_a: String,
     /// The vehicle's side.
     conn_b: String,
-    /// Seconds between RADIO_STATUS frames.
-    #[arg(long, default_value_t = 1.0)]
+    /// Seconds between RADIO_STATUS frames (from 0.01 to 86400).
+    #[arg(long, default_value_t = 1.0, value_parser = crate::link_cmd::period_arg)]
     interval: f64,
     /// Print the radio's events to stderr.
     #[arg(long, short)]

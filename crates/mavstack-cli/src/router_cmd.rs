@@ -14,7 +14,7 @@ use mavstack::{InputModeration, LinkSpec, Node, NodeReport, router_conf};
 use mavstack_bridge::BridgeStats;
 
 use crate::Failure;
-use crate::link_cmd::interrupted;
+use crate::link_cmd::{interrupted, seconds};
 
 /// `mavstack router` arguments.
 #[derive(Debug, Args)]
@@ -32,14 +32,15 @@ pub(crate) struct RouterArgs {
     /// Write a tlog of all traffic into this directory.
     #[arg(long, value_name = "DIR")]
     log: Option<PathBuf>,
-    /// Drop a frame whose exact bytes passed within this many milliseconds (off by default).
-    #[arg(long, value_name = "MS")]
+    /// Drop a frame whose exact bytes passed within this many milliseconds (off by default;
+    /// 0 to 3600000, 0 = off).
+    #[arg(long, value_name = "MS", value_parser = clap::value_parser!(u64).range(0..=3_600_000))]
     dedup: Option<u64>,
-    /// Forget a route after this many seconds of silence.
-    #[arg(long, value_name = "S", default_value_t = 30.0)]
+    /// Forget a route after this many seconds of silence (from 0.01 to 86400).
+    #[arg(long, value_name = "S", default_value_t = 30.0, value_parser = crate::link_cmd::period_arg)]
     route_ttl: f64,
-    /// Print one JSON object of statistics every S seconds on stdout.
-    #[arg(long, value_name = "S")]
+    /// Print one JSON object of statistics every S seconds on stdout (from 0.01 to 86400).
+    #[arg(long, value_name = "S", value_parser = crate::link_cmd::period_arg)]
     stats: Option<f64>,
     /// Dialect for CRC_EXTRA, lengths, target offsets and the message names of filters and
     /// rates: a built-in name or an XML file (includes resolved relative to it).
@@ -126,13 +127,6 @@ fn dialect(name: &str) -> Result<MessageTable, Failure> {
     }
     compiled!(ardupilotmega, common, minimal, standard, development, all);
     crate::dialect_cmd::load(name).map(|d| d.message_table())
-}
-
-fn seconds(value: f64, what: &str) -> Result<Duration, Failure> {
-    Duration::try_from_secs_f64(value)
-        .ok()
-        .filter(|d| !d.is_zero())
-        .ok_or_else(|| Failure::Input(anyhow!("{what} must be a positive number of seconds")))
 }
 
 pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {

@@ -91,12 +91,7 @@ pub(crate) struct VehicleArgs {
 }
 
 fn settle_seconds(text: &str) -> Result<f64, String> {
-    match text.parse::<f64>() {
-        Ok(v) if (0.0..=3600.0).contains(&v) => Ok(v),
-        _ => Err(format!(
-            "'{text}' is not a number of seconds from 0 to 3600"
-        )),
-    }
+    crate::link_cmd::number_within(text, 0.0, 3600.0, "seconds")
 }
 
 fn protocol_version_arg(text: &str) -> Result<ProtocolVersionSupport, String> {
