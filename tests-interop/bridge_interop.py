@@ -35,6 +35,17 @@ Scenarios:
              carries frames both ways; one without ca= (the system's roots) never connects
   alive      @alive is retained `online` while the router runs, `offline` after SIGTERM
              (published by the router), and `offline` by the last will after SIGKILL
+  corrupt    frames packed by pymavlink, then one payload byte flipped: a COMMAND_LONG on
+             mav/F/V/in and one as a request on @cmd never reach the pymavlink vehicle (nor
+             does any resend of the request: a valid request sent after it reaches it, resent
+             until its own timeout reply); the request gets error=bad_crc at once; the
+             router's stats count both (bad_crc 2)
+  vehicles   a ground router on vid=*&max_vehicles=3 with a real vehicle (truck-1, a vehicle
+             router with a pymavlink vehicle) heard first; a paho client announces 20 more
+             vehicles (@alive online and a HEARTBEAT each): at most 3 vehicle links, the
+             refusals counted (vehicles_refused), truck-1's frames still reach the ground
+             station and a command reaches truck-1; one announced vehicle going offline frees
+             a place for a new one
 """
 
 import os
@@ -489,8 +500,173 @@ def tls(bin_):
         certs.close()
 
 
+def pymavlink_refuses(raw):
+    """pymavlink finds no good frame in raw."""
+    try:
+        msgs = M.MAVLink(None).parse_buffer(raw) or []
+    except Exception:  # pymavlink raises on a bad checksum unless robust_parsing
+        return True
+    return all(m.get_type() == "BAD_DATA" for m in msgs)
+
+
+def corrupt_copy(raw, at=14):
+    """raw with one payload byte flipped (its checksum no longer matches)."""
+    b = bytearray(raw)
+    b[at] ^= 0x01
+    return bytes(b)
+
+
+def corrupt(bin_):
+    broker = Broker()
+    cli = Client(broker, ["replies/#"], "cloud")
+    pub = Client(broker, [], "pub")
+    port = free_port()
+    router = with_router(bin_, broker, lambda: "udpin:127.0.0.1:%d" % port)
+    veh = Peer("vehicle", M, 1, 1, dest=port)
+    if router is None:
+        veh.close()
+        broker.stop()
+        return None
+    gcs = M.MAVLink(None, srcSystem=255, srcComponent=190)
+
+    def command_long(cmd, p1):
+        return bytes(M.MAVLink_command_long_message(1, 1, cmd, 0, p1, 0, 0, 0, 0, 0, 0).pack(gcs))
+
+    try:
+        veh.send(heartbeat(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA))
+        time.sleep(0.3)
+        # On in: a corrupt frame, then a valid one on the same key (MQTT keeps their order).
+        bad_in = corrupt_copy(command_long(M.MAV_CMD_COMPONENT_ARM_DISARM, 1))
+        good_in = command_long(M.MAV_CMD_DO_SET_MODE, 1)
+        check(pymavlink_refuses(bad_in), "pymavlink takes the flipped frame for a good one")
+        pub.publish("%s/in" % PREFIX, bad_in)
+        pub.publish("%s/in" % PREFIX, good_in)
+        check(veh.wait_for(lambda f: f.raw == good_in, 3) is not None,
+              "the valid frame published on in after the corrupt one never reached the vehicle")
+        # On @cmd: a corrupt request is refused at once ...
+        bad_cmd = corrupt_copy(command_long(M.MAV_CMD_COMPONENT_ARM_DISARM, 1), at=16)
+        topic = request(cli, "%s/1/1/@cmd" % PREFIX, bad_cmd, "bad-crc")
+        got = cli.wait(lambda t, p: t == topic, 3)
+        check(got is not None and user_props(got[4]).get("error") == "bad_crc",
+              "a corrupt request on @cmd: %r, expected error=bad_crc" % ((got and (got[1], user_props(got[4]))),))
+        # ... and never resent: a valid request after it is resent until its timeout reply
+        # (pymavlink's vehicle answers nothing), time in which the corrupt one would have been.
+        good_cmd = command_long(M.MAV_CMD_DO_SET_MODE, 4)
+        topic = request(cli, "%s/1/1/@cmd" % PREFIX, good_cmd, "good")
+        got = cli.wait(lambda t, p: t == topic, 6)
+        check(got is not None and user_props(got[4]).get("error") == "timeout",
+              "the valid request's reply: %r, expected its timeout" % ((got and (got[1], user_props(got[4]))),))
+        longs = [f for f in veh.frames() if f.type == "COMMAND_LONG"]
+        arrived = [f for f in longs if f.msg.command == M.MAV_CMD_DO_SET_MODE and f.msg.param1 == 4]
+        check(len(arrived) == 4, "the valid request reached the vehicle %d times, expected 4 (3 resends)" % len(arrived))
+        leaked = [f for f in veh.got if f.raw in (bad_in, bad_cmd) or
+                  (f.type == "COMMAND_LONG" and f.msg.command == M.MAV_CMD_COMPONENT_ARM_DISARM)]
+        check(not leaked, "corrupt frames (or frames made of them) reached the vehicle: %r" % leaked)
+        check(not veh.bad, "the vehicle got frames pymavlink refuses: %r" % veh.bad)
+        stats = router.stop()
+        bridges = (stats or {}).get("bridges") or [{}]
+        check(bridges[0].get("bad_crc") == 2, "bridge counters %r: bad_crc 2 expected" % (bridges,))
+        return ("a corrupt frame on in and a corrupt request on @cmd (error=bad_crc) never reached the vehicle, "
+                "nor a resend; bad_crc %s" % bridges[0].get("bad_crc"))
+    finally:
+        veh.close()
+        if router.running():
+            router.stop()
+        cli.close()
+        pub.close()
+        broker.stop()
+
+
+def vehicle_links(stats):
+    """The ground router's links that are vehicles of its bridge: their peers, "mqtt F/V"."""
+    return [str(e.get("peer")) for e in (stats or {}).get("links", []) if "%s/" % FLEET in str(e.get("peer", ""))]
+
+
+def vehicles(bin_):
+    broker = Broker()
+    fake = Client(broker, [], "fake-fleet")
+    routers, peers = [], []
+    try:
+        vport, gport = free_port(), free_port()
+        v, _ = start_router(bin_, lambda: ["udpin:127.0.0.1:%d" % vport, mqtt_broker.Broker.url(broker, FLEET, "truck-1")])
+        if v is None:
+            return None
+        routers.append(v)
+        truck = Peer("truck-1", M, 1, 1, dest=vport)
+        gcs = Peer("gcs", M, 255, 190, dest=gport)
+        peers += [truck, gcs]
+        truck.keep_alive(heartbeat(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA))
+        g, _ = start_router(bin_, lambda: [mqtt_broker.Broker.url(broker, FLEET, "*", "&max_vehicles=3"),
+                                           "udpin:127.0.0.1:%d?name=gcs" % gport])
+        if g is None:
+            return None
+        routers.append(g)
+        gcs.send(heartbeat())
+        # truck-1 is a link first: its retained online is there when the ground subscribes.
+        first = gcs.wait_for(lambda f: f.type == "HEARTBEAT" and f.sysid == 1, 5)
+        check(first is not None, "truck-1's HEARTBEAT never reached the ground station")
+        t = time.monotonic()
+        for n in range(20):
+            vid = "fake-%d" % n
+            fake.publish("mav/%s/%s/@alive" % (FLEET, vid), b"online")
+            hb = M.MAVLink(None, srcSystem=100 + n, srcComponent=1)
+            raw = bytes(heartbeat(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA).pack(hb))
+            fake.publish("mav/%s/%s/%d/1/HEARTBEAT" % (FLEET, vid, 100 + n), raw)
+        # The fleet's last message has been handled when its HEARTBEAT (or nothing) came.
+        time.sleep(1.5)
+        links = []
+        deadline = time.monotonic() + 3
+        while time.monotonic() < deadline:
+            seen = g.stats(t)
+            links = vehicle_links(seen[-1][1]) if seen else []
+            refused = (((seen[-1][1] if seen else {}).get("bridges") or [{}])[0]).get("vehicles_refused", 0)
+            if refused >= 36:  # 18 vehicles without a place, 2 messages each
+                break
+            time.sleep(0.2)
+        check(0 < len(links) <= 3, "vehicle links on the ground router: %r, expected at most 3" % links)
+        check(any(l.endswith("/truck-1") for l in links), "truck-1 lost its link: %r" % links)
+        # truck-1 works both ways.
+        f = truck.send(M.MAVLink_attitude_message(4242, 0.1, 0, 0, 0, 0, 0))
+        got = gcs.wait_for(lambda fr: fr.type == "ATTITUDE" and fr.msg.time_boot_ms == 4242, 3)
+        check(got is not None and got.raw == f.raw, "truck-1's ATTITUDE at the ground station: %r" % got)
+        t2 = time.monotonic()
+        gcs.send(M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0))
+        check(truck.wait_for(lambda fr: fr.type == "COMMAND_LONG", 3, since=t2) is not None,
+              "the ground station's command never reached truck-1")
+        # A placed fake vehicle goes offline: a new one takes its place.
+        placed = [l.rsplit("/", 1)[-1] for l in links if not l.endswith("/truck-1")]
+        if placed:
+            fake.publish("mav/%s/%s/@alive" % (FLEET, placed[0]), b"offline")
+            time.sleep(0.3)
+            fake.publish("mav/%s/fake-new/@alive" % FLEET, b"online")
+        deadline = time.monotonic() + 4
+        now_links = []
+        while time.monotonic() < deadline:
+            seen = g.stats(time.monotonic() - 0.1)
+            now_links = vehicle_links(seen[-1][1]) if seen else now_links
+            if any(l.endswith("/fake-new") for l in now_links):
+                break
+            time.sleep(0.2)
+        check(placed and any(l.endswith("/fake-new") for l in now_links) and len(now_links) <= 3,
+              "after %s went offline: links %r, expected fake-new among at most 3" % (placed[:1], now_links))
+        stats = g.stop()
+        bridges = (stats or {}).get("bridges") or [{}]
+        check(bridges[0].get("vehicles_refused", 0) >= 18,
+              "bridge counters %r: vehicles_refused >= 18 expected (20 announced, 2 places)" % (bridges,))
+        return "%d vehicle links of 21 vehicles (max_vehicles=3), truck-1 works both ways, offline frees a place; " \
+               "vehicles_refused %s" % (len(links), bridges[0].get("vehicles_refused"))
+    finally:
+        for p in peers:
+            p.close()
+        for r in routers:
+            if r.running():
+                r.stop()
+        fake.close()
+        broker.stop()
+
+
 SCENARIOS = {"telemetry": telemetry, "inbound": inbound, "command": command, "alive": alive, "ground": ground,
-             "tls": tls}
+             "tls": tls, "corrupt": corrupt, "vehicles": vehicles}
 
 
 if __name__ == "__main__":

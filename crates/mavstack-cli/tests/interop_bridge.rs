@@ -14,7 +14,13 @@
 //! - `ground`: a ground router on `vid=*` shows two vehicles that are both system 1 as
 //!   systems 1 and 2, and a command to 2 reaches the second as a command to its own 1;
 //! - `alive`: `@alive` retained `online`, `offline` on SIGTERM, and by the last will on
-//!   SIGKILL.
+//!   SIGKILL;
+//! - `corrupt`: pymavlink-packed frames with a byte flipped, on `in` and as a request on
+//!   `@cmd`, never reach the vehicle (nor a resend of the request); the request gets
+//!   `error=bad_crc`; both counted (`bad_crc`);
+//! - `vehicles`: a ground router on `vid=*&max_vehicles=3` keeps at most 3 vehicle links
+//!   while a client announces 20 more vehicles (refusals counted), the real vehicle heard
+//!   first still works both ways, and a vehicle going offline frees a place.
 //!
 //! The same over Zenoh (`zenoh://HOST:PORT?fleet=F&vid=V`, `tests-interop/bridge_zenoh.py`)
 //! with eclipse-zenoh (PyPI) as the independent peer, its session the Zenoh router the link
@@ -90,6 +96,18 @@ fn zenoh_bridge_liveliness_token_goes_on_exit_and_on_crash() {
 #[test]
 fn zenoh_bridge_runs_as_an_in_process_peer() {
     zenoh("peer");
+}
+
+/// Corrupt frames from the broker are dropped and counted, never given a fresh checksum.
+#[test]
+fn bridge_drops_corrupt_frames_on_in_and_cmd() {
+    scenario("corrupt");
+}
+
+/// The ground side takes at most `max_vehicles` vehicles as links.
+#[test]
+fn ground_router_bounds_its_vehicle_links() {
+    scenario("vehicles");
 }
 
 /// The ground side over Zenoh: liveliness with history and the fleet's frames, remapped.
