@@ -136,9 +136,11 @@ async fn a_node_with_a_heartbeat_announces_itself_on_every_link() {
     announces_itself(false).await;
 }
 
-/// Its deadlines (the HEARTBEAT's period) on a thread of its own: the thread's timer.
+/// Its deadlines on a thread of its own: the thread's timer wakes it for each HEARTBEAT (three
+/// arrive with no input to wake it). The period itself is tested on a virtual clock where the
+/// timer lives (`crates/mavstack/src/node/heartbeat.rs`).
 #[tokio::test(flavor = "current_thread")]
-async fn a_node_on_its_own_thread_keeps_its_heartbeat_period() {
+async fn a_node_on_its_own_thread_wakes_for_its_heartbeats() {
     announces_itself(true).await;
 }
 

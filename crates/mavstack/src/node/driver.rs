@@ -13,6 +13,7 @@ use mavstack_transport::protocol::Framing;
 use mavstack_transport::{Dest, Input, Link, PeerId, PeerInfo, clock, tlog};
 use tokio::sync::mpsc;
 
+pub(super) use super::heartbeat::Heartbeat;
 use super::moderation::Moderation;
 use super::{Command, Incoming, LinkEvent, NodeError, NodeEvent, NodeReport, Tapped};
 
@@ -54,13 +55,6 @@ pub(super) enum Turn {
     Go { worked: bool },
     /// Shut down.
     Stop,
-}
-
-/// The node's own HEARTBEAT: its encoded payload, period and next time.
-pub(super) struct Heartbeat {
-    pub(super) payload: Vec<u8>,
-    pub(super) period: Duration,
-    pub(super) next: Instant,
 }
 
 /// The [`Input`] a slot's link feeds: peers become router links.
@@ -208,9 +202,8 @@ impl Driver {
         }
         let now = clock::now();
         if let Some(hb) = &mut self.heartbeat
-            && now >= hb.next
+            && hb.due(now)
         {
-            hb.next = now + hb.period;
             self.router.send(
                 now,
                 SendTo::Target,

@@ -18,12 +18,13 @@
 //! running [`Node`] and its [`NodeHandle`]s), [`driver`] (the driver's state and one turn of
 //! it: reading, routing, forwarding, commands), [`run_task`] (the driver as a task of the
 //! runtime), [`run_thread`] (the driver on a thread of its own, over an `epoll`),
-//! [`moderation`] (reading in bursts under a steady stream), [`log`] (the traffic log) and
-//! [`report`] (the counters a node reports).
+//! [`moderation`] (reading in bursts under a steady stream), [`heartbeat`] (the node's own
+//! HEARTBEAT timer), [`log`] (the traffic log) and [`report`] (the counters a node reports).
 
 mod builder;
 mod driver;
 mod handle;
+mod heartbeat;
 mod log;
 mod moderation;
 mod report;
