@@ -3,12 +3,13 @@
 //! (`docs/contracts/router.md`, "--conf"). The parse of every key is tested in
 //! `crates/mavstack/src/router_conf/tests.rs`; these tests check what the router does with it.
 
+use core::time::Duration;
 use std::io::{BufRead as _, BufReader};
 use std::net::UdpSocket;
 use std::path::Path;
 use std::process::{Child, ChildStdout, Command, Stdio};
 use std::sync::mpsc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 fn mavstack() -> Command {
     Command::new(env!("CARGO_BIN_EXE_mavstack"))

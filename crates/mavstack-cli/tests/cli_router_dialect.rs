@@ -3,12 +3,13 @@
 //! resolve in that dialect (`docs/contracts/router.md`, "Dialect"). The oracle for a custom
 //! message is pymavlink with a module generated from the same XML.
 
+use core::time::Duration;
 use std::ffi::OsStr;
 use std::io::{BufRead as _, BufReader, Read as _};
 use std::net::UdpSocket;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 mod support;
 
