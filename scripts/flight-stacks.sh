@@ -8,6 +8,7 @@
 #   ARDUPILOT_DEFAULTS  its defaults file (Tools/autotest/default_params/copter.parm)
 #   PX4_SITL_DIR        PX4's build directory (build/px4_sitl_default: bin/px4, etc/)
 #   MAVSTACK            the mavstack binary (default: target/release/mavstack, built if missing)
+#   FLIGHT              the `flight` example (default: target/release/examples/flight, likewise)
 #   ONLY                scenarios to run (comma-separated; default: all)
 # ArduPilot listens on tcp:127.0.0.1:5760 (SERIAL0); PX4 sends to udp 127.0.0.1:14550; the
 # simulator runs as `mavstack vehicle udpout:127.0.0.1:14550`. Results: target/flight-stacks/.
@@ -18,6 +19,10 @@ py="${MAVSTACK_PYTHON:-$(scripts/setup-peers.sh)}"
 bin="${MAVSTACK:-$root/target/release/mavstack}"
 if [ ! -x "$bin" ]; then
     cargo build --release --locked -q -p mavstack-cli
+fi
+flight="${FLIGHT:-$root/target/release/examples/flight}"
+if [ ! -x "$flight" ]; then
+    cargo build --release --locked -q -p mavstack --features services --example flight
 fi
 out="$root/target/flight-stacks"
 rm -rf "$out"
@@ -48,8 +53,8 @@ PY
 
 scenarios() {
     local name="$1" conn="$2"
-    "$py" tests-interop/flight_stacks.py --mavstack "$bin" --name "$name" --conn "$conn" \
-        --out "$out/$name.json" "${only[@]}" || true
+    "$py" tests-interop/flight_stacks.py --mavstack "$bin" --flight "$flight" --name "$name" \
+        --conn "$conn" --out "$out/$name.json" "${only[@]}" || true
 }
 
 if [ -n "${ARDUPILOT_SITL:-}" ]; then

@@ -22,6 +22,10 @@ Scenarios (in this order, each independent of the ones before but the flight, la
   arm_refused  right after start, arming is refused with the reason shown (STATUSTEXT); n/a
                when the vehicle is ready at once
   signing      `mavstack signing setup` proven by a signed answer, then removed
+  flight       (with --flight BIN, the `flight` example of crates/mavstack) telemetry at
+               requested rates (ATTITUDE 10 Hz, GLOBAL_POSITION_INT 5 Hz, within 20 % over 5 s),
+               then arm (refusals waited out), take off, a 4-item mission flown to its end
+               (MISSION_ITEM_REACHED for every item), RTL, landed and disarmed
 """
 import argparse
 import json
@@ -48,8 +52,8 @@ def run(argv, timeout=120):
 
 
 class Runner:
-    def __init__(self, bin_, name, conn):
-        self.bin, self.name, self.conn = bin_, name, conn
+    def __init__(self, bin_, name, conn, flight=None):
+        self.bin, self.name, self.conn, self.flight_bin = bin_, name, conn, flight
         self.results = []
 
     def mavstack(self, *args, timeout=120):
@@ -243,6 +247,37 @@ class Runner:
                     "%s; %s" % (out.strip(), (out2.strip() or err2.strip()[-300:])))
 
 
+def flight_steps(runner):
+    """The `flight` example's steps, each a scenario row: rates, then the flight."""
+    if not runner.flight_bin:
+        return runner.report("flight", "n/a", 0.0, "no --flight binary")
+    rc, out, err, s = run([runner.flight_bin, runner.conn], timeout=600)
+    steps = []
+    for line in out.splitlines():
+        try:
+            steps.append(json.loads(line))
+        except ValueError:
+            pass
+    by = {x["step"]: x for x in steps}
+    r = by.get("rates")
+    if r is None:
+        return runner.report("rates", "fail", s, "no rates step (exit %s): %s" % (rc, err.strip()[-300:]))
+    runner.report("rates", "pass" if r["ok"] else "fail", 5.0,
+                  "ATTITUDE %.1f Hz (asked 10, by %s), GLOBAL_POSITION_INT %.1f Hz (asked 5, by %s)" % (
+                      r["attitude_hz"], r["attitude_by"], r["global_position_int_hz"], r["global_position_int_by"]))
+    names = ["mission", "armed", "takeoff", "mission_flown", "landed_disarmed"]
+    done = [n for n in names if n in by]
+    ok = rc == 0 and all(by[n]["ok"] for n in done) and "landed_disarmed" in by
+    detail = ", ".join("%s %s at %.0f s" % (n, "ok" if by[n]["ok"] else "FAILED", by[n]["t_s"]) for n in done)
+    if "armed" in by and by["armed"].get("refusals"):
+        detail += "; arming refused first: %s" % by["armed"]["refusals"][:3]
+    if "mission_flown" in by:
+        detail += "; MISSION_ITEM_REACHED %s" % by["mission_flown"]["reached"]
+    if not ok:
+        detail += "; exit %s %s" % (rc, err.strip()[-200:])
+    runner.report("flight", "pass" if ok else "fail", s, detail)
+
+
 def decode_value(value, ptype, bytewise):
     """A PARAM_VALUE's float as the parameter's value: integers C-cast (ArduPilot) or their bytes
     in the float (PX4, MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)."""
@@ -282,7 +317,7 @@ def compare_plans(sent, got):
     return diffs
 
 
-SCENARIOS = ["probe", "conform", "params", "param_set", "mission", "arm_refused", "signing"]
+SCENARIOS = ["probe", "conform", "params", "param_set", "mission", "arm_refused", "signing", "flight"]
 
 
 def main():
@@ -292,13 +327,17 @@ def main():
     ap.add_argument("--conn", required=True)
     ap.add_argument("--out")
     ap.add_argument("--only")
+    ap.add_argument("--flight", help="the flight example's binary")
     a = ap.parse_args()
-    r = Runner(a.mavstack, a.name, a.conn)
+    r = Runner(a.mavstack, a.name, a.conn, a.flight)
     chosen = a.only.split(",") if a.only else SCENARIOS
     # arm_refused needs the vehicle fresh: it goes first when asked for.
     order = (["arm_refused"] if "arm_refused" in chosen else []) + [s for s in chosen if s != "arm_refused"]
     for s in order:
-        getattr(r, s)()
+        if s == "flight":
+            flight_steps(r)
+        else:
+            getattr(r, s)()
     if a.out:
         with open(a.out, "w") as f:
             json.dump(r.results, f, indent=1)
