@@ -1,7 +1,7 @@
 //! `decode --count` for built-in dialects through the generated, typed code: zero-copy
 //! parsing, checksum validation, typed decoding of every frame, no allocation per frame.
 
-use mavstack_core::MessageSet;
+use mavstack_core::{MessageSet, MessageTable};
 use std::io::{self, Read};
 
 use mavstack_core::parse::{CrcExtra, Item, Stats};
@@ -10,34 +10,32 @@ use mavstack_dialects as d;
 
 use crate::log_reader::raw_items;
 
-/// CRC_EXTRA of ids below 65536 from a dense table (0: unknown, else 0x100 | crc), the rest
-/// through the dialect's lookup: one load per frame, inlined into the parser.
-struct DenseCrcExtra<M> {
-    table: Vec<u16>,
-    dialect: core::marker::PhantomData<M>,
+/// A dense index over a dialect's [`MessageTable`] for ids below 65536 (0: unknown, else
+/// 0x100 | CRC_EXTRA), the rest through the table: one load per frame, inlined into the
+/// parser.
+struct DenseIndex {
+    dense: Vec<u16>,
+    table: MessageTable,
 }
 
-impl<M: MessageSet> DenseCrcExtra<M> {
-    fn new() -> Self {
-        let mut table = vec![0u16; 1 << 16];
-        for info in M::all() {
-            if let Some(slot) = usize::try_from(info.id).ok().and_then(|i| table.get_mut(i)) {
+impl DenseIndex {
+    fn new(table: MessageTable) -> Self {
+        let mut dense = vec![0u16; 1 << 16];
+        for info in table.entries() {
+            if let Some(slot) = usize::try_from(info.id).ok().and_then(|i| dense.get_mut(i)) {
                 *slot = 0x100 | u16::from(info.crc_extra);
             }
         }
-        Self {
-            table,
-            dialect: core::marker::PhantomData,
-        }
+        Self { dense, table }
     }
 }
 
-impl<M: MessageSet> CrcExtra for &DenseCrcExtra<M> {
+impl CrcExtra for &DenseIndex {
     #[inline(always)]
     fn crc_extra(&self, id: u32) -> Option<u8> {
-        match usize::try_from(id).ok().and_then(|i| self.table.get(i)) {
+        match usize::try_from(id).ok().and_then(|i| self.dense.get(i)) {
             Some(&v) => (v != 0).then_some(v.to_le_bytes()[0]),
-            None => M::info(id).map(|i| i.crc_extra),
+            None => self.table.crc_extra(id),
         }
     }
 }
@@ -49,7 +47,7 @@ pub(crate) fn count<M: MessageSet>(
     input: &mut dyn Read,
     key: Option<&SecretKey>,
 ) -> io::Result<(Stats, u64)> {
-    let lookup = DenseCrcExtra::<M>::new();
+    let lookup = DenseIndex::new(MessageTable::of::<M>());
     let mut bad_signature = 0;
     let stats = raw_items(
         input,
