@@ -382,11 +382,8 @@ impl BridgeSpec {
                     continue;
                 }
                 "trusted" => {
-                    trusted = match v {
-                        "true" => true,
-                        "false" => false,
-                        _ => return Err(option_err(k, "expected true or false")),
-                    };
+                    trusted = mavstack_router::options::parse_bool(v)
+                        .ok_or_else(|| option_err(k, "expected true, 1, yes or false, 0, no"))?;
                     continue;
                 }
                 "version" | "key" | "link_id" | "secure" => {
@@ -523,6 +520,26 @@ mod tests {
         assert_eq!(p.name, "zenoh:");
     }
 
+    /// `trusted` reads booleans as every link option does (docs/contracts/link-options.md).
+    #[test]
+    fn trusted_takes_the_link_options_booleans() {
+        let trusted = |v: &str| {
+            BridgeSpec::parse(&format!("mqtt://h:1?fleet=a&vid=b&trusted={v}"))
+                .map(|s| s.trusted)
+                .map_err(|e| e.to_string())
+        };
+        for (v, expected) in [
+            ("true", true),
+            ("1", true),
+            ("yes", true),
+            ("false", false),
+            ("0", false),
+            ("no", false),
+        ] {
+            assert_eq!(trusted(v), Ok(expected), "{v}");
+        }
+    }
+
     #[test]
     fn bad_strings_name_what_is_wrong() {
         let err = |t: &str| BridgeSpec::parse(t).unwrap_err().to_string();
@@ -532,7 +549,7 @@ mod tests {
         assert!(err("mqtt://h:99999?fleet=a&vid=b").contains("port \"99999\""));
         assert!(err("mqtt://h:1?fleet=a&vid=b&key=00").contains("does not apply"));
         assert!(err("mqtt://h:1?fleet=a&vid=b&colour=red").contains("unknown option"));
-        assert!(err("mqtt://h:1?fleet=a&vid=b&trusted=yes").contains("true or false"));
+        assert!(err("mqtt://h:1?fleet=a&vid=b&trusted=on").contains("true, 1, yes or false"));
         assert!(err("mqtt://h:1?fleet=a&vid=b,c/d").contains("vid \"c/d\""));
         assert!(err("mqtt://h:1?fleet=a&vid=b&side=sky").contains("vehicle or ground"));
         assert!(err("mqtt://h?fleet=a&vid=b&ca=/x.pem").contains("mqtts:// links only"));

@@ -180,12 +180,29 @@ pub fn parse(
     Ok(link)
 }
 
-fn boolean(name: &str, value: &str) -> Result<bool, OptionError> {
+/// A boolean as the link options spell it (`docs/contracts/link-options.md`): `true`, `1`,
+/// `yes` or `false`, `0`, `no`. The one reading of booleans for every option mavstack
+/// defines (link strings, bridge links); mavlink-router's own `main.conf` keys keep its
+/// reading.
+///
+/// ```
+/// use mavstack_router::options::parse_bool;
+/// assert_eq!(parse_bool("yes"), Some(true));
+/// assert_eq!(parse_bool("0"), Some(false));
+/// assert_eq!(parse_bool("on"), None);
+/// ```
+#[must_use]
+pub fn parse_bool(value: &str) -> Option<bool> {
     match value {
-        "true" | "1" | "yes" => Ok(true),
-        "false" | "0" | "no" => Ok(false),
-        _ => Err(err(name, format!("\"{value}\" is not true or false"))),
+        "true" | "1" | "yes" => Some(true),
+        "false" | "0" | "no" => Some(false),
+        _ => None,
     }
+}
+
+/// What [`parse_bool`] says about option `name`, or why not.
+fn boolean(name: &str, value: &str) -> Result<bool, OptionError> {
+    parse_bool(value).ok_or_else(|| err(name, format!("\"{value}\" is not true or false")))
 }
 
 fn message(
