@@ -47,6 +47,94 @@ pub(crate) fn load(name: &str) -> Result<Dialect, Failure> {
     mavstack_dialect::load(name).map_err(|e| Failure::Input(e.into()))
 }
 
+/// The dialects compiled into the binary, the one list of them in the command line:
+/// `with_compiled!(name, M => expr)` is `Some(expr)` with `M` the generated `MavMessage` of
+/// the built-in dialect `name` (lower case), or `None` when `name` is not one of them.
+macro_rules! with_compiled {
+    ($name:expr, $m:ident => $body:expr) => {
+        match $name {
+            "all" => {
+                type $m = ::mavstack_dialects::all::MavMessage;
+                Some($body)
+            }
+            "ardupilotmega" => {
+                type $m = ::mavstack_dialects::ardupilotmega::MavMessage;
+                Some($body)
+            }
+            "asluav" => {
+                type $m = ::mavstack_dialects::asluav::MavMessage;
+                Some($body)
+            }
+            "avssuas" => {
+                type $m = ::mavstack_dialects::avssuas::MavMessage;
+                Some($body)
+            }
+            "common" => {
+                type $m = ::mavstack_dialects::common::MavMessage;
+                Some($body)
+            }
+            "csairlink" => {
+                type $m = ::mavstack_dialects::csairlink::MavMessage;
+                Some($body)
+            }
+            "cubepilot" => {
+                type $m = ::mavstack_dialects::cubepilot::MavMessage;
+                Some($body)
+            }
+            "development" => {
+                type $m = ::mavstack_dialects::development::MavMessage;
+                Some($body)
+            }
+            "icarous" => {
+                type $m = ::mavstack_dialects::icarous::MavMessage;
+                Some($body)
+            }
+            "loweheiser" => {
+                type $m = ::mavstack_dialects::loweheiser::MavMessage;
+                Some($body)
+            }
+            "matrixpilot" => {
+                type $m = ::mavstack_dialects::matrixpilot::MavMessage;
+                Some($body)
+            }
+            "minimal" => {
+                type $m = ::mavstack_dialects::minimal::MavMessage;
+                Some($body)
+            }
+            "paparazzi" => {
+                type $m = ::mavstack_dialects::paparazzi::MavMessage;
+                Some($body)
+            }
+            "python_array_test" => {
+                type $m = ::mavstack_dialects::python_array_test::MavMessage;
+                Some($body)
+            }
+            "standard" => {
+                type $m = ::mavstack_dialects::standard::MavMessage;
+                Some($body)
+            }
+            "storm32" => {
+                type $m = ::mavstack_dialects::storm32::MavMessage;
+                Some($body)
+            }
+            "test" => {
+                type $m = ::mavstack_dialects::test::MavMessage;
+                Some($body)
+            }
+            "uavionix" => {
+                type $m = ::mavstack_dialects::uavionix::MavMessage;
+                Some($body)
+            }
+            "ualberta" => {
+                type $m = ::mavstack_dialects::ualberta::MavMessage;
+                Some($body)
+            }
+            _ => None,
+        }
+    };
+}
+pub(crate) use with_compiled;
+
 pub(crate) fn run(action: DialectAction) -> Result<(), Failure> {
     let stdout = io::stdout();
     let mut out = io::BufWriter::new(stdout.lock());

@@ -6,7 +6,6 @@ use std::io::{self, Read};
 
 use mavstack_core::parse::{CrcExtra, Item, Stats};
 use mavstack_core::signing::{self, SecretKey};
-use mavstack_dialects as d;
 
 use crate::log_reader::raw_items;
 
@@ -73,27 +72,10 @@ pub(crate) fn count_builtin(
     input: &mut dyn Read,
     key: Option<&SecretKey>,
 ) -> Option<io::Result<(Stats, u64)>> {
-    let run = match name.to_ascii_lowercase().as_str() {
-        "all" => count::<d::all::MavMessage>,
-        "ardupilotmega" => count::<d::ardupilotmega::MavMessage>,
-        "asluav" => count::<d::asluav::MavMessage>,
-        "avssuas" => count::<d::avssuas::MavMessage>,
-        "common" => count::<d::common::MavMessage>,
-        "csairlink" => count::<d::csairlink::MavMessage>,
-        "cubepilot" => count::<d::cubepilot::MavMessage>,
-        "development" => count::<d::development::MavMessage>,
-        "icarous" => count::<d::icarous::MavMessage>,
-        "loweheiser" => count::<d::loweheiser::MavMessage>,
-        "matrixpilot" => count::<d::matrixpilot::MavMessage>,
-        "minimal" => count::<d::minimal::MavMessage>,
-        "paparazzi" => count::<d::paparazzi::MavMessage>,
-        "python_array_test" => count::<d::python_array_test::MavMessage>,
-        "standard" => count::<d::standard::MavMessage>,
-        "storm32" => count::<d::storm32::MavMessage>,
-        "test" => count::<d::test::MavMessage>,
-        "uavionix" => count::<d::uavionix::MavMessage>,
-        "ualberta" => count::<d::ualberta::MavMessage>,
-        _ => return None,
-    };
+    type Count = fn(&mut dyn Read, Option<&SecretKey>) -> io::Result<(Stats, u64)>;
+    let run = crate::dialect_cmd::with_compiled!(
+        name.to_ascii_lowercase().as_str(),
+        M => count::<M> as Count
+    )?;
     Some(run(input, key))
 }

@@ -117,16 +117,14 @@ pub(crate) enum ModerationArg {
 /// built-in name or an XML file through the run-time model (`docs/contracts/json-lines.md`,
 /// "Dialect names").
 fn dialect(name: &str) -> Result<MessageTable, Failure> {
-    macro_rules! compiled {
-        ($($d:ident),*) => {
-            match name {
-                $(stringify!($d) => return Ok(MessageTable::of::<mavstack::dialects::$d::MavMessage>()),)*
-                _ => {}
-            }
-        };
+    let compiled = crate::dialect_cmd::with_compiled!(
+        name.to_ascii_lowercase().as_str(),
+        M => MessageTable::of::<M>()
+    );
+    match compiled {
+        Some(table) => Ok(table),
+        None => crate::dialect_cmd::load(name).map(|d| d.message_table()),
     }
-    compiled!(ardupilotmega, common, minimal, standard, development, all);
-    crate::dialect_cmd::load(name).map(|d| d.message_table())
 }
 
 pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
