@@ -11,6 +11,10 @@
 //! let key = "ab".repeat(32);
 //! let err = LinkSpec::parse(&format!("udpin:0.0.0.0:1?key={key}&version=1"), &|_| None).unwrap_err();
 //! assert!(!err.to_string().contains(&key), "keys never appear in messages");
+//! let spec = LinkSpec::parse("udpin:0.0.0.0:14550?max_peers=8&name=gcs", &|_| None).unwrap();
+//! assert_eq!((spec.max_peers, spec.config.name.as_str()), (8, "gcs"));
+//! let err = LinkSpec::parse("udpin:0.0.0.0:14550?max_peers=0", &|_| None).unwrap_err();
+//! assert_eq!(err.to_string(), r#"link "udpin:0.0.0.0:14550?max_peers=0": link option "max_peers": "0" is not a number 1-65535"#);
 //! ```
 
 use mavstack_core::MessageTable;
@@ -24,6 +28,10 @@ pub struct LinkSpec {
     pub conn: ConnSpec,
     /// Its options (name, version, key, filters...).
     pub config: LinkConfig,
+    /// The most peers a UDP link keeps (the `max_peers` option, 1-65535; default
+    /// [`mavstack_transport::Link::DEFAULT_MAX_PEERS`]). Other kinds of link refuse the
+    /// option.
+    pub max_peers: usize,
 }
 
 /// A link string that cannot be used.
@@ -105,14 +113,63 @@ impl LinkSpec {
             text: redacted(text),
             source,
         })?;
-        let config = options::parse(opts, &conn.to_string(), message_id).map_err(|source| {
-            LinkSpecError::Option {
-                text: redacted(text),
-                source,
+        let option_error = |source| LinkSpecError::Option {
+            text: redacted(text),
+            source,
+        };
+        let (max_peers, rest) = take_max_peers(opts, &conn).map_err(option_error)?;
+        let config = options::parse(&rest, &conn.to_string(), message_id).map_err(|mut e| {
+            // The router's options do not know the one the transport takes.
+            if e.reason.starts_with("unknown option; expected one of") {
+                e.reason.push_str(", max_peers");
             }
+            option_error(e)
         })?;
-        Ok(Self { conn, config })
+        Ok(Self {
+            conn,
+            config,
+            max_peers: max_peers.unwrap_or(mavstack_transport::Link::DEFAULT_MAX_PEERS),
+        })
     }
+}
+
+/// Takes the `max_peers` option out of `opts`: its value (1-65535, UDP links only) and the
+/// other options.
+fn take_max_peers(opts: &str, conn: &ConnSpec) -> Result<(Option<usize>, String), OptionError> {
+    const NAME: &str = "max_peers";
+    let err = |reason: String| OptionError {
+        option: NAME.to_owned(),
+        reason,
+    };
+    let mut max_peers = None;
+    let mut rest = Vec::new();
+    for pair in opts.split('&') {
+        let Some(value) = pair.strip_prefix("max_peers=") else {
+            if pair == NAME {
+                return Err(err("expected name=value".to_owned()));
+            }
+            rest.push(pair);
+            continue;
+        };
+        if max_peers.is_some() {
+            return Err(err("given twice".to_owned()));
+        }
+        let n = value
+            .parse::<u16>()
+            .ok()
+            .filter(|&n| n >= 1)
+            .ok_or_else(|| err(format!("\"{value}\" is not a number 1-65535")))?;
+        max_peers = Some(usize::from(n));
+    }
+    if max_peers.is_some()
+        && !matches!(
+            conn,
+            ConnSpec::UdpIn { .. } | ConnSpec::UdpOut { .. } | ConnSpec::UdpBcast { .. }
+        )
+    {
+        return Err(err("only UDP links have peers to bound".to_owned()));
+    }
+    Ok((max_peers, rest.join("&")))
 }
 
 /// Fuzzing entry point for link strings (connection string and options): any text parses to

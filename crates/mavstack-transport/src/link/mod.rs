@@ -13,6 +13,7 @@
 //! are the caller's code); what the helper-task links share is in [`tasks`] (the driver's side)
 //! and [`stream`] (readers, writers and the reconnecting supervisor).
 
+mod admission;
 mod external;
 mod file;
 mod serial;
@@ -81,8 +82,17 @@ pub struct LinkStats {
     pub tx_errors: u64,
     /// Peers that appeared (for a TCP client, each successful (re)connection).
     pub peers_added: u64,
-    /// Peers that went away (disconnected, expired, or a file's end).
+    /// Peers that went away (disconnected, expired, made room for a new one, or a file's
+    /// end).
     pub peers_removed: u64,
+    /// UDP: datagrams from a source that is not a peer holding no MAVLink frame with a good
+    /// checksum (dropped; they make no peer, see [`Link::admit_peers`]).
+    pub rx_unadmitted: u64,
+    /// UDP: new sources refused because the link had `max_peers` peers and none had been
+    /// quiet long enough to make room (their datagrams are dropped).
+    pub peers_refused: u64,
+    /// UDP: peers removed to make room for a new source (counted in `peers_removed` too).
+    pub peers_evicted: u64,
 }
 
 /// Hands out peer ids, unique within one connection.
@@ -310,6 +320,28 @@ impl Link {
             finished: None,
             local_addr,
         })
+    }
+
+    /// How many peers a UDP link keeps at most unless [`Link::admit_peers`] says otherwise
+    /// (the `max_peers` link option's default).
+    pub const DEFAULT_MAX_PEERS: usize = admission::DEFAULT_MAX_PEERS;
+
+    /// Sets who may become a peer of a UDP link (no effect on other kinds): a datagram from a
+    /// source that is not a peer yet makes it one only if it holds a MAVLink frame with a
+    /// good checksum by `lookup`'s CRC_EXTRA (any datagram without a lookup), and the link
+    /// keeps at most `max_peers` (at least 1) learned peers: at the limit the peer quiet the
+    /// longest makes room if it has been quiet for 3 s, else the new source is refused
+    /// ([`LinkStats::peers_refused`], a warning naming `name` at most every 10 s). Without
+    /// this call: [`Link::DEFAULT_MAX_PEERS`], any datagram.
+    pub fn admit_peers(
+        &mut self,
+        name: &str,
+        max_peers: usize,
+        lookup: Option<Arc<dyn mavstack_core::parse::CrcExtra + Send + Sync>>,
+    ) {
+        if let Kind::Udp(udp) = &mut self.kind {
+            udp.peers.admission = admission::Admission::new(name.to_owned(), max_peers, lookup);
+        }
     }
 
     /// The peers table the user's handle reads.

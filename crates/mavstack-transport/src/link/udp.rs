@@ -14,6 +14,7 @@ use crate::connection::Options;
 use crate::protocol::{Dest, Framing, Input, PeerAddr, PeerId, PeerInfo};
 use crate::udp_io::UdpIo;
 
+use super::admission::{Admission, IDLE_AFTER};
 use super::{BATCH, LinkStats, PeerIds, PeerTable};
 
 /// A UDP socket bound to `addr` with big buffers.
@@ -73,6 +74,8 @@ pub(super) struct UdpPeers {
     pub(super) peer_timeout: Duration,
     pub(super) next_expiry: Option<Instant>,
     pub(super) ids: PeerIds,
+    /// Who may become a peer, and how many.
+    pub(super) admission: Admission,
 }
 
 impl Udp {
@@ -94,6 +97,7 @@ impl Udp {
                 peer_timeout: options.peer_timeout,
                 next_expiry: None,
                 ids,
+                admission: Admission::default(),
             },
         }
     }
@@ -186,6 +190,8 @@ impl UdpPeers {
         table: &PeerTable,
     ) {
         let now = clock::now();
+        stats.rx_chunks += 1;
+        stats.rx_bytes += data.len() as u64;
         let id = match self.target {
             Some((id, addr)) if addr == from => id,
             _ => {
@@ -195,6 +201,18 @@ impl UdpPeers {
                     }
                     id
                 } else {
+                    // A new source: a peer only with a MAVLink frame, and room for it.
+                    if !self.admission.holds_frame(data) {
+                        stats.rx_unadmitted += 1;
+                        return;
+                    }
+                    if self.learned.len() >= self.admission.max_peers
+                        && !self.make_room(now, input, stats, table)
+                    {
+                        stats.peers_refused += 1;
+                        self.admission.refused(now, stats.peers_refused);
+                        return;
+                    }
                     let id = self.ids.next();
                     let info = PeerInfo {
                         id,
@@ -218,9 +236,36 @@ impl UdpPeers {
                 }
             }
         };
-        stats.rx_chunks += 1;
-        stats.rx_bytes += data.len() as u64;
         input.handle_input(now, id, data);
+    }
+
+    /// At `max_peers`: removes the peer quiet the longest if it has been quiet for
+    /// [`IDLE_AFTER`]. Whether there is room now.
+    fn make_room<I: Input>(
+        &mut self,
+        now: Instant,
+        input: &mut I,
+        stats: &mut LinkStats,
+        table: &PeerTable,
+    ) -> bool {
+        let oldest = self
+            .learned
+            .iter()
+            .min_by_key(|(_, p)| p.last_seen)
+            .filter(|(_, p)| now - p.last_seen >= IDLE_AFTER)
+            .map(|(&id, _)| id);
+        let Some(id) = oldest else {
+            return false;
+        };
+        if let Some(peer) = self.learned.remove(&id) {
+            tracing::debug!("udp peer {} ({id}) makes room for a new one", peer.addr);
+            self.by_addr.remove(&peer.addr);
+            table.remove(id);
+            stats.peers_removed += 1;
+            stats.peers_evicted += 1;
+            input.handle_peer_removed(now, id);
+        }
+        true
     }
 
     pub(super) fn expire<I: Input>(

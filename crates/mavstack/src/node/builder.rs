@@ -5,7 +5,7 @@ use core::time::Duration;
 use std::path::PathBuf;
 
 use mavstack_core::wire::MAX_FRAME_LEN;
-use mavstack_core::{MAX_PAYLOAD_LEN, Message, MessageSet};
+use mavstack_core::{MAX_PAYLOAD_LEN, Message};
 use mavstack_router::{LinkConfig, LinkRole, LocalDelivery, MessageTable, Router, RouterConfig};
 use mavstack_transport::{Link, Options, clock};
 use tokio::sync::mpsc;
@@ -236,15 +236,20 @@ impl NodeBuilder {
         options.peer_timeout = options.peer_timeout.max(router_config.route_ttl);
         // An endpoint that is not up yet is tried again, as mavlink-router does.
         options.keep_trying = true;
+        // A new UDP source becomes a peer (a router link) only with a frame whose checksum
+        // holds in the node's dialect, and each link has at most its `max_peers`.
+        let crc: std::sync::Arc<dyn mavstack_core::parse::CrcExtra + Send + Sync> =
+            std::sync::Arc::new(self.dialect);
         for new in self.links {
             let (mut config, mut io) = match new {
                 NewLink::Spec(spec) => {
-                    let io = Link::open(&spec.conn, &options).await.map_err(|source| {
+                    let mut io = Link::open(&spec.conn, &options).await.map_err(|source| {
                         NodeError::Open {
                             name: spec.config.name.clone(),
                             source,
                         }
                     })?;
+                    io.admit_peers(&spec.config.name, spec.max_peers, Some(crc.clone()));
                     (spec.config, io)
                 }
                 NewLink::Open(config, io) => (config, *io),

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use mavstack_core::time::Instant;
 use mavstack_core::wire::MAX_FRAME_LEN;
-use mavstack_core::{Message, MessageSet};
+use mavstack_core::Message;
 use mavstack_router::{Event, LinkConfig, LinkId, Router, SendTo};
 use mavstack_transport::protocol::Framing;
 use mavstack_transport::{Dest, Input, Link, PeerId, PeerInfo, clock, tlog};

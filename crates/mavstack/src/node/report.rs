@@ -30,6 +30,7 @@ impl Driver {
                     sources: Vec::new(),
                 });
             }
+            let first = links.len();
             let mut peers: Vec<_> = slot.peers.values().collect();
             peers.sort_by_key(|(id, _, _)| *id);
             for (id, _, addr) in peers {
@@ -59,6 +60,18 @@ impl Driver {
                             .collect()
                     }),
                 });
+            }
+            // What the link refused before any router link saw it goes on its first entry.
+            if let Some(entry) = links.get_mut(first) {
+                let io = slot.io.stats();
+                for (reason, n) in [
+                    ("not_mavlink", io.rx_unadmitted),
+                    ("peer_refused", io.peers_refused),
+                ] {
+                    if n > 0 {
+                        entry.dropped.push((reason, n));
+                    }
+                }
             }
         }
         let routes = self
