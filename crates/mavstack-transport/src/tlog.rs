@@ -6,11 +6,14 @@
 //! There is no length field: the frame's header gives its length. (Protocol digest §8;
 //! pymavlink, MAVProxy, QGroundControl and mavlink-router write this format.)
 //!
-//! - [`Writer`] (over [`std::io::Write`]) and [`AsyncWriter`] (over tokio's `AsyncWrite`)
-//!   append records. They buffer, and write the buffer out at least once a second and
-//!   whenever it reaches 64 KiB, so a crash loses at most the last second. Between records,
-//!   call `flush_if_due` (or sleep until `flush_deadline`) so that an idle log is written out
-//!   too.
+//! - [`Writer`] (over [`std::io::Write`]) appends records: the one tlog writer (the
+//!   `record` command, the router's `--log`, file links). It buffers, and writes the buffer
+//!   out at least once a second and whenever it reaches 64 KiB, so a crash loses at most the
+//!   last second. Between records, call `flush_if_due` (or sleep until `flush_deadline`) so
+//!   that an idle log is written out too.
+//! - [`Spool`] runs a [`Writer`] over a file on a thread of its own behind a bounded queue,
+//!   for writers that must never wait for the disk (a router's log, a file link); it also
+//!   names a router's logs (`mavstack-YYYYmmdd-HHMMSS.tlog`, UTC, never overwriting one).
 //! - [`Reader`] yields `(timestamp, frame)` records, and survives corruption: a record that
 //!   does not hold a plausible frame is skipped byte by byte until one does (see
 //!   [`Reader::with_crc_extra`] for what "plausible" means). A replayer gets each record's
@@ -40,11 +43,14 @@ use mavstack_core::parse::CrcExtra;
 use mavstack_core::time::Instant;
 use mavstack_core::tlog::{LOOKAHEAD, RecordStats, record_len};
 use mavstack_core::wire::Frame;
-use tokio::io::{AsyncWrite, AsyncWriteExt as _};
 
 use crate::frame::FrameBuf;
 
 pub use mavstack_core::tlog::{MAX_RECORD_LEN, TIMESTAMP_LEN};
+mod spool;
+
+pub use spool::{OpenMode, QUEUE_BATCHES, Spool};
+
 /// Buffered records are written out at least this often.
 pub const FLUSH_INTERVAL: Duration = Duration::from_secs(1);
 /// Buffered records are written out once they reach this many bytes.
@@ -152,6 +158,17 @@ impl<W: Write> Writer<W> {
         self.flush_if_due().map(|_| ())
     }
 
+    /// Appends bytes as they are, no timestamp (for raw captures written through the same
+    /// buffering). Writes the buffer out if it is due.
+    ///
+    /// # Errors
+    /// Errors of the underlying writer, when the buffer is written out.
+    pub fn write_raw(&mut self, data: &[u8]) -> io::Result<()> {
+        self.buffer.push_raw(data);
+        self.records += 1;
+        self.flush_if_due().map(|_| ())
+    }
+
     /// Writes the buffer out if a second has passed since its oldest record was added (or it
     /// is full), and says whether it did. Call it now and then when no records come.
     ///
@@ -207,77 +224,6 @@ impl<W: Write> Drop for Writer<W> {
         if let Err(e) = self.flush() {
             tracing::warn!("tlog: cannot write the last records: {e}");
         }
-    }
-}
-
-/// Writes tlog records to a tokio `AsyncWrite`; the async twin of [`Writer`].
-///
-/// Dropping it loses what is buffered (at most a second's worth): call
-/// [`AsyncWriter::flush`] before.
-#[derive(Debug)]
-pub struct AsyncWriter<W: AsyncWrite + Unpin> {
-    inner: W,
-    buffer: Buffer,
-    records: u64,
-}
-
-impl<W: AsyncWrite + Unpin> AsyncWriter<W> {
-    /// A writer appending to `inner`.
-    pub fn new(inner: W) -> Self {
-        Self {
-            inner,
-            buffer: Buffer::new(),
-            records: 0,
-        }
-    }
-
-    /// Appends a record (see [`Writer::write_record`]).
-    ///
-    /// # Errors
-    /// Errors of the underlying writer, when the buffer is written out.
-    pub async fn write_record(&mut self, ts_us: u64, frame: &[u8]) -> io::Result<()> {
-        self.buffer.push_record(ts_us, frame);
-        self.records += 1;
-        self.flush_if_due().await.map(|_| ())
-    }
-
-    /// Writes the buffer out if it is due (see [`Writer::flush_if_due`]).
-    ///
-    /// # Errors
-    /// Errors of the underlying writer.
-    pub async fn flush_if_due(&mut self) -> io::Result<bool> {
-        if self.buffer.due() {
-            self.flush().await?;
-            return Ok(true);
-        }
-        Ok(false)
-    }
-
-    /// When the buffer must next be written out (`None` when it is empty).
-    #[must_use]
-    pub fn flush_deadline(&self) -> Option<std::time::Instant> {
-        self.buffer.deadline()
-    }
-
-    /// Writes the buffer out and flushes the underlying writer.
-    ///
-    /// # Errors
-    /// Errors of the underlying writer.
-    pub async fn flush(&mut self) -> io::Result<()> {
-        self.inner.write_all(self.buffer.bytes()).await?;
-        self.buffer.clear();
-        self.inner.flush().await
-    }
-
-    /// Records written so far.
-    #[must_use]
-    pub fn records(&self) -> u64 {
-        self.records
-    }
-
-    /// The underlying writer (flush first).
-    pub fn into_inner(self) -> W {
-        self.inner
     }
 }
 
@@ -674,21 +620,5 @@ mod tests {
             w.write_record(2, &HEARTBEAT).unwrap();
         }
         assert!(w.inner.as_ref().unwrap().len() > BUFFER_LEN);
-    }
-
-    #[tokio::test]
-    async fn async_writer_writes_the_same_bytes() {
-        let mut w = AsyncWriter::new(Vec::new());
-        for i in 0..4u64 {
-            let frame: &[u8] = if i % 2 == 0 {
-                &HEARTBEAT
-            } else {
-                &HEARTBEAT_V1
-            };
-            w.write_record(1_000 + i, frame).await.unwrap();
-        }
-        w.flush().await.unwrap();
-        assert_eq!(w.records(), 4);
-        assert_eq!(w.into_inner(), log(4));
     }
 }

@@ -4,7 +4,6 @@ use std::io;
 
 use mavstack_core::time::Instant;
 use mavstack_core::wire::Frame;
-use tokio::io::AsyncWriteExt as _;
 use tokio::sync::mpsc;
 
 use crate::clock;
@@ -15,7 +14,7 @@ use crate::protocol::{Framing, PeerAddr, PeerId, PeerInfo};
 use crate::tlog;
 
 use super::tasks::Tasks;
-use super::{LinkMsg, PeerIds, PeerWriter, WriterQueue, sleep_until};
+use super::{LinkMsg, PeerIds, PeerWriter, WriterQueue};
 
 pub(super) fn open_file(
     path: &std::path::Path,
@@ -54,24 +53,26 @@ pub(super) fn open_file(
                 .map_err(|e| file_err(&e))?;
         }
         FileMode::Write | FileMode::Append => {
-            let mut open = std::fs::OpenOptions::new();
-            if options.file_mode == FileMode::Append {
-                open.append(true).create(true);
+            let mode = if options.file_mode == FileMode::Append {
+                tlog::OpenMode::Append
             } else {
-                open.write(true).create(true).truncate(true);
-            }
-            let file = open.open(path).map_err(|e| file_err(&e))?;
-            let (wtx, wrx) = mpsc::channel(options.write_queue.max(1));
+                tlog::OpenMode::Truncate
+            };
+            let spool = tlog::Spool::open(path, mode).map_err(|e| file_err(&e))?;
+            let sink = FileSink {
+                spool,
+                format,
+                what,
+                _open: tx,
+            };
             tasks.writers.insert(
                 id,
                 PeerWriter {
-                    queue: WriterQueue::Plain(wtx),
+                    queue: WriterQueue::File(Box::new(sink)),
                     task: None,
                 },
             );
             tasks.initial.push(info);
-            let sink = write_file(tokio::fs::File::from_std(file), format, wrx, what, tx);
-            tasks.sinks.push(tokio::spawn(sink));
         }
     }
     Ok(())
@@ -176,74 +177,63 @@ pub(super) fn read_tlog(
     }
 }
 
-/// Writes what is sent to a file: raw, or as tlog records stamped with the transport's clock.
-/// Writes out at least once a second; writes everything out when the link closes.
-pub(super) async fn write_file(
-    mut file: tokio::fs::File,
+/// A file being written: what is sent goes to its [`tlog::Spool`] (the file's own writer
+/// thread; raw, or as tlog records stamped with the transport's clock when sent), written out
+/// at least once a second and all of it when the link closes.
+#[derive(Debug)]
+pub(super) struct FileSink {
+    spool: tlog::Spool,
     format: FileFormat,
-    mut rx: mpsc::Receiver<Vec<u8>>,
     what: String,
-    link: mpsc::Sender<LinkMsg>,
-) -> Result<(), LinkError> {
-    let mut buffer = tlog::Buffer::new();
-    let fail = |e: &io::Error| LinkError::Write {
-        what: what.clone(),
-        reason: Reason::from_io(e),
-    };
-    loop {
-        let deadline = buffer.deadline().map(tokio::time::Instant::from_std);
-        let flush = tokio::select! {
-            data = rx.recv() => match data {
-                Some(data) => {
-                    append(&mut buffer, format, &data, &what);
-                    buffer.due()
-                }
-                None => break,
-            },
-            () = sleep_until(deadline), if deadline.is_some() => true,
-        };
-        if flush && let Err(e) = write_out(&mut file, &mut buffer).await {
-            let err = fail(&e);
-            let _ = link.send(LinkMsg::Closed(Err(err.clone()))).await;
-            return Err(err);
-        }
-    }
-    write_out(&mut file, &mut buffer)
-        .await
-        .map_err(|e| fail(&e))?;
-    file.sync_data().await.map_err(|e| fail(&e))
+    /// Keeps the link's queue open while the file is written.
+    _open: mpsc::Sender<LinkMsg>,
 }
 
-pub(super) fn append(buffer: &mut tlog::Buffer, format: FileFormat, data: &[u8], what: &str) {
-    match format {
-        FileFormat::Raw => buffer.push_raw(data),
-        FileFormat::Tlog => {
-            let now = clock::now().as_micros();
-            let mut rest = data;
-            while !rest.is_empty() {
-                let Ok(frame) = Frame::new_checked(rest) else {
-                    tracing::warn!(
-                        "{what}: {} bytes that are not a frame not logged",
-                        rest.len()
-                    );
-                    return;
-                };
-                let len = frame.frame_len();
-                buffer.push_record(now, &rest[..len]);
-                rest = &rest[len..];
+impl FileSink {
+    /// Hands `data` to the writer thread; `Ok(false)` when its queue was full (dropped).
+    ///
+    /// # Errors
+    /// The file could not be written.
+    pub(super) fn write(&mut self, data: &[u8]) -> Result<bool, LinkError> {
+        match self.format {
+            FileFormat::Raw => self.spool.push_raw(data),
+            FileFormat::Tlog => {
+                let now = clock::now().as_micros();
+                let mut rest = data;
+                while !rest.is_empty() {
+                    let Ok(frame) = Frame::new_checked(rest) else {
+                        tracing::warn!(
+                            "{}: {} bytes that are not a frame not logged",
+                            self.what,
+                            rest.len()
+                        );
+                        break;
+                    };
+                    let (record, more) = rest.split_at(frame.frame_len());
+                    self.spool.push_record(now, record);
+                    rest = more;
+                }
             }
         }
+        self.spool.send().map_err(|e| self.fail(&e))
     }
-}
 
-pub(super) async fn write_out(
-    file: &mut tokio::fs::File,
-    buffer: &mut tlog::Buffer,
-) -> io::Result<()> {
-    if buffer.bytes().is_empty() {
-        return Ok(());
+    /// Writes everything out and syncs the file (blocks: the writer thread finishes).
+    ///
+    /// # Errors
+    /// The file could not be written.
+    pub(super) fn finish(self) -> Result<(), LinkError> {
+        let what = self.what;
+        self.spool.finish().map_err(|e| LinkError::Write {
+            what,
+            reason: Reason::from_io(&e),
+        })
     }
-    file.write_all(buffer.bytes()).await?;
-    buffer.clear();
-    file.flush().await
+
+    fn fail(&self, e: &io::Error) -> LinkError {
+        LinkError::Write {
+            what: self.what.clone(),
+            reason: Reason::from_io(e),
+        }
+    }
 }

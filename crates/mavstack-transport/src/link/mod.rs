@@ -159,19 +159,35 @@ pub(crate) enum LinkMsg {
     Closed(Result<(), LinkError>),
 }
 
-/// Where a peer's frames go: its writer task, or an external link's one queue (tagged).
+/// Where a peer's frames go: its writer task, an external link's one queue (tagged), or a
+/// file's writer thread.
 #[derive(Debug)]
 enum WriterQueue {
     Plain(mpsc::Sender<Vec<u8>>),
     Tagged(PeerId, mpsc::Sender<(PeerId, Vec<u8>)>),
+    File(Box<file::FileSink>),
+}
+
+/// What became of a transmit handed to a [`WriterQueue`].
+enum Queued {
+    Yes,
+    /// The queue was full: dropped.
+    Full,
+    /// The writer failed: the link ends with this.
+    Failed(LinkError),
 }
 
 impl WriterQueue {
-    fn try_send(&self, data: &[u8]) -> Result<(), ()> {
-        match self {
-            Self::Plain(q) => q.try_send(data.to_vec()).map_err(|_| ()),
-            Self::Tagged(id, q) => q.try_send((*id, data.to_vec())).map_err(|_| ()),
-        }
+    fn try_send(&mut self, data: &[u8]) -> Queued {
+        let queued = match self {
+            Self::Plain(q) => q.try_send(data.to_vec()).is_ok(),
+            Self::Tagged(id, q) => q.try_send((*id, data.to_vec())).is_ok(),
+            Self::File(sink) => match sink.write(data) {
+                Ok(queued) => queued,
+                Err(e) => return Queued::Failed(e),
+            },
+        };
+        if queued { Queued::Yes } else { Queued::Full }
     }
 }
 
@@ -528,9 +544,17 @@ impl Link {
         let Kind::Tasks(tasks) = &mut self.kind else {
             return Ok(());
         };
-        // Dropping the queues lets each writer task write what is queued, then end.
-        let writers: Vec<JoinHandle<()>> =
-            tasks.writers.drain().filter_map(|(_, w)| w.task).collect();
+        // Dropping the queues lets each writer task write what is queued, then end; files
+        // are written out and synced by their writer threads.
+        let mut writers: Vec<JoinHandle<()>> = Vec::new();
+        for (_, w) in tasks.writers.drain() {
+            match w.queue {
+                WriterQueue::File(sink) => tasks
+                    .sinks
+                    .push(tokio::task::spawn_blocking(move || sink.finish())),
+                _ => writers.extend(w.task),
+            }
+        }
         tasks.rx.close();
         let deadline = tokio::time::Instant::now() + DRAIN_TIMEOUT;
         for handle in writers {
@@ -538,7 +562,7 @@ impl Link {
                 tracing::debug!("a peer's writer did not finish in time");
             }
         }
-        let mut result = Ok(());
+        let mut result = tasks.failed.take().map_or(Ok(()), |e| Err(*e));
         for handle in tasks.sinks.drain(..) {
             match tokio::time::timeout(DRAIN_TIMEOUT, handle).await {
                 Ok(Ok(Ok(()))) => {}

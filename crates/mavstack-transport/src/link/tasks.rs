@@ -10,7 +10,7 @@ use crate::clock;
 use crate::error::LinkError;
 use crate::protocol::{Dest, Input, PeerId, PeerInfo};
 
-use super::{BATCH, LinkMsg, LinkStats, PeerTable, PeerWriter};
+use super::{BATCH, LinkMsg, LinkStats, PeerTable, PeerWriter, Queued};
 
 #[derive(Debug)]
 pub(super) struct Tasks {
@@ -21,6 +21,8 @@ pub(super) struct Tasks {
     pub(super) sinks: Vec<JoinHandle<Result<(), LinkError>>>,
     /// Peers known when the link opened, announced by [`Link::start`].
     pub(super) initial: Vec<PeerInfo>,
+    /// A writer that failed (a file that cannot be written): the link ends with it.
+    pub(super) failed: Option<Box<LinkError>>,
 }
 
 impl Tasks {
@@ -31,11 +33,12 @@ impl Tasks {
             writers: HashMap::new(),
             sinks: Vec::new(),
             initial: Vec::new(),
+            failed: None,
         }
     }
 
     pub(super) fn poll_ready(&mut self, cx: &mut Context<'_>) -> Poll<()> {
-        if self.pending.is_some() {
+        if self.pending.is_some() || self.failed.is_some() {
             return Poll::Ready(());
         }
         self.rx.poll_recv(cx).map(|msg| {
@@ -49,6 +52,9 @@ impl Tasks {
         stats: &mut LinkStats,
         table: &PeerTable,
     ) -> Option<Result<(), LinkError>> {
+        if let Some(e) = self.failed.take() {
+            return Some(Err(*e));
+        }
         let mut next = self.pending.take();
         for _ in 0..BATCH {
             let Some(msg) = next.take() else { break };
@@ -107,21 +113,26 @@ impl Tasks {
     }
 
     pub(super) fn transmit(&mut self, dest: Dest, data: &[u8], stats: &mut LinkStats) {
-        let mut send = |writer: &PeerWriter| match writer.queue.try_send(data) {
-            Ok(()) => {
+        let failed = &mut self.failed;
+        let mut send = |writer: &mut PeerWriter| match writer.queue.try_send(data) {
+            Queued::Yes => {
                 stats.tx_chunks += 1;
                 stats.tx_bytes += data.len() as u64;
             }
-            Err(_) => stats.tx_dropped += 1,
+            Queued::Full => stats.tx_dropped += 1,
+            Queued::Failed(e) => {
+                stats.tx_errors += 1;
+                failed.get_or_insert(Box::new(e));
+            }
         };
         match dest {
-            Dest::Peer(id) => match self.writers.get(&id) {
+            Dest::Peer(id) => match self.writers.get_mut(&id) {
                 Some(w) => send(w),
                 None => stats.tx_dropped += 1,
             },
             Dest::All | Dest::AllExcept(_) => {
                 let mut sent = false;
-                for (&id, w) in &self.writers {
+                for (&id, w) in &mut self.writers {
                     if dest != Dest::AllExcept(id) {
                         send(w);
                         sent = true;

@@ -14,7 +14,7 @@ use crate::link_spec::LinkSpec;
 
 use super::driver::{Driver, Heartbeat, PeerLinks, Slot};
 use super::handle::Node;
-use super::log::open_log;
+use super::log::TrafficLog;
 use super::moderation::{InputModeration, Moderation};
 use super::{EventSubscription, NodeError, NodeEvent, SUBSCRIPTION_DEPTH, TapSubscription, Tapped};
 
@@ -185,8 +185,12 @@ impl NodeBuilder {
     }
 
     /// Writes every accepted frame to a tlog in `dir` (`mavstack-YYYYmmdd-HHMMSS.tlog`,
-    /// named by the start time), with the link number in the timestamps' low two bits as
-    /// MAVProxy does (0, 1, 2 for the first three links, 2 for the rest).
+    /// named by the start time in UTC, with `-1`, `-2`, ... added when a log of that second
+    /// exists: a log never overwrites another), with the link number in the timestamps' low
+    /// two bits as MAVProxy does (0, 1, 2 for the first three links, 2 for the rest). The
+    /// frames go through a bounded queue to the log's own writer thread: frames that do not
+    /// fit are left out of the log and counted as `log_full`; a write error stops the node
+    /// with [`NodeError::Log`] naming the file.
     #[must_use]
     pub fn log_dir(mut self, dir: impl Into<PathBuf>) -> Self {
         self.log_dir = Some(dir.into());
@@ -266,7 +270,7 @@ impl NodeBuilder {
             });
         }
         let log = match self.log_dir {
-            Some(dir) => Some(open_log(&dir)?),
+            Some(dir) => Some(TrafficLog::open(&dir, slots.len())?),
             None => None,
         };
         let http = match self.http {

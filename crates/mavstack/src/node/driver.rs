@@ -1,19 +1,18 @@
 //! The driver: the state of a running node and one turn of it (read the ready links, run
 //! what is due, forward, carry out a command).
 
-use core::time::Duration;
 use std::collections::HashMap;
-use std::path::PathBuf;
 
 use mavstack_core::time::Instant;
 use mavstack_core::wire::MAX_FRAME_LEN;
 use mavstack_core::Message;
 use mavstack_router::{Event, LinkConfig, LinkId, Router, SendTo};
 use mavstack_transport::protocol::Framing;
-use mavstack_transport::{Dest, Input, Link, PeerId, PeerInfo, clock, tlog};
+use mavstack_transport::{Dest, Input, Link, PeerId, PeerInfo, clock};
 use tokio::sync::mpsc;
 
 pub(super) use super::heartbeat::Heartbeat;
+use super::log::TrafficLog;
 use super::moderation::Moderation;
 use super::{Command, Incoming, LinkEvent, NodeError, NodeEvent, NodeReport, Tapped};
 
@@ -34,7 +33,7 @@ pub(super) struct Driver {
     /// Router link → (slot, peer).
     pub(super) owners: Vec<Option<(usize, PeerId)>>,
     pub(super) commands: mpsc::Receiver<Command>,
-    pub(super) log: Option<(PathBuf, tlog::Writer<std::fs::File>)>,
+    pub(super) log: Option<TrafficLog>,
     pub(super) log_local_only: bool,
     pub(super) started: Instant,
     pub(super) buf: [u8; MAX_FRAME_LEN],
@@ -314,28 +313,24 @@ impl Driver {
                 tracing::warn!("{}: {e}", slot.template.name);
             }
         }
-        if let Some((path, log)) = &mut self.log {
-            log.flush().map_err(|source| NodeError::Log {
-                path: path.clone(),
-                source,
-            })?;
+        let report = self.report(clock::now());
+        if let Some(log) = self.log.take() {
+            // Writing out and syncing blocks: off the runtime's threads.
+            tokio::task::spawn_blocking(move || log.finish())
+                .await
+                .map_err(|e| NodeError::Stopped(e.to_string()))??;
         }
-        result.map(|()| self.report(clock::now()))
+        result.map(|()| report)
     }
 
-    pub(super) fn next_deadline(&self, now: Instant) -> Option<Instant> {
+    pub(super) fn next_deadline(&self) -> Option<Instant> {
         let housekeeping = self
             .slots
             .iter()
             .filter_map(|s| s.io.next_housekeeping())
             .min();
-        let log = self
-            .log
-            .as_ref()
-            .and_then(|(_, w)| w.flush_deadline())
-            .map(|_| now + Duration::from_secs(1));
         let heartbeat = self.heartbeat.as_ref().map(|h| h.next);
-        [self.router.poll_timeout(), housekeeping, log, heartbeat]
+        [self.router.poll_timeout(), housekeeping, heartbeat]
             .into_iter()
             .flatten()
             .min()
@@ -345,20 +340,13 @@ impl Driver {
         while let Some(event) = self.router.poll_event() {
             match event {
                 Event::Local { link, frame } => {
-                    if let Some((path, log)) = &mut self.log {
-                        let slot = self
-                            .owners
-                            .get(link.index())
-                            .copied()
-                            .flatten()
-                            .map_or(2, |(s, _)| s);
-                        let bits = slot.min(2) as u64;
-                        let ts = (frame.received_at.as_micros() & !3) | bits;
-                        log.write_record(ts, frame.frame.as_bytes())
-                            .map_err(|source| NodeError::Log {
-                                path: path.clone(),
-                                source,
-                            })?;
+                    if let Some(log) = &mut self.log {
+                        let slot = self.owners.get(link.index()).copied().flatten();
+                        log.push(
+                            slot.map(|(s, _)| s),
+                            frame.received_at.as_micros(),
+                            frame.frame.as_bytes(),
+                        );
                     }
                     if self.log_local_only || self.subscribers.is_empty() {
                         continue;
@@ -412,11 +400,8 @@ impl Driver {
         for event in pending {
             self.publish(event);
         }
-        if let Some((path, log)) = &mut self.log {
-            log.flush_if_due().map_err(|source| NodeError::Log {
-                path: path.clone(),
-                source,
-            })?;
+        if let Some(log) = &mut self.log {
+            log.send()?;
         }
         Ok(())
     }

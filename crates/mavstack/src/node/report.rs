@@ -12,7 +12,7 @@ impl Driver {
     pub(super) fn report(&self, now: Instant) -> NodeReport {
         let mut links = Vec::new();
         let mut names: HashMap<LinkId, (String, Option<String>)> = HashMap::new();
-        for slot in &self.slots {
+        for (i, slot) in self.slots.iter().enumerate() {
             if slot.peers.is_empty() {
                 links.push(LinkReport {
                     name: slot.template.name.clone(),
@@ -64,9 +64,11 @@ impl Driver {
             // What the link refused before any router link saw it goes on its first entry.
             if let Some(entry) = links.get_mut(first) {
                 let io = slot.io.stats();
+                let log_full = self.log.as_ref().map_or(0, |l| l.dropped(i));
                 for (reason, n) in [
                     ("not_mavlink", io.rx_unadmitted),
                     ("peer_refused", io.peers_refused),
+                    ("log_full", log_full),
                 ] {
                     if n > 0 {
                         entry.dropped.push((reason, n));

@@ -19,7 +19,7 @@ impl Driver {
         let mut armed: Option<Instant> = None;
         let mut timer_fired = false;
         let result = loop {
-            let deadline = self.next_deadline(clock::now());
+            let deadline = self.next_deadline();
             // Re-arming the timer costs a trip through the runtime's timer wheel: only when the
             // deadline moved (or after it fired).
             if let Some(d) = deadline

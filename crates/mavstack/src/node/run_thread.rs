@@ -42,7 +42,7 @@ impl Driver {
             let (timer, now) = loop {
                 let any = self.poll_inputs(&mut cx, &mut ready, &mut command);
                 let now = clock::now();
-                let deadline = *deadline.get_or_insert_with(|| self.next_deadline(now));
+                let deadline = *deadline.get_or_insert_with(|| self.next_deadline());
                 let due = deadline.is_some_and(|d| now >= d);
                 let slots = &mut self.slots;
                 let mut mark = |i: usize| {
