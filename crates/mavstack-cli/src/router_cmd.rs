@@ -265,32 +265,44 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         eprintln!("mavstack router: ready");
         let stop = interrupted();
         tokio::pin!(stop);
-        if let Some(every) = stats_every {
-            let mut tick = tokio::time::interval(every);
+        // Until a signal, or until the node stops on its own (a link failed, the log could
+        // not be written): then the daemon exits 1 with the reason, for its supervisor to
+        // see and restart it (`docs/operations.md`).
+        let mut tick = stats_every.map(tokio::time::interval);
+        if let Some(tick) = &mut tick {
             tick.tick().await;
-            loop {
-                tokio::select! {
-                    () = &mut stop => break,
-                    _ = tick.tick() => {
-                        match node.report().await {
-                            Some(report) => print_stats(&report, &bridge_stats),
-                            None => break,
-                        }
+        }
+        loop {
+            tokio::select! {
+                () = &mut stop => break,
+                () = node.closed() => break,
+                () = next_tick(&mut tick) => {
+                    if let Some(report) = node.report().await {
+                        print_stats(&report, &bridge_stats);
                     }
                 }
             }
-        } else {
-            stop.await;
         }
-        let report = node.shutdown().await.map_err(crate::other)?;
+        let result = node.shutdown().await;
         for handle in handles {
             handle.finish().await;
         }
+        let report = result.map_err(|e| crate::other(format!("the router stopped: {e}")))?;
         if stats_every.is_some() {
             print_stats(&report, &bridge_stats);
         }
         Ok(())
     })
+}
+
+/// The next tick of `--stats`, never without it.
+async fn next_tick(tick: &mut Option<tokio::time::Interval>) {
+    match tick {
+        Some(tick) => {
+            tick.tick().await;
+        }
+        None => core::future::pending().await,
+    }
 }
 
 /// One `--stats` line (`docs/contracts/router.md`).
