@@ -50,6 +50,11 @@ pub(crate) struct ListenArgs {
     /// Only these messages (names, comma-separated).
     #[arg(long, value_delimiter = ',')]
     filter: Vec<String>,
+    /// Ask the first autopilot heard for these rates (`NAME:HZ`, comma-separated, e.g.
+    /// `ATTITUDE:10,GLOBAL_POSITION_INT:5`): SET_MESSAGE_INTERVAL, and REQUEST_DATA_STREAM
+    /// where that is refused or ignored.
+    #[arg(long, value_delimiter = ',', value_name = "NAME:HZ")]
+    rate: Vec<String>,
     /// Only frames from this system id.
     #[arg(long)]
     sysid: Option<u8>,
@@ -343,6 +348,34 @@ pub(crate) fn listen(args: &ListenArgs) -> Result<(), Failure> {
                 })
         })
         .collect::<Result<_, _>>()?;
+    let rates = args
+        .rate
+        .iter()
+        .filter(|r| !r.is_empty())
+        .map(|r| {
+            let bad = || {
+                Failure::Input(anyhow!(
+                    "--rate: {r:?} is not NAME:HZ (HZ from 0.01 to 1000)"
+                ))
+            };
+            let (name, hz) = r.split_once(':').ok_or_else(bad)?;
+            let hz: f32 = hz.parse().map_err(|_| bad())?;
+            if !(0.01..=1000.0).contains(&hz) {
+                return Err(bad());
+            }
+            let id = dialect
+                .message_by_name(&name.to_ascii_uppercase())
+                .map(|m| m.id)
+                .ok_or_else(|| {
+                    Failure::Input(anyhow!(
+                        "--rate: no message {name} in dialect {}",
+                        dialect.name
+                    ))
+                })?;
+            Ok((id, hz))
+        })
+        .collect::<Result<Vec<_>, Failure>>()?;
+    let mut rate_requests = crate::rate_request::RateRequests::new(&rates);
     let until = deadline(args.duration)?;
     let spec = parse_spec(&args.conn)?;
     let with_ts = matches!(
@@ -361,7 +394,12 @@ pub(crate) fn listen(args: &ListenArgs) -> Result<(), Failure> {
         let mut table = args.table.then(Table::new);
         let mut printed = 0u64;
         let mut batch = Vec::with_capacity(1024);
-        let mut redraw = tokio::time::interval(Duration::from_secs(1));
+        // Rate requests are resent and fall back in steps of a quarter second.
+        let mut redraw = tokio::time::interval(if rates.is_empty() {
+            Duration::from_secs(1)
+        } else {
+            Duration::from_millis(250)
+        });
         let stop = interrupted();
         tokio::pin!(stop);
         'run: loop {
@@ -369,6 +407,9 @@ pub(crate) fn listen(args: &ListenArgs) -> Result<(), Failure> {
                 Wake::Batch => {}
                 Wake::Done => break 'run,
                 Wake::Tick => {
+                    for out in rate_requests.on_tick(std::time::Instant::now()) {
+                        let _ = conn.send(FrameCommand::to_all(out)).await;
+                    }
                     if let Some(t) = table.as_mut() {
                         t.draw(&dialect, &mut sink).context("writing output")?;
                     }
@@ -382,6 +423,17 @@ pub(crate) fn listen(args: &ListenArgs) -> Result<(), Failure> {
                     _ => continue,
                 };
                 let frame = received.frame.frame();
+                if known {
+                    for out in rate_requests.on_frame(
+                        std::time::Instant::now(),
+                        frame.sysid(),
+                        frame.compid(),
+                        frame.msg_id(),
+                        frame.payload(),
+                    ) {
+                        let _ = conn.send(FrameCommand::to_all(out)).await;
+                    }
+                }
                 if args.sysid.is_some_and(|s| s != frame.sysid())
                     || (!filter.is_empty() && !filter.contains(&frame.msg_id()))
                 {

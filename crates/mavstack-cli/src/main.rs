@@ -21,6 +21,7 @@ mod mission_file;
 mod probe_cmd;
 mod progress;
 mod radio_cmd;
+mod rate_request;
 mod router_cmd;
 mod signing_cmd;
 mod vehicle_cmd;

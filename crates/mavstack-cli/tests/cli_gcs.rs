@@ -343,3 +343,50 @@ fn signing_setup_is_proven_by_a_signed_answer_and_remove_by_an_unsigned_one() {
     let missing = gcs(insecure.port, &["signing", "setup"]);
     assert_eq!(missing.status.code(), Some(2));
 }
+
+#[test]
+fn listen_asks_the_vehicle_for_the_rates_given() {
+    // The simulator streams ATTITUDE at 4 Hz unasked; 20 Hz only comes when asked for.
+    let port = free_port();
+    let _vehicle = SecureVehicle(
+        Command::new(env!("CARGO_BIN_EXE_mavstack"))
+            .args(["vehicle", &format!("udpout:127.0.0.1:{port}")])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("vehicle starts"),
+    );
+    let listen = |extra: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_mavstack"))
+            .args([
+                "listen",
+                &format!("udpin:127.0.0.1:{port}"),
+                "--filter",
+                "ATTITUDE",
+            ])
+            .args(["--duration", "4"])
+            .args(extra)
+            .output()
+            .expect("listen runs");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).lines().count()
+    };
+    let asked = listen(&["--rate", "ATTITUDE:20,GLOBAL_POSITION_INT:5"]);
+    // At 4 Hz four seconds hold at most 17; asked for 20 Hz, the last three alone hold 60.
+    assert!(asked > 25, "{asked} ATTITUDE in 4 s after asking for 20 Hz");
+    let bad = Command::new(env!("CARGO_BIN_EXE_mavstack"))
+        .args([
+            "listen",
+            &format!("udpin:127.0.0.1:{port}"),
+            "--rate",
+            "ATTITUDE",
+        ])
+        .output()
+        .expect("listen runs");
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--rate"));
+}
