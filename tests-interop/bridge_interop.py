@@ -635,6 +635,7 @@ def vehicles(bin_):
               "the ground station's command never reached truck-1")
         # A placed fake vehicle goes offline: a new one takes its place.
         placed = [l.rsplit("/", 1)[-1] for l in links if not l.endswith("/truck-1")]
+        t3 = time.monotonic()
         if placed:
             fake.publish("mav/%s/%s/@alive" % (FLEET, placed[0]), b"offline")
             time.sleep(0.3)
@@ -642,7 +643,7 @@ def vehicles(bin_):
         deadline = time.monotonic() + 4
         now_links = []
         while time.monotonic() < deadline:
-            seen = g.stats(time.monotonic() - 0.1)
+            seen = g.stats(t3)
             now_links = vehicle_links(seen[-1][1]) if seen else now_links
             if any(l.endswith("/fake-new") for l in now_links):
                 break
@@ -650,6 +651,11 @@ def vehicles(bin_):
         check(placed and any(l.endswith("/fake-new") for l in now_links) and len(now_links) <= 3,
               "after %s went offline: links %r, expected fake-new among at most 3" % (placed[:1], now_links))
         stats = g.stop()
+        # One warning for the refusals so far (one per 10 s at most), naming the link.
+        name = mqtt_broker.Broker.url(broker, FLEET, "*").split("?")[0]
+        warned = [l for _, l in g.err if "max_vehicles" in l]
+        check(len(warned) == 1 and name in warned[0],
+              "warnings about max_vehicles: %r, expected one naming %s" % (warned, name))
         bridges = (stats or {}).get("bridges") or [{}]
         check(bridges[0].get("vehicles_refused", 0) >= 18,
               "bridge counters %r: vehicles_refused >= 18 expected (20 announced, 2 places)" % (bridges,))
