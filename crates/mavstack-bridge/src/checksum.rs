@@ -53,7 +53,9 @@ pub fn check(bytes: &[u8], info: impl Fn(u32) -> Option<MessageInfo>) -> Checksu
 }
 
 /// Whether any frame in `payload` (frames one after the other, as a datagram holds them)
-/// has a wrong checksum. Bytes after the last whole frame are left to the router's parser.
+/// has a wrong checksum. From the first bytes that are not a whole frame on, the rest is
+/// left to the router's parser, which resyncs and checks checksums itself (it rewrites
+/// nothing).
 #[must_use]
 pub fn any_bad(mut payload: &[u8], info: impl Fn(u32) -> Option<MessageInfo>) -> bool {
     while let Ok(view) = Frame::new_checked(payload) {
