@@ -96,7 +96,7 @@ MODULES = "signing,wp,param,arm,mode,cmdlong"
 PASSPHRASE = "mavstack-interop"
 FLEET = "interop"  # --via-broker: the fleet; the vehicle is truck-1
 # defaults of the ArduPilot flavour that the fetch must show
-ARDUPILOT_PARAMS = {"SYSID_THISMAV": 1, "ARMING_CHECK": 1, "WPNAV_SPEED": 500.0, "RTL_ALT": 1500}
+ARDUPILOT_PARAMS = {"MAV_SYSID": 1, "ARMING_CHECK": 1, "WPNAV_SPEED": 500.0, "RTL_ALT": 1500}
 
 
 def mavproxy_exe():

@@ -11,10 +11,12 @@ use mavstack_services::param::{Name, Value};
 
 use crate::Autopilot;
 
-/// ArduPilot Copter's names, types and defaults (a representative subset).
+/// ArduPilot Copter's names, types and defaults (a representative subset, with the names of
+/// ArduPilot 4.7, which renamed `SYSID_THISMAV`, `SYSID_MYGCS`, `GPS_TYPE` and `SRn_*` to
+/// `MAV_SYSID`, `MAV_GCS_SYSID`, `GPS1_TYPE` and `MAVn_*`; types as its SITL reports them).
 const ARDUPILOT: &[(&str, Value)] = &[
-    ("SYSID_THISMAV", Value::I16(1)),
-    ("SYSID_MYGCS", Value::I16(255)),
+    ("MAV_SYSID", Value::I16(1)),
+    ("MAV_GCS_SYSID", Value::I16(255)),
     ("FORMAT_VERSION", Value::I16(120)),
     ("FRAME_CLASS", Value::I8(1)),
     ("FRAME_TYPE", Value::I8(1)),
@@ -44,10 +46,10 @@ const ARDUPILOT: &[(&str, Value)] = &[
     ("ATC_RAT_PIT_P", Value::F32(0.135)),
     ("ATC_RAT_YAW_P", Value::F32(0.18)),
     ("COMPASS_USE", Value::I8(1)),
-    ("GPS_TYPE", Value::I8(1)),
+    ("GPS1_TYPE", Value::I8(1)),
     ("SERIAL0_BAUD", Value::I32(115)),
-    ("SR0_POSITION", Value::I16(4)),
-    ("SR0_EXTRA1", Value::I16(4)),
+    ("MAV1_POSITION", Value::I16(4)),
+    ("MAV1_EXTRA1", Value::I16(4)),
 ];
 
 /// PX4's names, types and defaults (a representative subset; PX4 uses only INT32/REAL32).

@@ -80,7 +80,7 @@ async fn a_ground_station_node_reads_telemetry_and_a_parameter_of_the_in_process
     assert!(attitude.is_some(), "ATTITUDE streams");
 
     let mut param_id = [0u8; 16];
-    param_id[..13].copy_from_slice(b"SYSID_THISMAV");
+    param_id[..9].copy_from_slice(b"MAV_SYSID");
     let request = ParamRequestRead {
         target_system: 1,
         target_component: 1,
@@ -93,7 +93,7 @@ async fn a_ground_station_node_reads_telemetry_and_a_parameter_of_the_in_process
         _ => None,
     })
     .await
-    .expect("PARAM_VALUE for SYSID_THISMAV");
+    .expect("PARAM_VALUE for MAV_SYSID");
     assert_eq!(value.param_value, 1.0, "ArduPilot's C-cast encoding of 1");
     assert_eq!(value.param_type, MavParamType::INT16);
 
