@@ -1,2 +1,2 @@
 #![no_main]
-libfuzzer_sys::fuzz_target!(|data: &[u8]| mavstack_dialect::fuzz_dialect_xml(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| mavstack_xml::fuzz_dialect_xml(data));

@@ -1,2 +1,2 @@
 #![no_main]
-libfuzzer_sys::fuzz_target!(|data: &[u8]| mavstack_dialect::json::fuzz_json_frames(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| mavstack_xml::json::fuzz_json_frames(data));

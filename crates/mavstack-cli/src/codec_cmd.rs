@@ -8,10 +8,10 @@ use clap::Args;
 use mavstack_core::parse::{Item, Stats};
 use mavstack_core::signing::{self, SecretKey};
 use mavstack_core::wire::{Frame, MAX_FRAME_LEN};
-use mavstack_dialect::Message;
-use mavstack_dialect::codec;
-use mavstack_dialect::json::{self, EncodeDefaults, SignatureStatus};
 use mavstack_transport::tlog;
+use mavstack_xml::Message;
+use mavstack_xml::codec;
+use mavstack_xml::json::{self, EncodeDefaults, SignatureStatus};
 use serde_json::Value as Json;
 
 use crate::Failure;

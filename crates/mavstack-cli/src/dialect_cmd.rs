@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use clap::{Args, Subcommand};
-use mavstack_dialect::{Dialect, Field, Message, builtin};
+use mavstack_xml::{Dialect, Field, Message, builtin};
 use serde_json::{Value, json};
 
 use crate::Failure;
@@ -44,7 +44,7 @@ pub(crate) struct CodegenArgs {
 }
 
 pub(crate) fn load(name: &str) -> Result<Dialect, Failure> {
-    mavstack_dialect::load(name).map_err(|e| Failure::Input(e.into()))
+    mavstack_xml::load(name).map_err(|e| Failure::Input(e.into()))
 }
 
 /// The dialects compiled into the binary, the one list of them in the command line:
@@ -169,7 +169,7 @@ fn list(out: &mut impl Write, json: bool) -> Result<(), Failure> {
             .root()
             .includes
             .iter()
-            .map(|p| mavstack_dialect::model::file_stem(p))
+            .map(|p| mavstack_xml::model::file_stem(p))
             .collect();
         if json {
             let line = json!({"name": name, "messages": d.messages.len(), "enums": d.enums.len(), "includes": includes});

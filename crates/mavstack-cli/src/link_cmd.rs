@@ -11,13 +11,13 @@ use clap::Args;
 use core::time::Duration;
 use mavstack_core::parse::{Item, SliceParser};
 use mavstack_core::wire::Frame;
-use mavstack_dialect::Dialect;
 use mavstack_transport::conn::FileFormat;
 use mavstack_transport::frame::FrameStats;
 use mavstack_transport::{
     ConnSpec, Connection, FileMode, FrameBuf, FrameCommand, FrameEvent, FrameProtocol, Options,
     tlog,
 };
+use mavstack_xml::Dialect;
 use tokio::time::Instant;
 
 use crate::codec_cmd::{Counts, frame_line, parse_key};

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, anyhow};
 use clap::{Args, Subcommand};
-use mavstack_dialect::Dialect;
+use mavstack_xml::Dialect;
 use serde_json::{Map, Value, json};
 
 use crate::Failure;

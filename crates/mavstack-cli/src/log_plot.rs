@@ -9,8 +9,8 @@ use std::path::{Path, PathBuf};
 use anyhow::anyhow;
 use clap::Args;
 use mavstack_core::MAX_PAYLOAD_LEN;
-use mavstack_dialect::codec::{self, Value};
-use mavstack_dialect::{Dialect, Field, Message, PrimitiveType};
+use mavstack_xml::codec::{self, Value};
+use mavstack_xml::{Dialect, Field, Message, PrimitiveType};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -456,7 +456,7 @@ mod tests {
 
     #[test]
     fn fields_resolve_in_the_dialect_with_their_units_and_bad_ones_say_why() {
-        let d = mavstack_dialect::load("common").expect("common");
+        let d = mavstack_xml::load("common").expect("common");
         let w = parse_field(&d, "attitude.ROLL").expect("ATTITUDE.roll");
         assert_eq!((w.spec.as_str(), w.units()), ("ATTITUDE.roll", Some("rad")));
         let w = parse_field(&d, "SERVO_OUTPUT_RAW.servo3_raw").expect("a scalar");
@@ -482,7 +482,7 @@ mod tests {
 
     #[test]
     fn a_field_reads_from_a_truncated_payload_as_zero_extended() {
-        let d = mavstack_dialect::load("common").expect("common");
+        let d = mavstack_xml::load("common").expect("common");
         let w = parse_field(&d, "ATTITUDE.pitch").expect("pitch");
         let mut buf = [0u8; MAX_PAYLOAD_LEN];
         buf[8..12].copy_from_slice(&(-0.25f32).to_le_bytes());

@@ -7,8 +7,8 @@ use std::path::Path;
 use anyhow::{Context as _, anyhow};
 use mavstack_core::parse::{CrcExtra, Item, SliceParser, Stats};
 use mavstack_core::wire::Frame;
-use mavstack_dialect::Dialect;
 use mavstack_transport::tlog;
+use mavstack_xml::Dialect;
 
 use crate::Failure;
 use crate::progress::Progress;

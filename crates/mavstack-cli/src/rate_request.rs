@@ -179,7 +179,7 @@ mod tests {
     use mavstack_dialects::common::{Attitude, MavType, RequestDataStream};
 
     fn heartbeat() -> Vec<u8> {
-        let mut p = [0u8; 16];
+        let mut p = [0u8; 255];
         let n = Heartbeat {
             r#type: MavType::QUADROTOR,
             autopilot: MavAutopilot::ARDUPILOTMEGA,
@@ -223,7 +223,7 @@ mod tests {
         let t0 = Instant::now();
         let mut r = RateRequests::new(&[(Attitude::ID, 10.0)]);
         let _ = r.on_frame(t0, 1, 1, Heartbeat::ID, &heartbeat());
-        let mut ack = [0u8; 16];
+        let mut ack = [0u8; 255];
         let n = CommandAck {
             command: MavCmd::SET_MESSAGE_INTERVAL,
             result: MavResult::ACCEPTED,

@@ -30,7 +30,7 @@ fn list_names_every_builtin_dialect() {
     let o = mavstack(&["dialect", "list"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = stdout(&o);
-    for name in mavstack_dialect::builtin::dialect_names() {
+    for name in mavstack_xml::builtin::dialect_names() {
         assert!(
             out.lines()
                 .any(|l| l.split_whitespace().next() == Some(name)),
@@ -120,7 +120,7 @@ fn bad_input_is_one_error_line_and_exit_2() {
         "{err}"
     );
 
-    let bad = workspace().join("crates/mavstack-dialect/tests/fixtures/errors/unknown_type.xml");
+    let bad = workspace().join("crates/mavstack-xml/tests/fixtures/errors/unknown_type.xml");
     let o = mavstack(&["dialect", "show", bad.to_str().expect("utf-8 path")]);
     assert_eq!(o.status.code(), Some(2));
     let err = stderr(&o);

@@ -1,6 +1,6 @@
 //! Documentation text for generated items, from the XML descriptions.
 
-use mavstack_dialect::{Deprecation, Entry, Enum, Field, Message};
+use mavstack_xml::{Deprecation, Entry, Enum, Field, Message};
 use proc_macro2::TokenStream;
 use quote::quote;
 

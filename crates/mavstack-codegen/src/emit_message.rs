@@ -6,7 +6,7 @@
 
 use std::collections::BTreeMap;
 
-use mavstack_dialect::{Field, Message, PrimitiveType};
+use mavstack_xml::{Field, Message, PrimitiveType};
 use proc_macro2::{Literal, TokenStream};
 use quote::quote;
 

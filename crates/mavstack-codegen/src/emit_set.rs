@@ -1,7 +1,7 @@
 //! The message enum of a dialect: every message of the file's include closure, with id
 //! dispatch.
 
-use mavstack_dialect::Message;
+use mavstack_xml::Message;
 use proc_macro2::{Literal, TokenStream};
 use quote::quote;
 

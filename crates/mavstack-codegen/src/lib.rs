@@ -7,7 +7,7 @@
 //! Architecture: `docs/architecture.md` in the repository.
 //!
 //! ```text
-//!  XML roots ──mavstack-dialect──► Dialect per file ──plan──► modules + enum owners
+//!  XML roots ──mavstack-xml──► Dialect per file ──plan──► modules + enum owners
 //!                                                              │
 //!              quote ◄── messages, open enums, MavMessage ◄────┘
 //!                │
@@ -55,7 +55,7 @@ use quote::quote;
 pub enum Error {
     /// A definition file is invalid.
     #[error(transparent)]
-    Dialect(#[from] mavstack_dialect::Error),
+    Dialect(#[from] mavstack_xml::Error),
     /// Two definition files cannot be generated side by side.
     #[error("{0}")]
     Conflict(String),

@@ -11,7 +11,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
-use mavstack_dialect::{Dialect, Entry, Enum, FileSystem, Loader, Message, PrimitiveType};
+use mavstack_xml::{Dialect, Entry, Enum, FileSystem, Loader, Message, PrimitiveType};
 
 use crate::Error;
 use crate::names::module_name;
@@ -33,7 +33,7 @@ impl Unit {
     /// The module that owns the type of enum `name` as this file sees it.
     pub(crate) fn enum_owner(&self, name: &str) -> Option<String> {
         let e = self.dialect.enum_by_name(name)?;
-        Some(module_name(&mavstack_dialect::model::file_stem(&e.file)))
+        Some(module_name(&mavstack_xml::model::file_stem(&e.file)))
     }
 
     /// Messages this file defines itself.
@@ -117,7 +117,7 @@ fn build_with(loader: &mut Loader<FileSystem>, roots: &[PathBuf]) -> Result<Plan
     }
     let mut modules: HashMap<PathBuf, String> = HashMap::new();
     for path in &files {
-        let module = module_name(&mavstack_dialect::model::file_stem(path));
+        let module = module_name(&mavstack_xml::model::file_stem(path));
         if let Some((other, _)) = modules.iter().find(|(_, m)| **m == module) {
             return Err(Error::Conflict(format!(
                 "{} and {} would both become module `{module}`",

@@ -4,7 +4,7 @@
 //! A [`MessageTable`] is a sorted slice of [`MessageInfo`] entries (id, name, CRC_EXTRA,
 //! base and full payload lengths, target offsets). A generated dialect gives one with
 //! [`MessageTable::of`]; a dialect loaded from XML at run time gives one through
-//! `mavstack_dialect::Dialect::message_table`. The parser, the channel, the router, the
+//! `mavstack_xml::Dialect::message_table`. The parser, the channel, the router, the
 //! transport's frame protocol, the command line and the Python package all take this one
 //! type.
 //!

@@ -3,8 +3,8 @@
 #![cfg(feature = "all")]
 
 use mavstack_core::{MAX_PAYLOAD_LEN, Message, MessageSet};
-use mavstack_dialect::codec;
 use mavstack_dialects::{all, ardupilotmega, common, matrixpilot, minimal, paparazzi};
+use mavstack_xml::codec;
 use proptest::prelude::*;
 
 /// Every dialect module's message table, by built-in dialect name.
@@ -43,12 +43,9 @@ fn tables() -> Vec<(&'static str, &'static [mavstack_core::MessageInfo])> {
 
 #[test]
 fn message_tables_match_the_model() {
-    assert_eq!(
-        tables().len(),
-        mavstack_dialect::builtin::dialect_names().len()
-    );
+    assert_eq!(tables().len(), mavstack_xml::builtin::dialect_names().len());
     for (name, table) in tables() {
-        let model = mavstack_dialect::load(name).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let model = mavstack_xml::load(name).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(table.len(), model.messages.len(), "{name}");
         for (info, m) in table.iter().zip(&model.messages) {
             assert_eq!(
@@ -79,9 +76,9 @@ fn message_tables_match_the_model() {
 }
 
 /// The `all` model, loaded once.
-fn all_model() -> &'static mavstack_dialect::Dialect {
-    static MODEL: std::sync::OnceLock<mavstack_dialect::Dialect> = std::sync::OnceLock::new();
-    MODEL.get_or_init(|| mavstack_dialect::load("all").expect("all loads"))
+fn all_model() -> &'static mavstack_xml::Dialect {
+    static MODEL: std::sync::OnceLock<mavstack_xml::Dialect> = std::sync::OnceLock::new();
+    MODEL.get_or_init(|| mavstack_xml::load("all").expect("all loads"))
 }
 
 /// The full payload bytes of a typed message (floats compared bit for bit, NaN included).

@@ -5,7 +5,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use mavstack_core::MessageTable;
-use mavstack_dialect::PrimitiveType;
+use mavstack_xml::PrimitiveType;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
@@ -79,13 +79,13 @@ impl Dialect {
     pub(crate) fn load(name: &str) -> PyResult<Arc<Self>> {
         static CACHE: OnceLock<Mutex<HashMap<String, Arc<Dialect>>>> = OnceLock::new();
         let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
-        let builtin = mavstack_dialect::builtin::dialect_names()
+        let builtin = mavstack_xml::builtin::dialect_names()
             .iter()
             .any(|b| b.eq_ignore_ascii_case(name));
         if builtin && let Some(found) = cache.lock().ok().and_then(|c| c.get(name).cloned()) {
             return Ok(found);
         }
-        let loaded = mavstack_dialect::load(name)
+        let loaded = mavstack_xml::load(name)
             .map_err(|e| PyValueError::new_err(format!("dialect {name:?}: {e}")))?;
         let dialect = Arc::new(Self::from_loaded(name, &loaded));
         if builtin && let Ok(mut c) = cache.lock() {
@@ -94,7 +94,7 @@ impl Dialect {
         Ok(dialect)
     }
 
-    fn from_loaded(name: &str, loaded: &mavstack_dialect::Dialect) -> Self {
+    fn from_loaded(name: &str, loaded: &mavstack_xml::Dialect) -> Self {
         let mut messages = Vec::with_capacity(loaded.messages.len());
         for m in &loaded.messages {
             let xml = m.fields_in_xml_order();

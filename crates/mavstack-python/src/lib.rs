@@ -38,7 +38,7 @@ fn open_log(
 /// The names of the built-in dialects.
 #[pyfunction]
 fn dialects() -> Vec<&'static str> {
-    mavstack_dialect::builtin::dialect_names()
+    mavstack_xml::builtin::dialect_names()
 }
 
 /// The native module.

@@ -4,7 +4,7 @@
 use std::sync::Arc;
 
 use mavstack_core::wire::{Frame, Version};
-use mavstack_dialect::PrimitiveType;
+use mavstack_xml::PrimitiveType;
 use pyo3::exceptions::PyAttributeError;
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;

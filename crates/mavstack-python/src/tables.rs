@@ -23,7 +23,7 @@ use arrow_schema::{ArrowError, DataType, Field, Schema, SchemaRef};
 use mavstack_core::text::until_nul;
 use mavstack_core::tlog::TIMESTAMP_LEN;
 use mavstack_core::wire::Frame;
-use mavstack_dialect::PrimitiveType;
+use mavstack_xml::PrimitiveType;
 use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyCapsule, PyDict};

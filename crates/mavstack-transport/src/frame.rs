@@ -9,7 +9,7 @@
 //! [`Protocol`] itself.
 //!
 //! The table is a typed dialect's ([`MessageTable::of`]) or one made from XML at run time
-//! (`mavstack_dialect::Dialect::message_table`).
+//! (`mavstack_xml::Dialect::message_table`).
 //!
 //! ```
 //! use mavstack_core::time::Instant;

@@ -3,9 +3,9 @@
 
 use std::collections::HashMap;
 
+use mavstack_core::Message;
 use mavstack_core::time::Instant;
 use mavstack_core::wire::MAX_FRAME_LEN;
-use mavstack_core::Message;
 use mavstack_router::{Event, LinkConfig, LinkId, Router, SendTo};
 use mavstack_transport::protocol::Framing;
 use mavstack_transport::{Dest, Input, Link, PeerId, PeerInfo, clock};

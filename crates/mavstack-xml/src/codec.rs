@@ -6,8 +6,8 @@
 //! full untruncated payload (MAVLink 2 truncation is the frame layer's job).
 //!
 //! ```
-//! use mavstack_dialect::codec::{self, Value};
-//! let dialect = mavstack_dialect::load("minimal")?;
+//! use mavstack_xml::codec::{self, Value};
+//! let dialect = mavstack_xml::load("minimal")?;
 //! let heartbeat = dialect.message(0).expect("HEARTBEAT");
 //! let payload = [0, 0, 0, 0, 2, 12, 0x51, 4, 3];
 //! let values = codec::decode(heartbeat, &payload);
@@ -15,7 +15,7 @@
 //! let mut out = [0u8; 255];
 //! let len = codec::encode(heartbeat, &values, &mut out).expect("same shape");
 //! assert_eq!(&out[..len], &payload);
-//! # Ok::<(), mavstack_dialect::Error>(())
+//! # Ok::<(), mavstack_xml::Error>(())
 //! ```
 
 use mavstack_core::MAX_PAYLOAD_LEN;
@@ -71,7 +71,7 @@ impl Value {
     /// text and arrays.
     ///
     /// ```
-    /// use mavstack_dialect::codec::Value;
+    /// use mavstack_xml::codec::Value;
     /// assert_eq!(Value::I16(-3).as_f64(), Some(-3.0));
     /// assert_eq!(Value::Text(b"x".to_vec()).as_f64(), None);
     /// ```

@@ -39,11 +39,11 @@ impl Dialect {
     /// dialect with the same messages returns the table made before.
     ///
     /// ```
-    /// let dialect = mavstack_dialect::load("common")?;
+    /// let dialect = mavstack_xml::load("common")?;
     /// let table = dialect.message_table();
     /// assert_eq!(table.by_name("COMMAND_ACK").map(|m| (m.id, m.crc_extra)), Some((77, 143)));
     /// assert_eq!(table.len(), dialect.messages.len());
-    /// # Ok::<(), mavstack_dialect::Error>(())
+    /// # Ok::<(), mavstack_xml::Error>(())
     /// ```
     #[must_use]
     pub fn message_table(&self) -> MessageTable {

@@ -9,9 +9,9 @@
 //!
 //! ```
 //! use mavstack_core::wire::{Frame, MAX_FRAME_LEN};
-//! use mavstack_dialect::json::{self, EncodeDefaults};
+//! use mavstack_xml::json::{self, EncodeDefaults};
 //!
-//! let dialect = mavstack_dialect::load("common")?;
+//! let dialect = mavstack_xml::load("common")?;
 //! let obj = serde_json::from_str(r#"{"name":"HEARTBEAT","fields":{"type":2,"autopilot":3}}"#)?;
 //! let mut buf = [0u8; MAX_FRAME_LEN];
 //! let mut seq = 7;

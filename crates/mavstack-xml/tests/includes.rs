@@ -14,7 +14,7 @@
 
 use std::path::{Path, PathBuf};
 
-use mavstack_dialect::{Dialect, Loader};
+use mavstack_xml::{Dialect, Loader};
 
 fn dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/includes")
@@ -178,7 +178,7 @@ fn root_path_is_normalised() {
 
 #[test]
 fn protocol_version_supplement_only_with_the_standard_loaders() {
-    use mavstack_dialect::FileSystem;
+    use mavstack_xml::FileSystem;
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/supplement/common.xml");
     let with = Loader::filesystem()
         .load(&path)

@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
-use mavstack_dialect::{Error, ErrorKind, Loader, builtin, load};
+use mavstack_xml::{Error, ErrorKind, Loader, builtin, load};
 
 /// The folder of the error fixtures, as the loader reports it.
 fn dir() -> PathBuf {

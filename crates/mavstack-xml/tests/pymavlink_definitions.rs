@@ -14,7 +14,7 @@ mod support;
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::OnceLock;
 
-use mavstack_dialect::{Dialect, Message, builtin, load};
+use mavstack_xml::{Dialect, Message, builtin, load};
 
 #[derive(Debug)]
 struct PyField {

@@ -67,12 +67,12 @@ struct Supplement {
 /// Loads dialects through a [`Source`], caching parsed files across loads.
 ///
 /// ```
-/// use mavstack_dialect::Loader;
+/// use mavstack_xml::Loader;
 /// let common = Loader::builtin().load("common.xml")?;
 /// let heartbeat = common.message(0).expect("common defines HEARTBEAT");
 /// assert_eq!((heartbeat.name.as_str(), heartbeat.crc_extra), ("HEARTBEAT", 50));
 /// assert_eq!(common.message(300).map(|m| m.crc_extra), Some(217));
-/// # Ok::<(), mavstack_dialect::Error>(())
+/// # Ok::<(), mavstack_xml::Error>(())
 /// ```
 #[derive(Debug)]
 pub struct Loader<S> {

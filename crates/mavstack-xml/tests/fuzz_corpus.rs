@@ -6,7 +6,7 @@ use proptest::prelude::*;
 #[test]
 fn seed_corpus_never_panics() {
     for seed in mavstack_core::fuzz_seeds("dialect_xml", 20) {
-        mavstack_dialect::fuzz_dialect_xml(&seed);
+        mavstack_xml::fuzz_dialect_xml(&seed);
     }
 }
 
@@ -45,12 +45,12 @@ fn xmlish() -> impl Strategy<Value = String> {
 proptest! {
     #[test]
     fn arbitrary_bytes_never_panic(data in proptest::collection::vec(any::<u8>(), 0..512)) {
-        mavstack_dialect::fuzz_dialect_xml(&data);
+        mavstack_xml::fuzz_dialect_xml(&data);
     }
 
     #[test]
     fn xml_shaped_input_never_panics(text in xmlish()) {
-        mavstack_dialect::fuzz_dialect_xml(text.as_bytes());
+        mavstack_xml::fuzz_dialect_xml(text.as_bytes());
     }
 }
 
@@ -60,6 +60,6 @@ proptest! {
 #[test]
 fn json_frame_seeds() {
     for seed in mavstack_core::fuzz_seeds("json_frames", 20) {
-        mavstack_dialect::json::fuzz_json_frames(&seed);
+        mavstack_xml::json::fuzz_json_frames(&seed);
     }
 }

@@ -1,4 +1,4 @@
-//! # mavstack-dialect
+//! # mavstack-xml
 //!
 //! MAVLink message definitions ("dialects") from XML to a validated model, and a run-time
 //! codec over that model.
@@ -25,10 +25,10 @@
 //! - `json` (feature `json`) writes frames as JSON lines and reads them back.
 //!
 //! ```
-//! let dialect = mavstack_dialect::load("ardupilotmega")?;
+//! let dialect = mavstack_xml::load("ardupilotmega")?;
 //! let m = dialect.message_by_name("COMMAND_ACK").expect("defined in common.xml");
 //! assert_eq!((m.id, m.crc_extra, m.min_len, m.max_len), (77, 143, 3, 10));
-//! # Ok::<(), mavstack_dialect::Error>(())
+//! # Ok::<(), mavstack_xml::Error>(())
 //! ```
 //!
 //! MSRV: Rust 1.95.

@@ -1,6 +1,6 @@
 //! Every vendored dialect loads, and the CRC_EXTRA / length anchors of `docs/protocol-notes.md` hold.
 
-use mavstack_dialect::{builtin, load};
+use mavstack_xml::{builtin, load};
 
 #[test]
 fn every_builtin_dialect_loads() {
