@@ -14,6 +14,7 @@ use serde_json::{Map, Value, json};
 use crate::Failure;
 use crate::log_plot::{PlotArgs, plot};
 use crate::log_reader::{LogFrame, is_tlog, read_log};
+use mavstack_transport::tlog;
 
 /// `mavstack log ...`.
 #[derive(Debug, Subcommand)]
@@ -333,7 +334,8 @@ fn filter(args: &FilterArgs) -> Result<(), Failure> {
     }
     let file = std::fs::File::create(&args.out)
         .map_err(|e| Failure::Other(anyhow!("cannot create {}: {e}", args.out.display())))?;
-    let mut out = BufWriter::with_capacity(1 << 16, file);
+    // The one tlog writer: records as `record` and the router write them, raw frames alike.
+    let mut out = tlog::Writer::new(file);
     let mut first: Option<u64> = None;
     let mut written = 0u64;
     let mut error: Option<std::io::Error> = None;
@@ -350,10 +352,8 @@ fn filter(args: &FilterArgs) -> Result<(), Failure> {
             return;
         }
         let result = match f.ts_us.filter(|_| tlog_out) {
-            Some(ts) => out
-                .write_all(&ts.to_be_bytes())
-                .and_then(|()| out.write_all(frame.as_bytes())),
-            None => out.write_all(frame.as_bytes()),
+            Some(ts) => out.write_record(ts, frame.as_bytes()),
+            None => out.write_raw(frame.as_bytes()),
         };
         match result {
             Ok(()) => written += 1,

@@ -13,8 +13,8 @@ pub(crate) fn dialect_ready() {
     static READY: OnceLock<Result<(), String>> = OnceLock::new();
     let ready = READY.get_or_init(|| {
         let dir = script("");
-        let code = "import sys; sys.path.insert(0, sys.argv[1]); import mavstack_xml; \
-                    print(mavstack_xml.load().MAVLINK_MSG_ID_PROTOCOL_VERSION)";
+        let code = "import sys; sys.path.insert(0, sys.argv[1]); import mavstack_dialect; \
+                    print(mavstack_dialect.load().MAVLINK_MSG_ID_PROTOCOL_VERSION)";
         let out = Command::new(python())
             .args([OsStr::new("-c"), OsStr::new(code), dir.as_os_str()])
             .output()
@@ -23,7 +23,7 @@ pub(crate) fn dialect_ready() {
             Ok(())
         } else {
             Err(format!(
-                "mavstack_xml.load() failed ({}): {}{}",
+                "mavstack_dialect.load() failed ({}): {}{}",
                 out.status,
                 text(&out.stdout),
                 text(&out.stderr)
