@@ -14,7 +14,7 @@ use mavstack::system::{System, SystemError, Wanted};
 use mavstack::{LinkSpec, Node};
 use mavstack_channel::SigningConfig;
 use mavstack_dialects::common::{
-    CommandInt, CommandLong, MavCmd, MavFrame, MavMissionType, MavParamType, MavResult,
+    CommandInt, MavCmd, MavFrame, MavMissionType, MavParamType, MavResult,
 };
 use mavstack_services::Address;
 use mavstack_services::command::{Command, CommandError};
@@ -727,17 +727,7 @@ pub(crate) fn command(args: &CommandArgs) -> Result<(), Failure> {
                 ..CommandInt::default()
             })
         } else {
-            Command::Long(CommandLong {
-                command: id,
-                param1: p[0],
-                param2: p[1],
-                param3: p[2],
-                param4: p[3],
-                param5: p[4],
-                param6: p[5],
-                param7: p[6],
-                ..CommandLong::default()
-            })
+            Command::long(id, p)
         };
         let began = remote.elapsed();
         let json = args.remote.json;

@@ -46,6 +46,22 @@ pub enum Command {
 }
 
 impl Command {
+    /// COMMAND_LONG `command` with params 1–7 (its target fields are filled in when sent).
+    #[must_use]
+    pub fn long(command: MavCmd, p: [f32; 7]) -> Self {
+        Self::Long(CommandLong {
+            command,
+            param1: p[0],
+            param2: p[1],
+            param3: p[2],
+            param4: p[3],
+            param5: p[4],
+            param6: p[5],
+            param7: p[6],
+            ..CommandLong::default()
+        })
+    }
+
     /// The MAV_CMD.
     #[must_use]
     pub const fn id(&self) -> MavCmd {

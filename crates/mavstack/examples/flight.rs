@@ -16,8 +16,8 @@ use core::time::Duration;
 
 use mavstack::core::Message as _;
 use mavstack::dialects::common::{
-    Attitude, CommandLong, GlobalPositionInt, Heartbeat, MavCmd, MavFrame, MavMissionType,
-    MavModeFlag, MissionItemInt, MissionItemReached,
+    Attitude, GlobalPositionInt, Heartbeat, MavCmd, MavFrame, MavMissionType, MavModeFlag,
+    MissionItemInt, MissionItemReached,
 };
 use mavstack::modes::Flavour;
 use mavstack::services::command::Command;
@@ -44,22 +44,7 @@ async fn rate<T: mavstack::core::Message>(v: &System, span: Duration) -> f64 {
 }
 
 async fn command(v: &mut System, command: MavCmd, p: [f32; 7]) -> Result<(), SystemError> {
-    v.command(
-        Command::Long(CommandLong {
-            command,
-            param1: p[0],
-            param2: p[1],
-            param3: p[2],
-            param4: p[3],
-            param5: p[4],
-            param6: p[5],
-            param7: p[6],
-            ..CommandLong::default()
-        }),
-        |_| {},
-    )
-    .await
-    .map(drop)
+    v.command(Command::long(command, p), |_| {}).await.map(drop)
 }
 
 /// The plan: home, a take-off to 10 m, three waypoints about 40 m apart (item 0 home, as QGC

@@ -346,17 +346,7 @@ impl System {
         for id in [HomePosition::ID, GlobalPositionInt::ID] {
             self.request_once(id).await;
         }
-        let until = tokio::time::Instant::now() + wait;
-        while self.home_amsl.is_none() {
-            let Ok(Some(incoming)) = tokio::time::timeout_at(until, self.frames.recv()).await
-            else {
-                break;
-            };
-            let f = incoming.frame.frame.view();
-            if let Ok(msg) = MavMessage::decode(f.msg_id(), f.payload()) {
-                self.note(Address::new(f.sysid(), f.compid()), &msg);
-            }
-        }
+        self.take_until(wait, |s, _| s.home_amsl.is_some()).await;
         self.home_amsl
     }
 
@@ -367,17 +357,7 @@ impl System {
         self.update();
         if self.home.is_none() {
             self.request_once(HomePosition::ID).await;
-            let until = tokio::time::Instant::now() + wait;
-            while self.home.is_none() {
-                let Ok(Some(incoming)) = tokio::time::timeout_at(until, self.frames.recv()).await
-                else {
-                    break;
-                };
-                let f = incoming.frame.frame.view();
-                if let Ok(msg) = MavMessage::decode(f.msg_id(), f.payload()) {
-                    self.note(Address::new(f.sysid(), f.compid()), &msg);
-                }
-            }
+            self.take_until(wait, |s, _| s.home.is_some()).await;
         }
         let home = self.home?;
         Some(MissionItemInt {
@@ -775,7 +755,8 @@ impl System {
         match result {
             Ok(ack) => Ok(ack),
             Err(source) => {
-                self.listen(SAID_AFTER).await;
+                // STATUSTEXT that says why may follow the refusal.
+                self.take_until(SAID_AFTER, |_, _| false).await;
                 Err(SystemError::Command {
                     command: command_name(id),
                     source,
@@ -785,15 +766,25 @@ impl System {
         }
     }
 
-    /// Takes in what the system sends for `time` (its STATUSTEXT lines among it).
-    async fn listen(&mut self, time: Duration) {
-        let until = tokio::time::Instant::now() + time;
+    /// Takes in what the system sends (noting what it tells about itself) until `done` holds
+    /// after a frame — given the frame's (sysid, msg_id) — or `wait` has passed; says whether
+    /// `done` held.
+    async fn take_until(
+        &mut self,
+        wait: Duration,
+        mut done: impl FnMut(&Self, (u8, u32)) -> bool,
+    ) -> bool {
+        let until = tokio::time::Instant::now() + wait;
         while let Ok(Some(incoming)) = tokio::time::timeout_at(until, self.frames.recv()).await {
             let f = incoming.frame.frame.view();
             if let Ok(msg) = MavMessage::decode(f.msg_id(), f.payload()) {
                 self.note(Address::new(f.sysid(), f.compid()), &msg);
             }
+            if done(self, (f.sysid(), f.msg_id())) {
+                return true;
+            }
         }
+        false
     }
 
     /// Asks the system to send message `id` once (MAV_CMD_REQUEST_MESSAGE); returns its
@@ -974,17 +965,10 @@ impl System {
 
     /// Whether message `msg_id` from the system arrives within `wait`.
     async fn comes(&mut self, msg_id: u32, wait: Duration) -> bool {
-        let until = tokio::time::Instant::now() + wait;
-        while let Ok(Some(incoming)) = tokio::time::timeout_at(until, self.frames.recv()).await {
-            let f = incoming.frame.frame.view();
-            if let Ok(msg) = MavMessage::decode(f.msg_id(), f.payload()) {
-                self.note(Address::new(f.sysid(), f.compid()), &msg);
-            }
-            if f.msg_id() == msg_id && f.sysid() == self.target.system {
-                return true;
-            }
-        }
-        false
+        self.take_until(wait, |s, (sysid, id)| {
+            id == msg_id && sysid == s.target.system
+        })
+        .await
     }
 
     /// Messages `T` from this system from now on, decoded (see [`Telemetry`]).
