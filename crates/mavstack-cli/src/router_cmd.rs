@@ -262,9 +262,10 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         if let Some(addr) = node.http_addr() {
             eprintln!("mavstack router: status page on http://{addr}/");
         }
-        eprintln!("mavstack router: ready");
+        // The signal handlers first: a SIGTERM right after "ready" is a clean stop.
         let stop = interrupted();
         tokio::pin!(stop);
+        eprintln!("mavstack router: ready");
         // Until a signal, or until the node stops on its own (a link failed, the log could
         // not be written): then the daemon exits 1 with the reason, for its supervisor to
         // see and restart it (`docs/operations.md`).

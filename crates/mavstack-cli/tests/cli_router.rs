@@ -2,11 +2,15 @@
 //! it is, and faults (a TCP client that vanishes and comes back, a flooding link while
 //! commands pass, a truncated or corrupted datagram).
 
+mod router;
+
+use router::Router;
+
 use core::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use core::time::Duration;
-use std::io::{BufRead as _, BufReader, Read as _, Write as _};
+use std::io::{Read as _, Write as _};
 use std::net::{TcpListener, TcpStream, UdpSocket};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -54,71 +58,6 @@ fn free_tcp() -> u16 {
         .local_addr()
         .unwrap()
         .port()
-}
-
-/// A router process; stopped (SIGTERM, exit 0 asserted) by `stop`.
-struct Router(Child);
-
-impl Router {
-    fn start(args: &[String]) -> Self {
-        let mut child = mavstack()
-            .arg("router")
-            .args(args)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let mut err = BufReader::new(child.stderr.take().unwrap());
-        let mut line = String::new();
-        loop {
-            line.clear();
-            assert!(
-                err.read_line(&mut line).unwrap() > 0,
-                "router exited before it was ready"
-            );
-            if line.contains("mavstack router: ready") {
-                break;
-            }
-        }
-        std::thread::spawn(move || {
-            let mut rest = String::new();
-            let _ = err.read_to_string(&mut rest);
-        });
-        Self(child)
-    }
-
-    fn stop(mut self) -> String {
-        let pid = self.0.id().to_string();
-        Command::new("kill").args(["-TERM", &pid]).status().unwrap();
-        self.0.wait_with_output_timeout()
-    }
-}
-
-trait WaitTimeout {
-    fn wait_with_output_timeout(&mut self) -> String;
-}
-
-impl WaitTimeout for Child {
-    fn wait_with_output_timeout(&mut self) -> String {
-        let start = Instant::now();
-        loop {
-            if let Some(status) = self.try_wait().unwrap() {
-                assert!(status.success(), "router exit status {status}");
-                let mut out = String::new();
-                self.stdout
-                    .take()
-                    .unwrap()
-                    .read_to_string(&mut out)
-                    .unwrap();
-                return out;
-            }
-            assert!(
-                start.elapsed() < Duration::from_secs(10),
-                "router did not stop"
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
 }
 
 fn recv_frames(sock: &UdpSocket, wait: Duration) -> Vec<Vec<u8>> {

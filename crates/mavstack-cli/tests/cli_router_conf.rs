@@ -3,13 +3,14 @@
 //! (`docs/contracts/router.md`, "--conf"). The parse of every key is tested in
 //! `crates/mavstack/src/router_conf/tests.rs`; these tests check what the router does with it.
 
+mod router;
+
+use router::Router;
+
 use core::time::Duration;
-use std::io::{BufRead as _, BufReader};
+use std::ffi::OsStr;
 use std::net::UdpSocket;
-use std::path::Path;
-use std::process::{Child, ChildStdout, Command, Stdio};
-use std::sync::mpsc;
-use std::time::Instant;
+use std::process::Command;
 
 fn mavstack() -> Command {
     Command::new(env!("CARGO_BIN_EXE_mavstack"))
@@ -21,73 +22,6 @@ fn free_udp() -> u16 {
         .local_addr()
         .unwrap()
         .port()
-}
-
-/// A router started with `--conf conf`; its stderr up to "ready" is kept.
-struct Router {
-    child: Child,
-    before_ready: Vec<String>,
-}
-
-impl Router {
-    fn start(conf: &Path) -> Self {
-        let mut child = mavstack()
-            .args(["router", "--conf"])
-            .arg(conf)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let mut err = BufReader::new(child.stderr.take().unwrap());
-        let mut before_ready = Vec::new();
-        loop {
-            let mut line = String::new();
-            assert!(
-                err.read_line(&mut line).unwrap() > 0,
-                "router exited before it was ready: {before_ready:?}"
-            );
-            if line.contains("mavstack router: ready") {
-                break;
-            }
-            before_ready.push(line.trim_end().to_owned());
-        }
-        std::thread::spawn(move || for _ in err.lines() {});
-        Self {
-            child,
-            before_ready,
-        }
-    }
-
-    /// Its stdout, line by line, through a channel (a wait on it can be bounded).
-    fn stdout_lines(&mut self) -> mpsc::Receiver<String> {
-        let out: ChildStdout = self.child.stdout.take().unwrap();
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(out).lines().map_while(Result::ok) {
-                if tx.send(line).is_err() {
-                    break;
-                }
-            }
-        });
-        rx
-    }
-
-    fn stop(mut self) {
-        let pid = self.child.id().to_string();
-        Command::new("kill").args(["-TERM", &pid]).status().unwrap();
-        let start = Instant::now();
-        loop {
-            if let Some(status) = self.child.try_wait().unwrap() {
-                assert!(status.success(), "router exit status {status}");
-                return;
-            }
-            assert!(
-                start.elapsed() < Duration::from_secs(10),
-                "router did not stop"
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
 }
 
 fn udp_server(port: u16) -> String {
@@ -103,7 +37,7 @@ fn report_stats_prints_the_statistics_lines() {
         udp_server(free_udp())
     );
     std::fs::write(&conf, text).unwrap();
-    let mut router = Router::start(&conf);
+    let mut router = Router::start([OsStr::new("--conf"), conf.as_os_str()]);
     let lines = router.stdout_lines();
     // The first statistics object (the wait is only bounded: it comes after a period).
     let line = lines
@@ -139,7 +73,7 @@ fn keys_without_effect_are_warned_about_with_file_and_line() {
         udp_server(port)
     ));
     std::fs::write(&conf, &text).unwrap();
-    let router = Router::start(&conf);
+    let router = Router::start([OsStr::new("--conf"), conf.as_os_str()]);
     let warnings = router.before_ready.clone();
     router.stop();
     let path = conf.display();

@@ -3,13 +3,14 @@
 //! resolve in that dialect (`docs/contracts/router.md`, "Dialect"). The oracle for a custom
 //! message is pymavlink with a module generated from the same XML.
 
-use core::time::Duration;
+mod router;
+
+use router::Router;
+
 use std::ffi::OsStr;
-use std::io::{BufRead as _, BufReader, Read as _};
 use std::net::UdpSocket;
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
-use std::time::Instant;
+use std::process::Command;
 
 mod support;
 
@@ -64,55 +65,6 @@ fn free_udp() -> u16 {
         .local_addr()
         .unwrap()
         .port()
-}
-
-/// A router process, ready (it said so on stderr); stopped with SIGTERM by `stop`.
-struct Router(Child);
-
-impl Router {
-    fn start(args: &[String]) -> Self {
-        let mut child = mavstack()
-            .arg("router")
-            .args(args)
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let mut err = BufReader::new(child.stderr.take().unwrap());
-        let mut line = String::new();
-        loop {
-            line.clear();
-            assert!(
-                err.read_line(&mut line).unwrap() > 0,
-                "router exited before it was ready"
-            );
-            if line.contains("mavstack router: ready") {
-                break;
-            }
-        }
-        std::thread::spawn(move || {
-            let mut rest = String::new();
-            let _ = err.read_to_string(&mut rest);
-        });
-        Self(child)
-    }
-
-    fn stop(mut self) {
-        let pid = self.0.id().to_string();
-        Command::new("kill").args(["-TERM", &pid]).status().unwrap();
-        let start = Instant::now();
-        loop {
-            if let Some(status) = self.0.try_wait().unwrap() {
-                assert!(status.success(), "router exit status {status}");
-                return;
-            }
-            assert!(
-                start.elapsed() < Duration::from_secs(10),
-                "router did not stop"
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
 }
 
 #[test]
