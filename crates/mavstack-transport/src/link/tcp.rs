@@ -50,6 +50,10 @@ pub(super) async fn serve_tcp(
     tx: mpsc::Sender<LinkMsg>,
     queue: usize,
 ) {
+    // The link as its connection string names it, for the warnings.
+    let link = listener
+        .local_addr()
+        .map_or_else(|_| "tcpin".to_owned(), |a| format!("tcpin:{a}"));
     loop {
         let accepted = tokio::select! {
             () = tx.closed() => return,
@@ -82,7 +86,7 @@ pub(super) async fn serve_tcp(
             }
             Err(e) => {
                 // Out of file descriptors and the like: wait a little, then go on.
-                tracing::warn!("tcp accept failed: {e}");
+                tracing::warn!(link = %link, "{link}: tcp accept failed: {e}");
                 tokio::select! {
                     () = tx.closed() => return,
                     () = tokio::time::sleep(Duration::from_millis(100)) => {}
