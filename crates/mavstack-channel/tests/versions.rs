@@ -1070,6 +1070,19 @@ fn ack_from_vehicle(command: MavCmd, result: MavResult) -> Vec<u8> {
     )
 }
 
+/// A ground station whose request for 300 the vehicle refused with `result` at T0: the
+/// fallback's request has gone out (and been taken off the link).
+fn gcs_in_fallback(result: MavResult) -> Channel {
+    let mut g = gcs_asking_for_300();
+    let _ = feed(
+        &mut g,
+        T0,
+        &ack_from_vehicle(MavCmd::REQUEST_MESSAGE, result),
+    );
+    let _ = transmits(&mut g, T0);
+    g
+}
+
 /// The REQUEST_MESSAGE commands among `sent`, as (magic byte, param1).
 fn requests(sent: &[Vec<u8>]) -> Vec<(u8, f32)> {
     sent.iter()
@@ -1131,13 +1144,7 @@ fn refused_300_falls_back_to_autopilot_version_in_mavlink2_and_switches() {
 fn a_late_refusal_in_the_fallback_phase_does_not_end_it() {
     // The ACK FAILED of an earlier retry of the request for 300 may arrive after the
     // fallback's request went out: COMMAND_ACK does not say which message was asked for.
-    let mut g = gcs_asking_for_300();
-    let _ = feed(
-        &mut g,
-        T0,
-        &ack_from_vehicle(MavCmd::REQUEST_MESSAGE, MavResult::FAILED),
-    );
-    let _ = transmits(&mut g, T0);
+    let mut g = gcs_in_fallback(MavResult::FAILED);
     let t = T0 + Duration::from_millis(100);
     let events = feed(
         &mut g,
@@ -1155,13 +1162,7 @@ fn a_late_refusal_in_the_fallback_phase_does_not_end_it() {
 
 #[test]
 fn a_refused_fallback_ends_in_a_nack_at_the_attempts_deadline() {
-    let mut g = gcs_asking_for_300();
-    let _ = feed(
-        &mut g,
-        T0,
-        &ack_from_vehicle(MavCmd::REQUEST_MESSAGE, MavResult::UNSUPPORTED),
-    );
-    let _ = transmits(&mut g, T0);
+    let mut g = gcs_in_fallback(MavResult::UNSUPPORTED);
     let _ = feed(
         &mut g,
         T0,
@@ -1190,13 +1191,7 @@ fn a_refused_fallback_ends_in_a_nack_at_the_attempts_deadline() {
 #[test]
 fn the_fallback_answered_in_mavlink1_is_a_nack() {
     // A system with MAVLink 2 disabled: it refuses 300 and answers the fallback in MAVLink 1.
-    let mut g = gcs_asking_for_300();
-    let _ = feed(
-        &mut g,
-        T0,
-        &ack_from_vehicle(MavCmd::REQUEST_MESSAGE, MavResult::UNSUPPORTED),
-    );
-    let _ = transmits(&mut g, T0);
+    let mut g = gcs_in_fallback(MavResult::UNSUPPORTED);
     let av = AutopilotVersion::default();
     let events = feed(&mut g, T0, &frame(Version::V1, 1, 1, 1, &av));
     let outcome = outcome_of(&events).expect("finished");

@@ -57,18 +57,11 @@ fn same_plan(a: &[MissionItemInt], b: &[MissionItemInt]) -> bool {
 
 #[tokio::test]
 async fn a_ground_station_finds_handshakes_and_operates_the_simulated_vehicle() {
-    let vehicle = SimVehicle::start(
-        Node::builder().link(LinkSpec::parse("udpin:127.0.0.1:0", &none).expect("spec")),
+    let (vehicle, gcs) = vehicle_and_gcs(
+        ProtocolVersionSupport::Answer,
         SimVehicle::config(Autopilot::Ardupilot, params::defaults(Autopilot::Ardupilot)),
     )
-    .await
-    .expect("vehicle starts");
-    let port = vehicle.node().local_addrs()[0].expect("bound").port();
-    let gcs = ground_station()
-        .link(LinkSpec::parse(&format!("udpout:127.0.0.1:{port}"), &none).expect("spec"))
-        .start()
-        .await
-        .expect("ground station starts");
+    .await;
     let mut discovery = Discovery::new(&gcs.handle()).await;
 
     let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
