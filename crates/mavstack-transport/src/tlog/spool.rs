@@ -36,7 +36,8 @@ struct Batch {
     parts: Vec<(Option<u64>, usize)>,
 }
 
-/// A log file written on a thread of its own; see the [module docs](self).
+/// A log file written on a thread of its own, behind a bounded queue: records that do not fit
+/// are counted, never waited for.
 ///
 /// ```
 /// use mavstack_transport::tlog::{OpenMode, Reader, Spool};

@@ -58,8 +58,8 @@ pub(super) enum NewLink {
 }
 
 impl NodeBuilder {
-    /// A tap ([`NodeHandle::tap`]) that sees every input from the node's first datagram on:
-    /// [`NodeHandle::tap`] on a started node misses what a quick peer sent before it was
+    /// A tap ([`NodeHandle::tap`](crate::NodeHandle::tap)) that sees every input from the node's first datagram on:
+    /// [`NodeHandle::tap`](crate::NodeHandle::tap) on a started node misses what a quick peer sent before it was
     /// registered.
     #[must_use]
     pub fn with_tap(mut self) -> (Self, TapSubscription) {
@@ -68,7 +68,7 @@ impl NodeBuilder {
         (self, rx)
     }
 
-    /// Link events ([`NodeHandle::events`]) from the node's start on, none missed.
+    /// Link events ([`NodeHandle::events`](crate::NodeHandle::events)) from the node's start on, none missed.
     #[must_use]
     pub fn with_events(mut self) -> (Self, EventSubscription) {
         let (tx, rx) = mpsc::channel(SUBSCRIPTION_DEPTH);

@@ -180,7 +180,7 @@ impl NodeHandle {
     }
 
     /// Like [`send_message`](Self::send_message), onto one router link only (the one an
-    /// [`Incoming`] or a [`NodeEvent`] names); 0 if it is gone.
+    /// [`Incoming`](crate::Incoming) or a [`NodeEvent`](crate::NodeEvent) names); 0 if it is gone.
     pub async fn send_on<S: MessageSet>(&self, link: LinkId, message: &S) -> usize {
         let mut payload = [0u8; MAX_PAYLOAD_LEN];
         let len = message.encode(&mut payload);

@@ -14,12 +14,12 @@
 //!                                       Link::send (batched, never waits) ─► sockets
 //! ```
 //!
-//! One file per part: [`builder`] (what a node is made of, and opening it), [`handle`] (the
-//! running [`Node`] and its [`NodeHandle`]s), [`driver`] (the driver's state and one turn of
-//! it: reading, routing, forwarding, commands), [`run_task`] (the driver as a task of the
-//! runtime), [`run_thread`] (the driver on a thread of its own, over an `epoll`),
-//! [`moderation`] (reading in bursts under a steady stream), [`heartbeat`] (the node's own
-//! HEARTBEAT timer), [`log`] (the traffic log) and [`report`] (the counters a node reports).
+//! One file per part: `builder` (what a node is made of, and opening it), `handle` (the
+//! running [`Node`] and its [`NodeHandle`]s), `driver` (the driver's state and one turn of
+//! it: reading, routing, forwarding, commands), `run_task` (the driver as a task of the
+//! runtime), `run_thread` (the driver on a thread of its own, over an `epoll`),
+//! `moderation` (reading in bursts under a steady stream), `heartbeat` (the node's own
+//! HEARTBEAT timer), `log` (the traffic log) and `report` (the counters a node reports).
 
 mod builder;
 mod driver;
@@ -232,7 +232,7 @@ pub enum LinkEvent {
         /// Why.
         cause: SwitchCause,
     },
-    /// A vehicle link ([`LinkRole::Vehicle`]) was asked for PROTOCOL_VERSION.
+    /// A vehicle link ([`LinkRole::Vehicle`](crate::router::LinkRole::Vehicle)) was asked for PROTOCOL_VERSION.
     ProtocolVersionRequested {
         /// The requester (sysid, compid).
         from: (u8, u8),

@@ -4,7 +4,7 @@ use core::time::Duration;
 
 use mavstack_core::time::Instant;
 
-/// How a node reads under a steady stream of input (see [`NodeBuilder::input_moderation`]).
+/// How a node reads under a steady stream of input (see [`NodeBuilder::input_moderation`](crate::NodeBuilder::input_moderation)).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[non_exhaustive]
 pub enum InputModeration {
