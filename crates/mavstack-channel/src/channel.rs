@@ -831,15 +831,21 @@ impl Channel {
             return None;
         }
         let to = (frame.sysid(), frame.compid());
-        let answer = match (policy.protocol_version, policy.version) {
+        // A refusal: ArduPilot's (REQUEST_MESSAGE for a message it cannot send fails, a
+        // command it does not know is unsupported), or a link with MAVLink 2 disabled.
+        let refusal = match (policy.protocol_version, policy.version) {
             (None, _) if policy.refuse_unsupported => {
-                // ArduPilot's answers: REQUEST_MESSAGE for a message it cannot send fails,
-                // a command it does not know is unsupported.
-                let result = if cmd.command == MavCmd::REQUEST_PROTOCOL_VERSION {
+                Some(if cmd.command == MavCmd::REQUEST_PROTOCOL_VERSION {
                     MavResult::UNSUPPORTED
                 } else {
                     MavResult::FAILED
-                };
+                })
+            }
+            (Some(_), VehicleVersion::Mavlink1Only) => Some(policy.nack_result),
+            _ => None,
+        };
+        let answer = match (policy.protocol_version, refusal) {
+            (_, Some(result)) => {
                 self.queue_control(
                     Control::Ack {
                         command: cmd.command,
@@ -850,20 +856,8 @@ impl Channel {
                 );
                 ProtocolVersionAnswer::Nacked(result)
             }
-            (None, _) => ProtocolVersionAnswer::Ignored,
-            (Some(_), VehicleVersion::Mavlink1Only) => {
-                let result = policy.nack_result;
-                self.queue_control(
-                    Control::Ack {
-                        command: cmd.command,
-                        result,
-                        to,
-                    },
-                    Framing::Link,
-                );
-                ProtocolVersionAnswer::Nacked(result)
-            }
-            (Some(version), _) => {
+            (None, None) => ProtocolVersionAnswer::Ignored,
+            (Some(version), None) => {
                 if self.transmits.free() < 2 {
                     self.stats.control_dropped += 2;
                 } else {
