@@ -41,6 +41,12 @@ rm -f target/wheels/mavstack-*.whl
 "$MAVSTACK_PYTHON" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps \
     target/wheels/mavstack-*-abi3-*.whl
 (cd crates/mavstack-python && "$MAVSTACK_PYTHON" -m pytest -q -p no:cacheprovider tests)
+# Damaged logs: `mavstack decode` and the package return exactly the frames pymavlink's reader
+# returns (order, timestamps), once with bit flips of every header field and unknown ids, once
+# with inserted garbage and flipped timestamps as well; raw streams lose none pymavlink finds.
+"$MAVSTACK_PYTHON" tests-interop/tlog_damage.py --mavstack target/debug/mavstack --python \
+    --damage payload,checksum,length_down,length_up,incompat,msgid0,msgid1,msgid2,magic,header,unknown_id
+"$MAVSTACK_PYTHON" tests-interop/tlog_damage.py --mavstack target/debug/mavstack --python --records 50000
 
 step "examples, against the in-process simulated vehicle"
 # Each example runs and its output must show what it is for.

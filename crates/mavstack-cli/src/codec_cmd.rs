@@ -198,6 +198,11 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
     };
     if is_tlog {
         let mut reader = tlog::Reader::new(input).with_crc_extra(table);
+        if let Some(path) = &args.file {
+            // A file is read as pymavlink opens one (its indexing walk first); stdin cannot be.
+            let file = std::fs::File::open(path).map_err(cannot)?;
+            reader = reader.indexed_as_pymavlink_opens(&file).map_err(cannot)?;
+        }
         let mut stats = Stats::default();
         let mut progress = crate::progress::Progress::new("decoding", input_len);
         loop {

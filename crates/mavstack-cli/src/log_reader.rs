@@ -98,8 +98,13 @@ pub(crate) fn read_log(
         let file = std::fs::File::open(path).map_err(cannot)?;
         let total = file.metadata().map_or(0, |m| m.len());
         let mut progress = Progress::new(what, total);
-        let mut reader =
-            tlog::Reader::new(BufReader::with_capacity(1 << 16, file)).with_crc_extra(table);
+        let mut reader = tlog::Reader::new(BufReader::with_capacity(
+            1 << 16,
+            file.try_clone().map_err(cannot)?,
+        ))
+        .with_crc_extra(table)
+        .indexed_as_pymavlink_opens(&file)
+        .map_err(cannot)?;
         while let Some((ts, bytes)) = reader
             .read_record()
             .with_context(|| format!("reading {}", path.display()))?

@@ -139,8 +139,13 @@ fn mavlink_router_sample_configuration_runs_as_it_is() {
     let sample = include_str!("../../mavstack/tests/data/config.sample");
     let pty = nix::pty::openpty(None, None).unwrap();
     let tty = nix::unistd::ttyname(&pty.slave).unwrap();
-    let (bravo, charlie, delta) = (free_udp(), free_udp(), free_tcp());
-    let tcp = TcpListener::bind(("127.0.0.1", delta)).unwrap();
+    // The sockets the test binds itself take their ports from the kernel: a port picked free and
+    // bound later can be taken in between by a parallel test.
+    let tcp = TcpListener::bind("127.0.0.1:0").unwrap();
+    let delta = tcp.local_addr().unwrap().port();
+    let gcs = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let charlie = gcs.local_addr().unwrap().port();
+    let bravo = free_udp();
     let text = sample
         .replace("/dev/ttyS0", &tty.display().to_string())
         .replace("Port = 10000", &format!("Port = {bravo}"))
@@ -150,7 +155,6 @@ fn mavlink_router_sample_configuration_runs_as_it_is() {
     let dir = tempfile::tempdir().unwrap();
     let conf = dir.path().join("main.conf");
     std::fs::write(&conf, text).unwrap();
-    let gcs = UdpSocket::bind(("127.0.0.1", charlie)).unwrap();
     let router = Router::start(&[
         "--conf".into(),
         conf.display().to_string(),
@@ -195,8 +199,8 @@ fn mavlink_router_sample_configuration_runs_as_it_is() {
 #[test]
 fn a_tcp_client_that_vanishes_and_comes_back_is_served_again() {
     let port = free_tcp();
-    let out = free_udp();
-    let listener = UdpSocket::bind(("127.0.0.1", out)).unwrap();
+    let listener = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let out = listener.local_addr().unwrap().port();
     let router = Router::start(&[
         format!("tcpin:127.0.0.1:{port}?name=tcp"),
         format!("udpout:127.0.0.1:{out}?name=gcs"),

@@ -76,7 +76,7 @@ impl LogConnection {
             .map_err(|e| PyOSError::new_err(format!("cannot read {}: {e}", path.display())))?;
         let tlog = is_tlog(&path);
         Ok(Self {
-            scan: Scan::new(tlog, key.clone()),
+            scan: Scan::new(&log, &dialect, tlog, key.clone()),
             next_check: CHECK_EVERY,
             path,
             log,
@@ -331,7 +331,7 @@ impl LogConnection {
 
     /// Back to the start of the log (counts and latest messages cleared).
     fn rewind(&mut self) {
-        self.scan = Scan::new(self.tlog, self.key.clone());
+        self.scan = Scan::new(&self.log, &self.dialect, self.tlog, self.key.clone());
         self.next_check = CHECK_EVERY;
         self.by_sysid.clear();
         self.latest.clear();

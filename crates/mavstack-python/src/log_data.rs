@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use mavstack_core::parse::{Item, SliceParser};
 use mavstack_core::signing::{self, SecretKey};
-use mavstack_core::tlog::Records;
+use mavstack_core::tlog::Recovery;
 use mavstack_core::wire::Frame;
 
 use crate::dialect::Dialect;
@@ -140,6 +140,8 @@ pub(crate) struct Found {
 pub(crate) struct Scan {
     pos: usize,
     tlog: bool,
+    /// The tlog reading state (pymavlink's way past damage), kept between frames.
+    recovery: Recovery,
     key: Option<SecretKey>,
     /// The last accepted signature timestamp per (link id, sysid, compid).
     streams: HashMap<(u8, u8, u8), u64>,
@@ -148,11 +150,32 @@ pub(crate) struct Scan {
 }
 
 impl Scan {
-    /// A scan from the start of a log.
-    pub(crate) fn new(tlog: bool, key: Option<SecretKey>) -> Self {
+    /// A scan from the start of `log`. A tlog is read as pymavlink's
+    /// `mavutil.mavlink_connection` reads it: after its indexing walk
+    /// (`Recovery::after_indexing`), which can change how the start of a damaged log reads.
+    pub(crate) fn new(log: &[u8], dialect: &Dialect, tlog: bool, key: Option<SecretKey>) -> Self {
+        let lookup = |id: u32| dialect.crc_extra(id);
+        let recovery = if tlog {
+            let read_at = |at: u64, buf: &mut [u8]| -> Result<usize, core::convert::Infallible> {
+                let rest = usize::try_from(at)
+                    .ok()
+                    .and_then(|at| log.get(at..))
+                    .unwrap_or_default();
+                let n = rest.len().min(buf.len());
+                buf[..n].copy_from_slice(&rest[..n]);
+                Ok(n)
+            };
+            match Recovery::after_indexing(log.len() as u64, read_at, Some(&lookup)) {
+                Ok(recovery) => recovery,
+                Err(never) => match never {},
+            }
+        } else {
+            Recovery::new()
+        };
         Self {
             pos: 0,
             tlog,
+            recovery,
             key,
             streams: HashMap::new(),
             stats: ScanStats::default(),
@@ -169,17 +192,13 @@ impl Scan {
         let lookup = |id: u32| dialect.crc_extra(id);
         loop {
             let (start, len, ts_us) = if self.tlog {
-                let mut records = Records::starting_at(log, self.pos, Some(lookup));
-                let record = records.next();
-                self.pos = records.position();
-                self.stats.skipped_bytes += records.stats().skipped_bytes;
-                self.stats.bad_crc += records.stats().bad_crc;
-                let r = record?;
-                (
-                    r.offset + mavstack_core::tlog::TIMESTAMP_LEN,
-                    r.frame.len(),
-                    r.ts_us,
-                )
+                let before = *self.recovery.stats();
+                let record = self.recovery.next_in(log, &mut self.pos, Some(&lookup));
+                let after = self.recovery.stats();
+                self.stats.skipped_bytes += after.skipped_bytes - before.skipped_bytes;
+                self.stats.bad_crc += after.bad_crc - before.bad_crc;
+                let (ts_us, start, len) = record?;
+                (start, len, ts_us)
             } else {
                 let rest = log.get(self.pos..)?;
                 let mut parser = SliceParser::new(rest, lookup);

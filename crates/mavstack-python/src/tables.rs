@@ -221,6 +221,9 @@ struct TableReader {
     tlog: bool,
     /// Frame starts, in file order.
     index: Vec<u64>,
+    /// The timestamps of the frames whose timestamp is not the 8 bytes before them (read
+    /// past damage as pymavlink reads it), by frame start.
+    moved_ts: Arc<HashMap<u64, u64>>,
     next: usize,
 }
 
@@ -257,9 +260,14 @@ impl TableReader {
                 let frame = Frame::new_checked(bytes).map_err(|e| {
                     ArrowError::ExternalError(Box::new(std::io::Error::other(e.to_string())))
                 })?;
-                let t = match start.checked_sub(TIMESTAMP_LEN) {
-                    Some(at) if self.tlog => u64::from_be_bytes(bytes_at::<8>(&self.log[at..], 0)),
-                    _ => 0,
+                let moved = (!self.moved_ts.is_empty())
+                    .then(|| self.moved_ts.get(&e).copied())
+                    .flatten();
+                let t = match (self.tlog, moved, start.checked_sub(TIMESTAMP_LEN)) {
+                    (false, _, _) => 0,
+                    (true, Some(t), _) => t,
+                    (true, None, Some(at)) => u64::from_be_bytes(bytes_at::<8>(&self.log[at..], 0)),
+                    (true, None, None) => 0,
                 };
                 ts.push(i64::try_from(t).unwrap_or(i64::MAX));
                 sysid.push(frame.sysid());
@@ -396,11 +404,12 @@ pub(crate) fn read_tlog<'py>(
         }
         mask
     });
-    let (order, mut index, length) = py.detach(|| {
+    let (order, mut index, moved_ts, length) = py.detach(|| {
         let bar = progress.then(|| crate::progress::bar(log.len() as u64, &path));
-        let mut scan = Scan::new(tlog, key);
+        let mut scan = Scan::new(&log, &dialect, tlog, key);
         let mut order = Vec::new();
         let mut index: HashMap<usize, Vec<u64>> = HashMap::new();
+        let mut moved_ts: HashMap<u64, u64> = HashMap::new();
         let mut n = 0u64;
         while let Some(found) = scan.next(&log, &dialect) {
             n += 1;
@@ -413,6 +422,13 @@ pub(crate) fn read_tlog<'py>(
                 continue;
             }
             let entry = found.start as u64;
+            let before = found
+                .start
+                .checked_sub(TIMESTAMP_LEN)
+                .map(|at| &log[at..found.start]);
+            if tlog && before != Some(&found.ts_us.to_be_bytes()[..]) {
+                moved_ts.insert(entry, found.ts_us);
+            }
             index
                 .entry(found.message)
                 .or_insert_with(|| {
@@ -424,7 +440,7 @@ pub(crate) fn read_tlog<'py>(
         if let Some(bar) = bar {
             bar.finish_and_clear();
         }
-        (order, index, log.check_length())
+        (order, index, Arc::new(moved_ts), log.check_length())
     });
     length.map_err(|e| PyOSError::new_err(e.to_string()))?;
     let out = PyDict::new(py);
@@ -440,6 +456,7 @@ pub(crate) fn read_tlog<'py>(
                 log: Arc::clone(&log),
                 tlog,
                 index: entries,
+                moved_ts: Arc::clone(&moved_ts),
                 next: 0,
             }),
         };

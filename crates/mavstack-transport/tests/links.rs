@@ -279,7 +279,7 @@ async fn tlog_written_by_one_connection_is_read_by_another() {
 }
 
 #[tokio::test]
-async fn corrupt_tlog_through_a_connection_loses_only_the_bad_record() {
+async fn corrupt_tlog_through_a_connection_gives_the_frames_pymavlink_gives() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("bad.tlog");
     let mut w = mavstack_transport::tlog::Writer::new(Vec::new());
@@ -298,11 +298,17 @@ async fn corrupt_tlog_through_a_connection_loses_only_the_bad_record() {
     let mut source = open(&format!("file:{}", path.display())).await;
     let mut seqs = Vec::new();
     while let Some(e) = source.recv().await {
-        if let FrameEvent::Frame(f) = e {
+        if let FrameEvent::Frame(f) = e
+            && f.frame.frame().msg_id() == 0
+        {
             seqs.push(f.frame.frame().seq());
         }
     }
-    assert_eq!(seqs, [0, 1, 2, 4, 5, 6, 7, 8, 9]);
+    // pymavlink 2.4.50 reads these bytes (mavutil.mavlink_connection) as HEARTBEAT 0, 1, 2,
+    // BAD_DATA, HEARTBEAT 4, 5, then damage and two "frames" of unknown ids made of the
+    // garbage: the garbage's bytes were taken for a timestamp, and the rest of the log is
+    // lost with it (docs/protocol-notes.md, "Reading past damage").
+    assert_eq!(seqs, [0, 1, 2, 4, 5]);
     source.close().await.unwrap();
 }
 

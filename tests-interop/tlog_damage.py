@@ -1,0 +1,322 @@
+#!/usr/bin/env python3
+"""A damaged tlog and a damaged raw stream, read by pymavlink and by mavstack: mavstack must
+return exactly the frames pymavlink returns, in its order, with its timestamps.
+
+Usage:
+  tlog_damage.py --mavstack BIN [--records N] [--seed S] [--out DIR] [--python]
+
+The corpus is written with pymavlink's encoder (ardupilotmega, MAVLink 2 and MAVLink 1,
+signed frames with a key, an id above 255). One record in ten is damaged, one kind of damage
+per record, every kind in turn:
+  payload bit flip, checksum bit flip, length byte flip (shorter and longer), incompat flags
+  flip, message id flip (each of its three bytes), start marker flip, sequence/sysid flip,
+  an unknown message id (a frame whose id no dialect defines, checksum of a made-up
+  CRC_EXTRA), garbage between two records, a timestamp bit flip; and the last record is cut
+  short.
+
+The oracle is pymavlink itself: `mavutil.mavlink_connection(path)` (for a log file a
+`mavmmaplog`: an indexing walk, then `mavlogfile`'s robust reading; pymavlink's default dialect
+`all`, MAVLINK_DIALECT picks another) read to the end; every message that is not BAD_DATA is
+a frame it returns, with `_timestamp`. mavstack is then checked, each against that list:
+  - `mavstack decode --dialect all --keep-unknown FILE.tlog` (JSON lines): the same
+    frames (header, signature timestamp and record timestamp), unknown ids included;
+  - with --python, the mavstack Python package (`mavstack.mavutil.mavlink_connection`): the
+    same frames of known messages (it returns no unknown ids), same bytes, same `_timestamp`.
+The raw stream (the same frames without timestamps) is read by pymavlink's parser
+(`parse_char` fed as `mavlogfile` with notimestamps feeds it) and by `mavstack decode` on the
+.bin: every frame pymavlink returns must be among mavstack's, in order (mavstack's stream
+parser resynchronises after a damaged frame at the next byte, so it may find more).
+Exit status 0 when all agree; a summary line per check either way.
+"""
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import random
+import struct
+import subprocess
+import sys
+import tempfile
+
+os.environ.setdefault("MAVLINK20", "1")
+# pymavlink's mavutil reads with the `all` dialect unless told otherwise; mavstack is given
+# the same (--dialect), so "known message" means the same on both sides.
+DIALECT = os.environ.setdefault("MAVLINK_DIALECT", "all")
+from pymavlink import mavutil  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
+
+KEY = bytes(range(32))
+START_US = 1_764_000_000_000_000
+DAMAGE = [
+    "payload", "checksum", "length_down", "length_up", "incompat", "msgid0", "msgid1", "msgid2",
+    "magic", "header", "unknown_id", "garbage", "timestamp",
+]
+
+
+class Sink:
+    def __init__(self):
+        self.buf = b""
+
+    def write(self, b):
+        self.buf += b
+
+
+def encoders():
+    plain = mav.MAVLink(Sink(), srcSystem=1, srcComponent=1)
+    signed = mav.MAVLink(Sink(), srcSystem=1, srcComponent=1)
+    signed.signing.secret_key = KEY
+    signed.signing.sign_outgoing = True
+    signed.signing.link_id = 1
+    signed.signing.timestamp = 1
+    return plain, signed
+
+
+def message(rng, i):
+    k = i % 7
+    if k == 0:
+        return mav.MAVLink_heartbeat_message(2, 3, 81, rng.randrange(1 << 16), 4, 3)
+    if k == 1:
+        return mav.MAVLink_attitude_message(i, rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-3, 3),
+                                            0.01, 0.02, 0.0)
+    if k == 2:
+        return mav.MAVLink_global_position_int_message(i, -353632620 + rng.randrange(1000), 1491652370,
+                                                       584000, 10000, 0, 0, 0, rng.randrange(36000))
+    if k == 3:
+        return mav.MAVLink_statustext_message(6, ("PreArm: check %d" % i).encode(), 0, 0)
+    if k == 4:
+        return mav.MAVLink_param_value_message(b"RTL_ALT", float(i % 5000), 4, 1354, i % 1354)
+    if k == 5:
+        return mav.MAVLink_gimbal_manager_status_message(i, 0, 1, 255, 190, 0, 0)
+    return mav.MAVLink_sys_status_message(1, 1, 1, 500, 12000, -1, 80, 0, 0, 0, 0, 0, 0)
+
+
+def pack(rng, i, plain, signed):
+    msg = message(rng, i)
+    plain.seq = i % 256
+    if i % 11 == 3 and msg.id < 256:
+        return msg.pack(plain, force_mavlink1=True)
+    if i % 13 == 5:
+        return msg.pack(signed)
+    return msg.pack(plain)
+
+
+def damage(rng, kind, frame):
+    f = bytearray(frame)
+    v2 = f[0] == 0xFD
+    hl = 10 if v2 else 6
+    if kind == "payload":
+        f[hl + rng.randrange(max(1, f[1]))] ^= 1 << rng.randrange(8)
+    elif kind == "checksum":
+        f[hl + f[1] + rng.randrange(2)] ^= 1 << rng.randrange(8)
+    elif kind == "length_down":
+        f[1] ^= 1 << rng.randrange(max(1, f[1].bit_length()))
+        f[1] = min(f[1], frame[1])
+    elif kind == "length_up":
+        f[1] |= 1 << rng.randrange(5, 8)
+    elif kind == "incompat":
+        if v2:
+            f[2] ^= 1 << rng.randrange(1, 8)
+        else:
+            f[2] ^= 1 << rng.randrange(8)
+    elif kind.startswith("msgid"):
+        at = (7 + int(kind[-1])) if v2 else 5
+        f[at] ^= 1 << rng.randrange(8)
+    elif kind == "magic":
+        f[0] ^= 1 << rng.randrange(8)
+    elif kind == "header":
+        f[4 if v2 else 2] ^= 1 << rng.randrange(8)
+    return bytes(f)
+
+
+def unknown_frame(rng, i):
+    payload = bytes(rng.randrange(256) for _ in range(12))
+    body = struct.pack("<BBBBBBHB", len(payload), 0, 0, i % 256, 1, 1, 0xF000 + (i % 0xFF), 0x7F) + payload
+    crc = mavutil.x25crc(body)
+    crc.accumulate(bytes([rng.randrange(256)]))
+    return b"\xfd" + body + struct.pack("<H", crc.crc)
+
+
+def write_corpus(path, raw_path, n, seed, damage_kinds):
+    rng = random.Random(seed)
+    plain, signed = encoders()
+    out = bytearray()
+    raw = bytearray()
+    kinds = {}
+    for i in range(n):
+        ts = START_US + i * 20_000 + rng.randrange(1000)
+        frame = pack(rng, i, plain, signed)
+        kind = None
+        if i % 10 == 7 and i > 0:
+            kind = damage_kinds[(i // 10) % len(damage_kinds)]
+            kinds[kind] = kinds.get(kind, 0) + 1
+        if kind == "unknown_id":
+            frame = unknown_frame(rng, i)
+        elif kind == "garbage":
+            junk = bytes(rng.randrange(256) for _ in range(rng.randrange(1, 40)))
+            out += junk
+            raw += junk
+        elif kind == "timestamp":
+            ts ^= 1 << rng.randrange(64)
+        elif kind is not None:
+            frame = damage(rng, kind, frame)
+        out += struct.pack(">Q", ts) + frame
+        raw += frame
+    # The last record cut short.
+    last = pack(rng, n, plain, signed)
+    out += struct.pack(">Q", START_US + n * 20_000) + last[: len(last) // 2]
+    raw += last[: len(last) // 2]
+    with open(path, "wb") as fh:
+        fh.write(out)
+    with open(raw_path, "wb") as fh:
+        fh.write(raw)
+    return kinds
+
+
+def quietly(read):
+    """Runs `read` with pymavlink's prints about what it skipped kept off the output."""
+    with contextlib.redirect_stdout(io.StringIO()):
+        return read()
+
+
+def pymavlink_tlog(path):
+    """(timestamp, frame bytes, known) for every message pymavlink's reader returns."""
+    return quietly(lambda: _pymavlink_tlog(path))
+
+
+def _pymavlink_tlog(path):
+    conn = mavutil.mavlink_connection(path)
+    got = []
+    while True:
+        m = conn.recv_msg()
+        if m is None:
+            break
+        if m.get_type() == "BAD_DATA":
+            continue
+        got.append((m._timestamp, bytes(m.get_msgbuf()), not m.get_type().startswith("UNKNOWN_")))
+    return got
+
+
+def pymavlink_raw(path):
+    """Frame bytes of every known message pymavlink's parser returns from a raw stream (the
+    frames of unknown ids it returns there are mostly damage it cannot check)."""
+    return quietly(lambda: _pymavlink_raw(path))
+
+
+def _pymavlink_raw(path):
+    conn = mavutil.mavlink_connection(path, notimestamps=True)
+    got = []
+    while True:
+        m = conn.recv_msg()
+        if m is None:
+            break
+        if m.get_type() != "BAD_DATA" and not m.get_type().startswith("UNKNOWN_"):
+            got.append(bytes(m.get_msgbuf()))
+    return got
+
+
+def mavstack_decode(binary, path):
+    out = subprocess.run([binary, "decode", "--dialect", DIALECT, "--keep-unknown", path],
+                         capture_output=True, text=True, check=False)
+    if out.returncode != 0:
+        raise SystemExit("mavstack decode %s failed (%d): %s" % (path, out.returncode, out.stderr))
+    rows = []
+    for line in out.stdout.splitlines():
+        obj = json.loads(line)
+        sig = obj.get("signature")
+        rows.append((obj.get("ts_us"), (obj["version"], obj["msgid"], obj["seq"], obj["sysid"], obj["compid"],
+                                        sig and sig["timestamp"])))
+    return rows
+
+
+def header_of(frame):
+    """What `mavstack decode` prints of a frame's header: version, msgid, seq, sysid, compid,
+    signature timestamp."""
+    if frame[0] == 0xFD:
+        sig = None
+        if frame[2] & 1:
+            sig = int.from_bytes(frame[-12:-6], "little")
+        return (2, frame[7] | frame[8] << 8 | frame[9] << 16, frame[4], frame[5], frame[6], sig)
+    return (1, frame[5], frame[2], frame[3], frame[4], None)
+
+
+def first_difference(a, b):
+    for i, (x, y) in enumerate(zip(a, b)):
+        if x != y:
+            return "at %d: pymavlink %r, mavstack %r" % (i, x, y)
+    return "lengths %d (pymavlink) and %d (mavstack)" % (len(a), len(b))
+
+
+def is_subsequence(small, big):
+    it = iter(big)
+    return all(any(x == y for y in it) for x in small)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--mavstack", required=True)
+    ap.add_argument("--records", type=int, default=200_000)
+    ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--out")
+    ap.add_argument("--damage", default=",".join(DAMAGE),
+                    help="comma-separated damage kinds, in turn (default: all of %s)" % ",".join(DAMAGE))
+    ap.add_argument("--python", action="store_true", help="also check the mavstack Python package")
+    args = ap.parse_args()
+    out_dir = args.out or tempfile.mkdtemp(prefix="tlog-damage-")
+    os.makedirs(out_dir, exist_ok=True)
+    tlog = os.path.join(out_dir, "damaged.tlog")
+    raw = os.path.join(out_dir, "damaged.mavlink")
+    damage_kinds = args.damage.split(",")
+    bad = sorted(set(damage_kinds) - set(DAMAGE))
+    if bad:
+        ap.error("unknown damage kind(s): %s" % ", ".join(bad))
+    kinds = write_corpus(tlog, raw, args.records, args.seed, damage_kinds)
+    failed = False
+
+    expected = pymavlink_tlog(tlog)
+    known = sum(1 for e in expected if e[2])
+    damaged = sum(kinds.values())
+    print("corpus: %d records, %d damaged %s; pymavlink returns %d frames (%d of known messages)"
+          % (args.records + 1, damaged + 1, json.dumps(kinds, sort_keys=True), len(expected), known))
+
+    got = mavstack_decode(args.mavstack, tlog)
+    want = [(t, header_of(b)) for (t, b, _) in expected]
+    got = [(ts * 1.0e-6, h) for (ts, h) in got]
+    if got == want:
+        print("ok   mavstack decode (tlog): the same %d frames, bytes and timestamps" % len(got))
+    else:
+        failed = True
+        print("FAIL mavstack decode (tlog): %s" % first_difference(want, got))
+
+    if args.python:
+        from mavstack import mavutil as ms_mavutil
+        conn = ms_mavutil.mavlink_connection(tlog, dialect=DIALECT)
+        mine = []
+        while True:
+            m = conn.recv_msg()
+            if m is None:
+                break
+            mine.append((m._timestamp, bytes(m.get_msgbuf())))
+        want_known = [(t, b) for (t, b, k) in expected if k]
+        if mine == want_known:
+            print("ok   Python package (tlog): the same %d frames of known messages, bytes and _timestamp"
+                  % len(mine))
+        else:
+            failed = True
+            print("FAIL Python package (tlog): %s" % first_difference(want_known, mine))
+
+    raw_expected = [header_of(b) for b in pymavlink_raw(raw)]
+    raw_got = [h for (_, h) in mavstack_decode(args.mavstack, raw)]
+    if is_subsequence(raw_expected, raw_got):
+        print("ok   mavstack decode (raw): all %d frames pymavlink's parser returns, in order (mavstack: %d)"
+              % (len(raw_expected), len(raw_got)))
+    else:
+        failed = True
+        missing = [h for h in raw_expected if h not in set(raw_got)][:3]
+        print("FAIL mavstack decode (raw): frames pymavlink returns are missing: %s" % missing)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
