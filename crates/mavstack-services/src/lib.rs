@@ -44,7 +44,7 @@
 //! | [`param`] | PARAM_REQUEST_LIST/READ, PARAM_SET, PARAM_VALUE | [`param::ParamClient`] | [`param::ParamServer`] |
 //! | [`mission`] | MISSION_COUNT, MISSION_REQUEST_INT, MISSION_ITEM_INT, MISSION_ACK, ... | [`mission::MissionClient`] | [`mission::MissionServer`] |
 //! | [`stream`] | SET_MESSAGE_INTERVAL, REQUEST_MESSAGE, MESSAGE_INTERVAL | [`stream::Subscriptions`], [`stream::set_message_interval`], [`stream::request_message`] | [`stream::StreamScheduler`], [`stream::StreamServer`] (a whole service) |
-//! | [`ftp`] | FILE_TRANSFER_PROTOCOL | [`ftp::Payload`] (format only so far) | — |
+//! | [`ftp`] | FILE_TRANSFER_PROTOCOL | [`ftp::FtpClient`] | [`ftp::FtpServer`] over a [`ftp::Backend`] ([`ftp::MemoryBackend`]) |
 //! | [`plan`] | — | [`plan::to_vehicle`], [`plan::from_vehicle`], [`plan::same`]: a plan file's mission as each autopilot stores it (ArduPilot's home at 0, PX4's none) | — |
 //! | [`statustext`] | STATUSTEXT | [`statustext::Lines`] (chunks put together, text made safe to show) | — |
 //! | [`timesync`] | TIMESYNC | [`timesync::Timesync`] (estimates the offset) | the same type answers requests |

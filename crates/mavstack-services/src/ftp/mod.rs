@@ -1,9 +1,19 @@
-//! MAVLink FTP (FILE_TRANSFER_PROTOCOL, message 110): the payload format.
+//! MAVLink FTP (FILE_TRANSFER_PROTOCOL, message 110): the payload format, the server
+//! role over a [`Backend`] and the client role.
 //!
 //! <https://mavlink.io/en/services/ftp.html>
 
+pub mod backend;
+pub mod client;
 pub mod payload;
+pub mod server;
 
+pub use backend::{Backend, BackendError, MemoryBackend, OpenMode, normalize_path};
+pub use client::{ClientConfig, FtpClient, FtpError, FtpEvent, FtpOutput, StartError};
 pub use payload::{
     DirEntry, EntryKind, NakCode, Opcode, Payload, PayloadError, crc32, parse_entries,
 };
+pub use server::{FtpServer, ServerConfig};
+
+#[cfg(test)]
+mod tests;

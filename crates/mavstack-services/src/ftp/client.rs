@@ -1,0 +1,718 @@
+//! The FTP client role: [`FtpClient`], one operation at a time against one server.
+
+use alloc::collections::VecDeque;
+use alloc::vec;
+use alloc::vec::Vec;
+use core::time::Duration;
+
+use mavstack_core::time::Instant;
+use mavstack_dialects::common::{FileTransferProtocol, MavMessage};
+
+use super::payload::{DirEntry, MAX_DATA, NakCode, Opcode, Payload, parse_entries};
+use crate::rtt::Rtt;
+use crate::{Address, Outgoing, Service};
+
+/// [`FtpClient`] settings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ClientConfig {
+    /// The longest wait for a reply (the adaptive timeout's ceiling and its value until a
+    /// round trip is measured).
+    pub timeout: Duration,
+    /// Sends of one request before the operation fails.
+    pub attempts: u8,
+    /// The largest file [`FtpClient::read`] accepts: a larger announced size fails with
+    /// [`FtpError::TooLarge`] before anything is allocated.
+    pub max_read_size: u32,
+    /// Read with BurstReadFile (gaps filled with ReadFile); `false` reads with ReadFile
+    /// only.
+    pub burst: bool,
+    /// Listing entries accepted at most (a server listing forever fails).
+    pub max_entries: usize,
+}
+
+impl Default for ClientConfig {
+    fn default() -> Self {
+        Self {
+            timeout: Duration::from_millis(500),
+            attempts: 5,
+            max_read_size: 16 << 20,
+            burst: true,
+            max_entries: 65_536,
+        }
+    }
+}
+
+/// What a finished operation produced.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum FtpOutput {
+    /// A directory's entries ([`FtpClient::list`]).
+    Listing(Vec<DirEntry>),
+    /// A file's contents ([`FtpClient::read`]).
+    Data(Vec<u8>),
+    /// A file's CRC32 as servers compute it ([`crc32`](super::crc32)).
+    Crc32(u32),
+    /// Done (write, remove, mkdir, rmdir, rename).
+    Done,
+}
+
+/// How an operation failed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum FtpError {
+    /// No reply after every attempt.
+    #[error("no reply after {attempts} attempts")]
+    TimedOut {
+        /// Sends of the last request.
+        attempts: u8,
+    },
+    /// The server refused.
+    #[error("refused: {code:?} (errno {errno:?})")]
+    Nak {
+        /// The NAK code.
+        code: NakCode,
+        /// The errno of a FailErrno NAK.
+        errno: Option<u8>,
+    },
+    /// The file is larger than [`ClientConfig::max_read_size`].
+    #[error("file of {size} bytes is too large")]
+    TooLarge {
+        /// The size the server announced.
+        size: u32,
+    },
+    /// The server's reply made no sense (a listing without end, an ACK without its data).
+    #[error("malformed reply")]
+    Protocol,
+    /// [`FtpClient::cancel`].
+    #[error("cancelled")]
+    Cancelled,
+}
+
+/// Why an operation could not start.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum StartError {
+    /// Another operation is under way.
+    #[error("another operation is under way")]
+    Busy,
+    /// The path (or both of a rename's) does not fit a payload's 239 data bytes.
+    #[error("path too long")]
+    PathTooLong,
+}
+
+/// What [`FtpClient::poll_event`] reports.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum FtpEvent {
+    /// Bytes transferred so far by a read or write, and the total.
+    Progress {
+        /// Bytes so far.
+        done: u64,
+        /// Bytes in all.
+        total: u64,
+    },
+    /// The operation ended.
+    Finished(Result<FtpOutput, FtpError>),
+}
+
+#[derive(Debug)]
+struct Pending {
+    req: Payload,
+    sent: Instant,
+    attempt: u8,
+    deadline: Instant,
+    /// Burst packets received for this request.
+    burst_packets: u32,
+}
+
+#[derive(Debug, PartialEq, Eq)]
+enum Phase {
+    Open,
+    Transfer,
+    Terminate,
+}
+
+#[derive(Debug)]
+struct Read {
+    phase: Phase,
+    session: u8,
+    data: Vec<u8>,
+    /// Ranges still wanted, `[start, end)`, sorted and disjoint.
+    missing: Vec<(u32, u32)>,
+    /// The end of the furthest data received.
+    high: u32,
+    /// A burst ended with no data: use ReadFile from now on.
+    no_burst: bool,
+    /// Bytes still missing at the last request, and requests since that brought none.
+    left: u64,
+    stalls: u8,
+}
+
+#[derive(Debug)]
+struct Write {
+    phase: Phase,
+    session: u8,
+    data: Vec<u8>,
+    acked: usize,
+}
+
+#[derive(Debug)]
+enum Op {
+    List {
+        path: Vec<u8>,
+        entries: Vec<DirEntry>,
+    },
+    Read(Read),
+    Write(Write),
+    Simple,
+    Crc,
+}
+
+/// A MAVLink FTP client for one server, sans-IO like every [`Service`].
+///
+/// Start one operation ([`list`](Self::list), [`read`](Self::read),
+/// [`write`](Self::write), [`remove`](Self::remove), [`mkdir`](Self::mkdir),
+/// [`rmdir`](Self::rmdir), [`rename`](Self::rename), [`crc32`](Self::crc32)), drive it
+/// with the [`Service`] calls, and take [`FtpEvent`]s from [`poll_event`](Self::poll_event)
+/// until [`FtpEvent::Finished`]. Requests are resent after an adaptive timeout (RFC 6298
+/// estimate, doubled per resend, at most [`ClientConfig::timeout`]) up to
+/// [`ClientConfig::attempts`] times; replies are matched by sequence number, so late
+/// duplicates are ignored. Reads keep only bytes inside the announced size, whatever
+/// offsets the server sends.
+#[derive(Debug)]
+pub struct FtpClient {
+    me: Address,
+    server: Address,
+    config: ClientConfig,
+    rtt: Rtt,
+    seq: u16,
+    op: Option<Op>,
+    pending: Option<Pending>,
+    queue: VecDeque<Outgoing>,
+    events: VecDeque<FtpEvent>,
+}
+
+fn path_bytes(path: &str) -> Result<Vec<u8>, StartError> {
+    if path.len() > MAX_DATA {
+        return Err(StartError::PathTooLong);
+    }
+    Ok(path.as_bytes().to_vec())
+}
+
+/// Removes `[s, e)` from sorted disjoint ranges.
+fn subtract(ranges: &mut Vec<(u32, u32)>, s: u32, e: u32) {
+    let mut out = Vec::with_capacity(ranges.len() + 1);
+    for &(a, b) in ranges.iter() {
+        if e <= a || b <= s {
+            out.push((a, b));
+            continue;
+        }
+        if a < s {
+            out.push((a, s));
+        }
+        if e < b {
+            out.push((e, b));
+        }
+    }
+    *ranges = out;
+}
+
+impl FtpClient {
+    /// A client at `me` talking to the server at `server`.
+    #[must_use]
+    pub fn new(me: Address, server: Address, config: ClientConfig) -> Self {
+        Self {
+            me,
+            server,
+            config,
+            rtt: Rtt::default(),
+            seq: 0,
+            op: None,
+            pending: None,
+            queue: VecDeque::new(),
+            events: VecDeque::new(),
+        }
+    }
+
+    /// Whether an operation is under way.
+    #[must_use]
+    pub const fn is_busy(&self) -> bool {
+        self.op.is_some()
+    }
+
+    /// The next event, if any.
+    pub fn poll_event(&mut self) -> Option<FtpEvent> {
+        self.events.pop_front()
+    }
+
+    fn start(&mut self, now: Instant, op: Op, req: Payload) -> Result<(), StartError> {
+        if self.op.is_some() {
+            return Err(StartError::Busy);
+        }
+        self.op = Some(op);
+        self.send(now, req);
+        Ok(())
+    }
+
+    fn request(opcode: Opcode, session: u8, offset: u32, data: &[u8]) -> Payload {
+        Payload::request(0, session, opcode, offset, data)
+    }
+
+    /// Lists the directory at `path`.
+    ///
+    /// # Errors
+    ///
+    /// [`StartError`] if busy or the path is too long.
+    pub fn list(&mut self, now: Instant, path: &str) -> Result<(), StartError> {
+        let path = path_bytes(path)?;
+        let req = Self::request(Opcode::ListDirectory, 0, 0, &path);
+        self.start(
+            now,
+            Op::List {
+                path,
+                entries: Vec::new(),
+            },
+            req,
+        )
+    }
+
+    /// Reads the file at `path` (OpenFileRO, then BurstReadFile or ReadFile, then
+    /// TerminateSession).
+    ///
+    /// # Errors
+    ///
+    /// [`StartError`] if busy or the path is too long.
+    pub fn read(&mut self, now: Instant, path: &str) -> Result<(), StartError> {
+        let path = path_bytes(path)?;
+        let op = Op::Read(Read {
+            phase: Phase::Open,
+            session: 0,
+            data: Vec::new(),
+            missing: Vec::new(),
+            high: 0,
+            no_burst: !self.config.burst,
+            left: u64::MAX,
+            stalls: 0,
+        });
+        self.start(now, op, Self::request(Opcode::OpenFileRO, 0, 0, &path))
+    }
+
+    /// Writes `contents` to the file at `path`, created or truncated (CreateFile, WriteFile
+    /// chunks, TerminateSession).
+    ///
+    /// # Errors
+    ///
+    /// [`StartError`] if busy or the path is too long.
+    pub fn write(&mut self, now: Instant, path: &str, contents: &[u8]) -> Result<(), StartError> {
+        let path = path_bytes(path)?;
+        let op = Op::Write(Write {
+            phase: Phase::Open,
+            session: 0,
+            data: contents.to_vec(),
+            acked: 0,
+        });
+        self.start(now, op, Self::request(Opcode::CreateFile, 0, 0, &path))
+    }
+
+    fn simple(&mut self, now: Instant, opcode: Opcode, path: &str) -> Result<(), StartError> {
+        let path = path_bytes(path)?;
+        self.start(now, Op::Simple, Self::request(opcode, 0, 0, &path))
+    }
+
+    /// Removes the file at `path`.
+    ///
+    /// # Errors
+    ///
+    /// [`StartError`] if busy or the path is too long.
+    pub fn remove(&mut self, now: Instant, path: &str) -> Result<(), StartError> {
+        self.simple(now, Opcode::RemoveFile, path)
+    }
+
+    /// Creates the directory at `path`.
+    ///
+    /// # Errors
+    ///
+    /// [`StartError`] if busy or the path is too long.
+    pub fn mkdir(&mut self, now: Instant, path: &str) -> Result<(), StartError> {
+        self.simple(now, Opcode::CreateDirectory, path)
+    }
+
+    /// Removes the empty directory at `path`.
+    ///
+    /// # Errors
+    ///
+    /// [`StartError`] if busy or the path is too long.
+    pub fn rmdir(&mut self, now: Instant, path: &str) -> Result<(), StartError> {
+        self.simple(now, Opcode::RemoveDirectory, path)
+    }
+
+    /// Renames `from` to `to`.
+    ///
+    /// # Errors
+    ///
+    /// [`StartError`] if busy or the paths are too long together.
+    pub fn rename(&mut self, now: Instant, from: &str, to: &str) -> Result<(), StartError> {
+        if from.len() + 1 + to.len() > MAX_DATA {
+            return Err(StartError::PathTooLong);
+        }
+        let mut data = Vec::from(from.as_bytes());
+        data.push(0);
+        data.extend_from_slice(to.as_bytes());
+        self.start(now, Op::Simple, Self::request(Opcode::Rename, 0, 0, &data))
+    }
+
+    /// Asks for the CRC32 of the file at `path`.
+    ///
+    /// # Errors
+    ///
+    /// [`StartError`] if busy or the path is too long.
+    pub fn crc32(&mut self, now: Instant, path: &str) -> Result<(), StartError> {
+        let path = path_bytes(path)?;
+        self.start(
+            now,
+            Op::Crc,
+            Self::request(Opcode::CalcFileCRC32, 0, 0, &path),
+        )
+    }
+
+    /// Abandons the operation under way ([`FtpError::Cancelled`]); an open session is
+    /// closed with one unacknowledged TerminateSession.
+    pub fn cancel(&mut self, now: Instant) {
+        let session = match &self.op {
+            None => return,
+            Some(Op::Read(r)) if r.phase != Phase::Open => Some(r.session),
+            Some(Op::Write(w)) if w.phase != Phase::Open => Some(w.session),
+            Some(_) => None,
+        };
+        if let Some(session) = session {
+            self.send(
+                now,
+                Self::request(Opcode::TerminateSession, session, 0, &[]),
+            );
+        }
+        self.finish(Err(FtpError::Cancelled));
+    }
+
+    fn send(&mut self, now: Instant, mut req: Payload) {
+        self.seq = self.seq.wrapping_add(1);
+        req.seq = self.seq;
+        self.transmit(&req);
+        self.pending = Some(Pending {
+            req,
+            sent: now,
+            attempt: 1,
+            deadline: now + self.rtt.backoff(self.config.timeout, 1),
+            burst_packets: 0,
+        });
+    }
+
+    fn transmit(&mut self, req: &Payload) {
+        self.queue.push_back(Outgoing {
+            target: self.server,
+            message: MavMessage::FileTransferProtocol(FileTransferProtocol {
+                target_network: 0,
+                target_system: self.server.system,
+                target_component: self.server.component,
+                payload: req.encode(),
+            }),
+        });
+    }
+
+    fn finish(&mut self, result: Result<FtpOutput, FtpError>) {
+        self.op = None;
+        self.pending = None;
+        self.events.push_back(FtpEvent::Finished(result));
+    }
+
+    /// Handles one reply that matches the pending request.
+    fn on_reply(&mut self, now: Instant, reply: &Payload) {
+        let Some(op) = self.op.as_mut() else {
+            return;
+        };
+        let nak = if reply.opcode == Opcode::Nak {
+            Some(reply.nak().unwrap_or((NakCode::None, None)))
+        } else {
+            None
+        };
+        let refused = |(code, errno): (NakCode, Option<u8>)| FtpError::Nak { code, errno };
+        match op {
+            Op::Simple => match nak {
+                Some(n) => self.finish(Err(refused(n))),
+                None => self.finish(Ok(FtpOutput::Done)),
+            },
+            Op::Crc => match (nak, reply.data.get(..4)) {
+                (Some(n), _) => self.finish(Err(refused(n))),
+                (None, Some(b)) => {
+                    let crc = u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+                    self.finish(Ok(FtpOutput::Crc32(crc)));
+                }
+                (None, None) => self.finish(Err(FtpError::Protocol)),
+            },
+            Op::List { path, entries } => match nak {
+                Some((NakCode::Eof, _)) => {
+                    let entries = core::mem::take(entries);
+                    self.finish(Ok(FtpOutput::Listing(entries)));
+                }
+                Some(n) => self.finish(Err(refused(n))),
+                None => {
+                    let got = parse_entries(&reply.data);
+                    if got.is_empty() || entries.len() + got.len() > self.config.max_entries {
+                        self.finish(Err(FtpError::Protocol));
+                        return;
+                    }
+                    entries.extend(got);
+                    let next = u32::try_from(entries.len()).unwrap_or(u32::MAX);
+                    let req = Self::request(Opcode::ListDirectory, 0, next, path);
+                    self.send(now, req);
+                }
+            },
+            Op::Write(w) => match (&w.phase, nak) {
+                (Phase::Terminate, _) => self.finish(Ok(FtpOutput::Done)),
+                (_, Some(n)) => self.finish(Err(refused(n))),
+                (Phase::Open, None) => {
+                    w.session = reply.session;
+                    w.phase = Phase::Transfer;
+                    self.next_write(now);
+                }
+                (Phase::Transfer, None) => {
+                    let sent = self.pending.as_ref().map_or(0, |p| p.req.data.len());
+                    w.acked += sent;
+                    let (done, total) = (w.acked as u64, w.data.len() as u64);
+                    self.events.push_back(FtpEvent::Progress { done, total });
+                    self.next_write(now);
+                }
+            },
+            Op::Read(r) => match (&r.phase, nak) {
+                (Phase::Terminate, _) => {
+                    let data = core::mem::take(&mut r.data);
+                    self.finish(Ok(FtpOutput::Data(data)));
+                }
+                (Phase::Open, Some(n)) => self.finish(Err(refused(n))),
+                (Phase::Open, None) => {
+                    let Some(b) = reply.data.get(..4) else {
+                        self.finish(Err(FtpError::Protocol));
+                        return;
+                    };
+                    let size = u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+                    r.session = reply.session;
+                    if size > self.config.max_read_size {
+                        let req = Self::request(Opcode::TerminateSession, r.session, 0, &[]);
+                        self.transmit(&req);
+                        self.finish(Err(FtpError::TooLarge { size }));
+                        return;
+                    }
+                    r.phase = Phase::Transfer;
+                    r.data = vec![0; size as usize];
+                    if size > 0 {
+                        r.missing.push((0, size));
+                    }
+                    self.next_read(now);
+                }
+                (Phase::Transfer, nak) => {
+                    let burst = reply.req_opcode == Opcode::BurstReadFile;
+                    match nak {
+                        // A burst ran into the end (or failed): carry on with ReadFile if
+                        // it brought nothing.
+                        Some(_) if burst => {
+                            if self.pending.as_ref().is_some_and(|p| p.burst_packets == 0) {
+                                r.no_burst = true;
+                            }
+                            self.next_read(now);
+                        }
+                        Some(n) => self.finish(Err(refused(n))),
+                        None if burst => {
+                            self.store(reply.offset, &reply.data);
+                            if reply.burst_complete {
+                                self.next_read(now);
+                            } else if let Some(p) = self.pending.as_mut() {
+                                p.burst_packets += 1;
+                                p.deadline = now + self.rtt.backoff(self.config.timeout, 1);
+                            }
+                        }
+                        None => {
+                            // Keep only the range asked for, wherever the reply says it is.
+                            if let Some(p) = self.pending.as_ref() {
+                                let want = p.req.offset;
+                                let len = u32::try_from(p.req.data.len()).unwrap_or(0);
+                                if reply.offset <= want {
+                                    let skip = (want - reply.offset) as usize;
+                                    let bytes = reply.data.get(skip..).unwrap_or(&[]);
+                                    let bytes = &bytes[..bytes.len().min(len as usize)];
+                                    let bytes = bytes.to_vec();
+                                    self.store(want, &bytes);
+                                }
+                            }
+                            self.next_read(now);
+                        }
+                    }
+                }
+            },
+        }
+    }
+
+    /// Keeps `bytes` at `offset` of the file being read, inside the announced size only.
+    fn store(&mut self, offset: u32, bytes: &[u8]) {
+        let Some(Op::Read(r)) = self.op.as_mut() else {
+            return;
+        };
+        let size = u32::try_from(r.data.len()).unwrap_or(u32::MAX);
+        let len = u32::try_from(bytes.len()).unwrap_or(u32::MAX);
+        let start = offset.min(size);
+        let end = offset.saturating_add(len).min(size);
+        if start >= end {
+            return;
+        }
+        let (s, e) = (start as usize, end as usize);
+        let Some(src) = bytes.get(..e - s) else {
+            return;
+        };
+        let Some(dst) = r.data.get_mut(s..e) else {
+            return;
+        };
+        dst.copy_from_slice(src);
+        subtract(&mut r.missing, start, end);
+        r.high = r.high.max(end);
+        let left: u64 = r.missing.iter().map(|&(a, b)| u64::from(b - a)).sum();
+        let total = u64::from(size);
+        self.events.push_back(FtpEvent::Progress {
+            done: total - left,
+            total,
+        });
+    }
+
+    fn next_read(&mut self, now: Instant) {
+        let Some(Op::Read(r)) = self.op.as_mut() else {
+            return;
+        };
+        let left: u64 = r.missing.iter().map(|&(a, b)| u64::from(b - a)).sum();
+        if left < r.left {
+            r.left = left;
+            r.stalls = 0;
+        } else {
+            r.stalls = r.stalls.saturating_add(1);
+            if r.stalls > self.config.attempts {
+                // Replies keep coming and bring nothing asked for.
+                let req = Self::request(Opcode::TerminateSession, r.session, 0, &[]);
+                self.transmit(&req);
+                self.finish(Err(FtpError::Protocol));
+                return;
+            }
+        }
+        let req = match r.missing.first() {
+            None => {
+                r.phase = Phase::Terminate;
+                Self::request(Opcode::TerminateSession, r.session, 0, &[])
+            }
+            Some(&(a, b)) if r.no_burst || a < r.high => {
+                let n = ((b - a) as usize).min(MAX_DATA);
+                Self::request(Opcode::ReadFile, r.session, a, &vec![0; n])
+            }
+            Some(&(a, _)) => Self::request(Opcode::BurstReadFile, r.session, a, &[0; MAX_DATA]),
+        };
+        self.send(now, req);
+    }
+
+    fn next_write(&mut self, now: Instant) {
+        let Some(Op::Write(w)) = self.op.as_mut() else {
+            return;
+        };
+        let req = match w.data.get(w.acked..) {
+            Some(rest) if !rest.is_empty() => {
+                let chunk = &rest[..rest.len().min(MAX_DATA)];
+                let offset = u32::try_from(w.acked).unwrap_or(u32::MAX);
+                Self::request(Opcode::WriteFile, w.session, offset, chunk)
+            }
+            _ => {
+                w.phase = Phase::Terminate;
+                Self::request(Opcode::TerminateSession, w.session, 0, &[])
+            }
+        };
+        self.send(now, req);
+    }
+}
+
+impl Service for FtpClient {
+    fn handle_message(&mut self, now: Instant, from: Address, message: &MavMessage) -> bool {
+        let MavMessage::FileTransferProtocol(m) = message else {
+            return false;
+        };
+        if !from.is_reached_by(self.server)
+            || !self
+                .me
+                .is_reached_by(Address::new(m.target_system, m.target_component))
+        {
+            return false;
+        }
+        let Ok(reply) = Payload::decode(&m.payload) else {
+            return false;
+        };
+        if !matches!(reply.opcode, Opcode::Ack | Opcode::Nak) {
+            return false;
+        }
+        let Some(p) = self.pending.as_ref() else {
+            return false;
+        };
+        if reply.req_opcode != p.req.opcode {
+            return false;
+        }
+        if p.req.opcode == Opcode::BurstReadFile {
+            let distance = reply.seq.wrapping_sub(p.req.seq);
+            if distance == 0 || distance > 0x8000 || reply.session != p.req.session {
+                return false;
+            }
+        } else if reply.seq != p.req.seq.wrapping_add(1) {
+            return false;
+        } else if p.attempt == 1 {
+            self.rtt.sample(p.sent, now);
+        }
+        self.on_reply(now, &reply);
+        true
+    }
+
+    fn handle_timeout(&mut self, now: Instant) {
+        let Some(p) = self.pending.as_mut() else {
+            return;
+        };
+        if now < p.deadline {
+            return;
+        }
+        if p.req.opcode == Opcode::BurstReadFile && p.burst_packets > 0 {
+            // The burst went quiet after some data: ask for what is missing.
+            self.next_read(now);
+            return;
+        }
+        let terminating = matches!(
+            &self.op,
+            Some(Op::Read(Read {
+                phase: Phase::Terminate,
+                ..
+            })) | Some(Op::Write(Write {
+                phase: Phase::Terminate,
+                ..
+            }))
+        );
+        if p.attempt >= self.config.attempts {
+            let attempts = p.attempt;
+            if terminating {
+                // Everything is transferred; only closing the session went unanswered
+                // (the server's idle timeout closes it).
+                let reply = p.req.clone();
+                self.on_reply(now, &reply);
+            } else {
+                self.finish(Err(FtpError::TimedOut { attempts }));
+            }
+            return;
+        }
+        p.attempt += 1;
+        p.sent = now;
+        p.deadline = now + self.rtt.backoff(self.config.timeout, p.attempt);
+        let req = p.req.clone();
+        self.transmit(&req);
+    }
+
+    fn poll_transmit(&mut self) -> Option<Outgoing> {
+        self.queue.pop_front()
+    }
+
+    fn poll_timeout(&self) -> Option<Instant> {
+        self.pending.as_ref().map(|p| p.deadline)
+    }
+}
