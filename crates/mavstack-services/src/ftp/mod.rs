@@ -5,11 +5,15 @@
 
 pub mod backend;
 pub mod client;
+#[cfg(feature = "std")]
+pub mod dir;
 pub mod payload;
 pub mod server;
 
 pub use backend::{Backend, BackendError, MemoryBackend, OpenMode, normalize_path};
 pub use client::{ClientConfig, FtpClient, FtpError, FtpEvent, FtpOutput, StartError};
+#[cfg(feature = "std")]
+pub use dir::DirBackend;
 pub use payload::{
     DirEntry, EntryKind, NakCode, Opcode, Payload, PayloadError, crc32, parse_entries,
 };
