@@ -11,6 +11,7 @@ mod conform_cmd;
 mod demo_cmd;
 mod dialect_cmd;
 mod fast_count;
+mod ftp_cmd;
 mod gcs_cmd;
 mod link_cmd;
 mod log_cmd;
@@ -99,6 +100,12 @@ enum Command {
         #[command(subcommand)]
         action: signing_cmd::SigningAction,
     },
+    /// Files on a system's MAVFTP server: list, download (checked by CRC32), upload, remove,
+    /// make and remove directories, rename, CRC32.
+    Ftp {
+        #[command(subcommand)]
+        action: ftp_cmd::FtpAction,
+    },
 }
 
 /// A failure with the exit code it maps to.
@@ -152,6 +159,7 @@ fn main() -> ExitCode {
         Command::Router(args) => router_cmd::router(&args),
         Command::Log { action } => log_cmd::run(action),
         Command::Signing { action } => signing_cmd::signing(&action),
+        Command::Ftp { action } => ftp_cmd::ftp(&action),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

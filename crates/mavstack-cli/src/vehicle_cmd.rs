@@ -10,6 +10,8 @@ use core::time::Duration;
 use anyhow::anyhow;
 use clap::Args;
 use mavstack::router::{LinkRole, ProtocolVersionSupport, VersionMode};
+use mavstack::serve::Served;
+use mavstack::services::ftp::{DirBackend, FtpServer, ServerConfig};
 use mavstack::sim_vehicle::SimVehicle;
 use mavstack::{LinkSpec, Node, NodeBuilder};
 use mavstack_channel::SigningConfig;
@@ -82,6 +84,13 @@ pub(crate) struct VehicleArgs {
     /// a flight stack's estimator settles (ArduPilot SITL: about 40 s). Default 0.
     #[arg(long, value_name = "S", default_value_t = 0.0, value_parser = settle_seconds)]
     estimator_settle: f64,
+    /// Serve this directory over MAVFTP (read-only unless --ftp-writable); no path, `..`
+    /// or symlink leaves it. The vehicle then advertises MAV_PROTOCOL_CAPABILITY_FTP.
+    #[arg(long, value_name = "DIR")]
+    ftp_root: Option<std::path::PathBuf>,
+    /// With --ftp-root: let clients create, write, rename and remove files and directories.
+    #[arg(long, requires = "ftp_root")]
+    ftp_writable: bool,
     /// Print what happens (link versions, handshakes, rejections, modes, parameter sets,
     /// plans) to stderr.
     #[arg(long, short)]
@@ -201,18 +210,47 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
         params,
         estimator_settle: Duration::from_secs_f64(args.estimator_settle),
         data_streams_only: false,
+        ftp: args.ftp_root.is_some(),
     };
+    let files = args
+        .ftp_root
+        .as_ref()
+        .map(|root| {
+            let backend = DirBackend::new(root)
+                .map_err(|e| Failure::Input(anyhow!("--ftp-root {}: {e}", root.display())))?;
+            Ok::<_, Failure>(if args.ftp_writable {
+                backend.writable()
+            } else {
+                backend
+            })
+        })
+        .transpose()?;
     runtime()?.block_on(async {
         let log = stderr_log(args.verbose);
+        let own = config.own;
         let vehicle = SimVehicle::start_logged(builder, config, log)
             .await
             .map_err(other)?;
         if let Some(addr) = vehicle.node().http_addr() {
             eprintln!("mavstack vehicle: status page on http://{addr}/");
         }
+        // The file server answers as the vehicle's own component, beside it.
+        let ftp = match files {
+            Some(backend) => Some(
+                Served::start(
+                    &vehicle.node().handle(),
+                    FtpServer::new(own, ServerConfig::default(), backend),
+                )
+                .await,
+            ),
+            None => None,
+        };
         tokio::select! {
             () = interrupted() => {}
             () = vehicle.node().closed() => {}
+        }
+        if let Some(ftp) = ftp {
+            ftp.stop().await;
         }
         vehicle.shutdown().await.map(drop).map_err(other)
     })

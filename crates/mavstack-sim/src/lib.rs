@@ -93,6 +93,9 @@ pub struct SimConfig {
     /// Refuse SET_MESSAGE_INTERVAL (MAV_RESULT_UNSUPPORTED) and take rates only through
     /// REQUEST_DATA_STREAM, as ArduPilot before 4.0 did.
     pub data_streams_only: bool,
+    /// Advertise MAV_PROTOCOL_CAPABILITY_FTP: a MAVFTP server runs beside the vehicle
+    /// (`mavstack vehicle --ftp-root`).
+    pub ftp: bool,
 }
 
 /// The messages the vehicle streams and their default intervals (`None`: on request only).
@@ -124,6 +127,7 @@ fn plan_name(mission_type: MavMissionType) -> &'static str {
 struct Craft {
     autopilot: Autopilot,
     mavlink2: bool,
+    ftp: bool,
     flight: Flight,
     streams: StreamScheduler,
     /// Mission items made current by a command, for the mission server.
@@ -242,6 +246,9 @@ impl Craft {
         };
         if self.mavlink2 {
             capabilities |= MavProtocolCapability::MAVLINK2;
+        }
+        if self.ftp {
+            capabilities |= MavProtocolCapability::FTP;
         }
         AutopilotVersion {
             capabilities,
@@ -573,6 +580,7 @@ impl Vehicle {
         let craft = Craft {
             autopilot: config.autopilot,
             mavlink2: config.mavlink2,
+            ftp: config.ftp,
             flight: Flight::new(config.autopilot, Tuning::default()),
             streams,
             new_current: None,

@@ -37,6 +37,9 @@ use mavstack_router::LinkId;
 use mavstack_services::command::{
     Command, CommandClient, CommandConfig, CommandError, CommandEvent,
 };
+use mavstack_services::ftp::{
+    ClientConfig as FtpConfig, DirEntry, FtpClient, FtpError, FtpEvent, FtpOutput, StartError,
+};
 use mavstack_services::heartbeat::{HeartbeatConfig, HeartbeatEvent, Heartbeats, Peer};
 use mavstack_services::mission::transfer::{Download, Upload};
 use mavstack_services::mission::{MissionClient, MissionConfig, MissionError, MissionEvent};
@@ -117,12 +120,43 @@ pub enum SystemError {
         /// The names the autopilot has.
         known: Vec<&'static str>,
     },
+    /// A MAVFTP operation failed.
+    #[error("ftp {what}: {source}")]
+    Ftp {
+        /// Which (the operation and its path).
+        what: String,
+        /// Why.
+        source: FtpError,
+    },
     /// The request could not start (another like it is running).
     #[error("{0}")]
     Busy(String),
     /// The node stopped.
     #[error("the node has stopped")]
     Stopped,
+}
+
+/// The MAVFTP operations on one path that return nothing ([`System::ftp_simple`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum FtpPathOp {
+    /// Remove a file.
+    Remove,
+    /// Make a directory.
+    Mkdir,
+    /// Remove an empty directory.
+    Rmdir,
+}
+
+impl FtpPathOp {
+    /// The operation's name as `mavstack ftp` spells it.
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Remove => "rm",
+            Self::Mkdir => "mkdir",
+            Self::Rmdir => "rmdir",
+        }
+    }
 }
 
 /// The STATUSTEXT lines after an error's message.
@@ -978,6 +1012,147 @@ impl System {
             system: self.target.system,
             message: PhantomData,
         }
+    }
+
+    // ----- files (MAVFTP) -------------------------------------------------------------------
+
+    /// A directory's entries on the system's MAVFTP server.
+    ///
+    /// # Errors
+    /// [`SystemError::Ftp`] (refused, or no answer after the retries), [`SystemError::Busy`]
+    /// (a path too long), [`SystemError::Stopped`].
+    pub async fn ftp_list(&mut self, path: &str) -> Result<Vec<DirEntry>, SystemError> {
+        match self
+            .ftp(format!("ls {path}"), |c, now| c.list(now, path), |_, _| {})
+            .await?
+        {
+            FtpOutput::Listing(entries) => Ok(entries),
+            _ => Err(self.ftp_protocol(format!("ls {path}"))),
+        }
+    }
+
+    /// A file's contents, telling `progress` (bytes so far, size) as they come.
+    ///
+    /// # Errors
+    /// As [`ftp_list`](Self::ftp_list).
+    pub async fn ftp_read(
+        &mut self,
+        path: &str,
+        progress: impl FnMut(u64, u64),
+    ) -> Result<Vec<u8>, SystemError> {
+        match self
+            .ftp(format!("get {path}"), |c, now| c.read(now, path), progress)
+            .await?
+        {
+            FtpOutput::Data(bytes) => Ok(bytes),
+            _ => Err(self.ftp_protocol(format!("get {path}"))),
+        }
+    }
+
+    /// Writes `contents` as the file `path` (created; an existing file is refused by most
+    /// servers), telling `progress` (bytes so far, size).
+    ///
+    /// # Errors
+    /// As [`ftp_list`](Self::ftp_list).
+    pub async fn ftp_write(
+        &mut self,
+        path: &str,
+        contents: &[u8],
+        progress: impl FnMut(u64, u64),
+    ) -> Result<(), SystemError> {
+        self.ftp(
+            format!("put {path}"),
+            |c, now| c.write(now, path, contents),
+            progress,
+        )
+        .await
+        .map(drop)
+    }
+
+    /// Removes a file (`rm`), makes or removes a directory (`mkdir`, `rmdir`).
+    ///
+    /// # Errors
+    /// As [`ftp_list`](Self::ftp_list).
+    pub async fn ftp_simple(&mut self, op: FtpPathOp, path: &str) -> Result<(), SystemError> {
+        let what = format!("{} {path}", op.name());
+        self.ftp(
+            what,
+            |c, now| match op {
+                FtpPathOp::Remove => c.remove(now, path),
+                FtpPathOp::Mkdir => c.mkdir(now, path),
+                FtpPathOp::Rmdir => c.rmdir(now, path),
+            },
+            |_, _| {},
+        )
+        .await
+        .map(drop)
+    }
+
+    /// Renames `from` to `to`.
+    ///
+    /// # Errors
+    /// As [`ftp_list`](Self::ftp_list).
+    pub async fn ftp_rename(&mut self, from: &str, to: &str) -> Result<(), SystemError> {
+        self.ftp(
+            format!("mv {from} {to}"),
+            |c, now| c.rename(now, from, to),
+            |_, _| {},
+        )
+        .await
+        .map(drop)
+    }
+
+    /// A file's CRC32 as MAVFTP servers compute it (`mavstack_services::ftp::crc32`).
+    ///
+    /// # Errors
+    /// As [`ftp_list`](Self::ftp_list).
+    pub async fn ftp_crc32(&mut self, path: &str) -> Result<u32, SystemError> {
+        match self
+            .ftp(
+                format!("crc {path}"),
+                |c, now| c.crc32(now, path),
+                |_, _| {},
+            )
+            .await?
+        {
+            FtpOutput::Crc32(crc) => Ok(crc),
+            _ => Err(self.ftp_protocol(format!("crc {path}"))),
+        }
+    }
+
+    fn ftp_protocol(&self, what: String) -> SystemError {
+        SystemError::Ftp {
+            what,
+            source: FtpError::Protocol,
+        }
+    }
+
+    /// Runs one MAVFTP operation, started by `start`, to its end.
+    async fn ftp(
+        &mut self,
+        what: String,
+        start: impl FnOnce(&mut FtpClient, mavstack_core::time::Instant) -> Result<(), StartError>,
+        mut progress: impl FnMut(u64, u64),
+    ) -> Result<FtpOutput, SystemError> {
+        let config = FtpConfig {
+            attempts: self.retries.saturating_add(1),
+            ..FtpConfig::default()
+        };
+        let mut client = FtpClient::new(self.own, self.target, config);
+        start(&mut client, clock::now())
+            .map_err(|e| SystemError::Busy(format!("ftp {what}: {e}")))?;
+        let result = self
+            .run(&mut client, Duration::from_secs(3600), |c| {
+                core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
+                    FtpEvent::Progress { done, total } => {
+                        progress(done, total);
+                        None
+                    }
+                    FtpEvent::Finished(result) => Some(result),
+                })
+            })
+            .await?;
+        result.map_err(|source| SystemError::Ftp { what, source })
     }
 
     // ----- the driver ----------------------------------------------------------------------

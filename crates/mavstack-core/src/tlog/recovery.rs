@@ -1,22 +1,4 @@
-//! The reading of a tlog as a state machine: which bytes are the next timestamp, which the
-//! next frame, and what damage costs.
-//!
-//! A damaged log is read the way pymavlink's `mavlogfile` reads it (the reader every tlog tool
-//! is compared with), step for step, so both give the same frames with the same timestamps:
-//! - A message starts with an 8-byte timestamp. After damage, a timestamp more than three days
-//!   away from the last good message's is not believed: reading slides on byte by byte until
-//!   one within three days is found (or the log ends).
-//! - The frame parser asks for only the bytes it needs: first a header's worth, then the rest
-//!   of what the length byte says. Bytes it was given but did not use stay in its buffer and
-//!   come before the log's next bytes (after the next timestamp).
-//! - A byte that cannot start a frame is damage, together with every following byte of the
-//!   buffer up to a start marker.
-//! - A frame is taken whole as its length byte (and signature flag) says. It is damage when
-//!   its incompatibility flags hold a bit other than "signed", or when its message id is known
-//!   and its checksum is wrong. A frame of an unknown id cannot be checked and is kept.
-//!
-//! [`Recovery::step`] takes a window of the log's bytes and gives one frame at a time, so the
-//! same machine reads a log held in memory and one read from a stream in pieces.
+//! The reading of a tlog as a state machine: [`Recovery`].
 
 use crate::Crc16;
 use crate::parse::CrcExtra;
@@ -98,7 +80,25 @@ enum Phase {
     Frame,
 }
 
-/// The tlog reading state machine; see the [module docs](self).
+/// The reading of a tlog as a state machine: which bytes are the next timestamp, which the
+/// next frame, and what damage costs.
+///
+/// A damaged log is read the way pymavlink's `mavlogfile` reads it (the reader every tlog tool
+/// is compared with), step for step, so both give the same frames with the same timestamps:
+/// - A message starts with an 8-byte timestamp. After damage, a timestamp more than three days
+///   away from the last good message's is not believed: reading slides on byte by byte until
+///   one within three days is found (or the log ends).
+/// - The frame parser asks for only the bytes it needs: first a header's worth, then the rest
+///   of what the length byte says. Bytes it was given but did not use stay in its buffer and
+///   come before the log's next bytes (after the next timestamp).
+/// - A byte that cannot start a frame is damage, together with every following byte of the
+///   buffer up to a start marker.
+/// - A frame is taken whole as its length byte (and signature flag) says. It is damage when
+///   its incompatibility flags hold a bit other than "signed", or when its message id is known
+///   and its checksum is wrong. A frame of an unknown id cannot be checked and is kept.
+///
+/// [`Recovery::step`] takes a window of the log's bytes and gives one frame at a time, so the
+/// same machine reads a log held in memory and one read from a stream in pieces.
 ///
 /// ```
 /// use mavstack_core::tlog::{FrameAt, Recovery, Step};
