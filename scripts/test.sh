@@ -54,7 +54,10 @@ example() {
     local name="$1"
     shift
     local out
-    out="$(cargo run -q --locked -p mavstack --features sim --example "$name" -- ${ARGS:-})"
+    # The test step built every example (workspace, all features): run that build.
+    local bin="target/debug/examples/$name"
+    [ -x "$bin" ] || { echo "example $name: $bin was not built by the test step" >&2; exit 1; }
+    out="$("$bin" ${ARGS:-})"
     for want in "$@"; do
         if ! grep -qF "$want" <<<"$out"; then
             printf '%s example: no "%s" in its output:\n%s\n' "$name" "$want" "$out" >&2
@@ -87,12 +90,14 @@ step "feature matrix"
 cargo check -p mavstack --locked
 cargo check -p mavstack-core --no-default-features --locked
 cargo check -p mavstack-dialects --no-default-features --features minimal --locked
-cargo check -p mavstack-dialects --locked
 cargo check -p mavstack-bridge --no-default-features --features zenoh --locked
 cargo check -p mavstack-bridge --locked
 cargo test -p mavstack-dialects --no-default-features --features common --locked --doc
 
 step "cargo doc (-D warnings)"
-RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --all-features --locked
+# The generated dialects are documented with their default set (ardupilotmega and what it
+# includes; this also checks that set builds): every dialect of `all` would triple the time.
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --all-features --locked --exclude mavstack-dialects
+RUSTDOCFLAGS="-D warnings" cargo doc -p mavstack-dialects --no-deps --locked
 
 step "done: every check passed"
