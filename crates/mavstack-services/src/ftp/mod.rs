@@ -7,6 +7,7 @@ pub mod backend;
 pub mod client;
 #[cfg(feature = "std")]
 pub mod dir;
+mod fuzzing;
 pub mod payload;
 pub mod server;
 
@@ -18,6 +19,9 @@ pub use payload::{
     DirEntry, EntryKind, NakCode, Opcode, Payload, PayloadError, crc32, parse_entries,
 };
 pub use server::{FtpServer, ServerConfig};
+
+#[doc(hidden)]
+pub use fuzzing::fuzz_ftp;
 
 #[cfg(test)]
 mod tests;
