@@ -8,6 +8,8 @@ pub mod client;
 #[cfg(feature = "std")]
 pub mod dir;
 mod fuzzing;
+pub mod overlay;
+pub mod param_pck;
 pub mod payload;
 pub mod server;
 
@@ -15,6 +17,7 @@ pub use backend::{Backend, BackendError, MemoryBackend, OpenMode, normalize_path
 pub use client::{ClientConfig, FtpClient, FtpError, FtpEvent, FtpOutput, StartError};
 #[cfg(feature = "std")]
 pub use dir::DirBackend;
+pub use overlay::{Overlay, OverlayHandle, Provider};
 pub use payload::{
     DirEntry, EntryKind, NakCode, Opcode, Payload, PayloadError, crc32, parse_entries,
 };

@@ -1,0 +1,878 @@
+//! ArduPilot's packed parameter file, `@PARAM/param.pck`: a whole parameter table in one
+//! MAVFTP download.
+//!
+//! The format (ArduPilot's `AP_Filesystem_Param`, read by pymavlink's `ftp_param_decode`),
+//! all little-endian:
+//!
+//! - a 6-byte header: magic `0x671b` ([`MAGIC`]; `0x671c`, [`MAGIC_WITH_DEFAULTS`], when
+//!   entries may carry their default), the number of entries in the file, and the number
+//!   of parameters the vehicle has (more when the file is a slice, `?start=N&count=C`);
+//! - per entry: one byte with the type in its low nibble (1 int8, 2 int16, 3 int32,
+//!   4 float) and flags in its high nibble (bit 0: a default value follows the value); one
+//!   byte with the number of leading name bytes shared with the previous entry's name in its
+//!   low nibble (0–15) and the number of name bytes that follow, minus one, in its high
+//!   nibble (so 1–16); those name bytes; the value (1, 2 or 4 bytes), then the default (as
+//!   many) when flagged;
+//! - zero bytes before an entry are padding (an entry's first byte is never zero): ArduPilot
+//!   inserts them so that the entry's last value does not cross a read-block boundary.
+//!
+//! The 64-bit types do not exist in this format, nor do the unsigned ones: [`encode`] writes
+//! an unsigned value as the smallest signed type that holds it (so it decodes as that signed
+//! type, same number), and refuses a `u32` above `i32::MAX`.
+
+use alloc::vec::Vec;
+
+use crate::param::{Name, Value};
+
+/// The magic of a file without default values.
+pub const MAGIC: u16 = 0x671b;
+/// The magic of a file whose entries may carry their default value.
+pub const MAGIC_WITH_DEFAULTS: u16 = 0x671c;
+/// The path of the file on ArduPilot's MAVFTP server (and on `mavstack-sim`'s vehicle).
+pub const PATH: &str = "@PARAM/param.pck";
+/// The read block [`encode`] pads for by default: the data of one MAVFTP reply.
+pub const BLOCK: usize = super::payload::MAX_DATA;
+
+const HEADER: usize = 6;
+
+/// Why a table cannot be packed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum EncodeError {
+    /// More than 65,535 entries.
+    #[error("{0} parameters: the file holds at most 65535")]
+    TooMany(usize),
+    /// A value no type of the format holds (a `u32` above `i32::MAX`).
+    #[error("parameter {0}: the value does not fit the format's int32")]
+    Unrepresentable(Name),
+    /// An empty name (a `param_id` of NULs), which the format cannot hold.
+    #[error("an empty parameter name")]
+    EmptyName,
+}
+
+/// Why bytes are not a packed parameter file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DecodeError {
+    /// Shorter than the 6-byte header.
+    #[error("{0} bytes: shorter than the header")]
+    TooShort(usize),
+    /// Neither [`MAGIC`] nor [`MAGIC_WITH_DEFAULTS`].
+    #[error("bad magic {0:#06x}")]
+    BadMagic(u16),
+    /// The header's entry count is larger than its parameter count.
+    #[error("{count} entries of {total} parameters")]
+    BadCount {
+        /// Entries the header announces.
+        count: u16,
+        /// Parameters it says the vehicle has.
+        total: u16,
+    },
+    /// An entry cut short at this offset.
+    #[error("entry at byte {0} is truncated")]
+    Truncated(usize),
+    /// An entry's type is not 1–4.
+    #[error("entry at byte {offset}: unknown type {ty}")]
+    BadType {
+        /// The entry's offset.
+        offset: usize,
+        /// Its type nibble.
+        ty: u8,
+    },
+    /// An entry shares more bytes with the previous name than that name has.
+    #[error("entry at byte {0}: shared prefix longer than the previous name")]
+    BadPrefix(usize),
+    /// An entry's name is longer than 16 bytes, contains a NUL or is not UTF-8.
+    #[error("entry at byte {0}: not a parameter name")]
+    BadName(usize),
+    /// The number of entries differs from the header's.
+    #[error("{found} entries, the header says {expected}")]
+    WrongCount {
+        /// Entries found.
+        found: usize,
+        /// Entries announced.
+        expected: u16,
+    },
+}
+
+/// A decoded file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamFile {
+    /// The entries, in file order: name, value, and the default when the file has defaults
+    /// ([`MAGIC_WITH_DEFAULTS`]: the value itself for an entry without a default of its own,
+    /// as pymavlink reads it).
+    pub entries: Vec<(Name, Value, Option<Value>)>,
+    /// The number of parameters the vehicle has (the header's third field).
+    pub total: u16,
+    /// Whether the magic was [`MAGIC_WITH_DEFAULTS`].
+    pub with_defaults: bool,
+}
+
+impl ParamFile {
+    /// The table without defaults.
+    #[must_use]
+    pub fn table(&self) -> Vec<(Name, Value)> {
+        self.entries.iter().map(|&(n, v, _)| (n, v)).collect()
+    }
+}
+
+/// How [`encode_with`] packs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct EncodeOptions {
+    /// Write [`MAGIC_WITH_DEFAULTS`] and each entry's default where it differs from the
+    /// value.
+    pub with_defaults: bool,
+    /// The header's parameter count (`None`: the number of entries).
+    pub total: Option<u16>,
+    /// Pad so that no entry's last value crosses a multiple of this many bytes (from the
+    /// file's start), as ArduPilot does for its read size; `0`: no padding.
+    pub block: usize,
+}
+
+impl Default for EncodeOptions {
+    fn default() -> Self {
+        Self {
+            with_defaults: false,
+            total: None,
+            block: BLOCK,
+        }
+    }
+}
+
+/// The format's type code and bytes of `v`.
+fn packed(name: Name, v: Value) -> Result<(u8, [u8; 4], usize), EncodeError> {
+    let i8_ = |x: i8| (1, [x.to_le_bytes()[0], 0, 0, 0], 1);
+    let i16_ = |x: i16| {
+        let b = x.to_le_bytes();
+        (2, [b[0], b[1], 0, 0], 2)
+    };
+    let i32_ = |x: i32| (3, x.to_le_bytes(), 4);
+    Ok(match v {
+        Value::I8(x) => i8_(x),
+        Value::I16(x) => i16_(x),
+        Value::I32(x) => i32_(x),
+        Value::F32(x) => (4, x.to_le_bytes(), 4),
+        Value::U8(x) => i8::try_from(x).map_or_else(|_| i16_(i16::from(x)), i8_),
+        Value::U16(x) => i16::try_from(x).map_or_else(|_| i32_(i32::from(x)), i16_),
+        Value::U32(x) => i32_(i32::try_from(x).map_err(|_| EncodeError::Unrepresentable(name))?),
+    })
+}
+
+/// The value of type code `ty` in `bytes` (as long as the type).
+fn unpacked(ty: u8, bytes: &[u8]) -> Option<Value> {
+    Some(match (ty, bytes) {
+        (1, &[a]) => Value::I8(i8::from_le_bytes([a])),
+        (2, &[a, b]) => Value::I16(i16::from_le_bytes([a, b])),
+        (3, &[a, b, c, d]) => Value::I32(i32::from_le_bytes([a, b, c, d])),
+        (4, &[a, b, c, d]) => Value::F32(f32::from_le_bytes([a, b, c, d])),
+        _ => return None,
+    })
+}
+
+/// Packs `table` (no defaults, padded for [`BLOCK`]-byte reads).
+///
+/// # Errors
+///
+/// As [`encode_with`].
+///
+/// ```
+/// use mavstack_services::ftp::param_pck;
+/// use mavstack_services::param::{Name, Value};
+/// let table = vec![
+///     (Name::new("RTL_ALT").unwrap(), Value::I32(1500)),
+///     (Name::new("RTL_SPEED").unwrap(), Value::I16(0)),
+/// ];
+/// let bytes = param_pck::encode(&table).unwrap();
+/// assert_eq!(&bytes[..6], &[0x1b, 0x67, 2, 0, 2, 0]);
+/// assert_eq!(param_pck::decode(&bytes).unwrap(), table);
+/// ```
+pub fn encode(table: &[(Name, Value)]) -> Result<Vec<u8>, EncodeError> {
+    let entries: Vec<_> = table.iter().map(|&(n, v)| (n, v, None)).collect();
+    encode_with(&entries, EncodeOptions::default())
+}
+
+/// Packs `entries` (name, value, default) as `options` say. A default is written (with
+/// [`EncodeOptions::with_defaults`]) only where it differs from the value, converted to the
+/// value's type.
+///
+/// # Errors
+///
+/// [`EncodeError::TooMany`] past 65,535 entries, [`EncodeError::Unrepresentable`] for a
+/// `u32` above `i32::MAX`.
+pub fn encode_with(
+    entries: &[(Name, Value, Option<Value>)],
+    options: EncodeOptions,
+) -> Result<Vec<u8>, EncodeError> {
+    let count = u16::try_from(entries.len()).map_err(|_| EncodeError::TooMany(entries.len()))?;
+    let total = options.total.unwrap_or(count).max(count);
+    let magic = if options.with_defaults {
+        MAGIC_WITH_DEFAULTS
+    } else {
+        MAGIC
+    };
+    let mut out = Vec::with_capacity(HEADER + entries.len() * 12);
+    out.extend_from_slice(&magic.to_le_bytes());
+    out.extend_from_slice(&count.to_le_bytes());
+    out.extend_from_slice(&total.to_le_bytes());
+    let mut last: &[u8] = &[];
+    for (name, value, default) in entries {
+        let (ty, bytes, len) = packed(*name, *value)?;
+        let default = match default {
+            Some(d) if options.with_defaults && !d.same_as(*value) => {
+                let (dty, dbytes, _) = packed(*name, *d)?;
+                // A default of another type is converted to the value's.
+                if dty == ty {
+                    Some(dbytes)
+                } else {
+                    let converted = d.converted_to(unpacked_type(ty)).unwrap_or(*value);
+                    Some(packed(*name, converted)?.1)
+                }
+            }
+            _ => None,
+        };
+        let full = name.as_bytes();
+        if full.is_empty() {
+            return Err(EncodeError::EmptyName);
+        }
+        let shared = full.iter().zip(last).take_while(|(a, b)| a == b).count();
+        // At least one name byte follows, and the nibble holds at most 15.
+        let shared = shared.min(full.len() - 1).min(15);
+        let suffix = &full[shared..];
+        let record = 2 + suffix.len() + len + if default.is_some() { len } else { 0 };
+        if options.block > 0 && len > 1 {
+            let end = (out.len() + record) % options.block;
+            if end > 0 && end < len {
+                out.resize(out.len() + (len - end), 0);
+            }
+        }
+        out.push(ty | (u8::from(default.is_some()) << 4));
+        // `shared` ≤ 15 and 1 ≤ suffix.len() ≤ 16.
+        out.push(shared as u8 | (((suffix.len() - 1) as u8) << 4));
+        out.extend_from_slice(suffix);
+        out.extend_from_slice(&bytes[..len]);
+        if let Some(d) = default {
+            out.extend_from_slice(&d[..len]);
+        }
+        last = full;
+    }
+    Ok(out)
+}
+
+/// The MAV_PARAM_TYPE of a type code.
+fn unpacked_type(ty: u8) -> mavstack_dialects::common::MavParamType {
+    use mavstack_dialects::common::MavParamType;
+    match ty {
+        1 => MavParamType::INT8,
+        2 => MavParamType::INT16,
+        3 => MavParamType::INT32,
+        _ => MavParamType::REAL32,
+    }
+}
+
+/// The table in a packed file (defaults dropped).
+///
+/// # Errors
+///
+/// As [`decode_file`].
+pub fn decode(bytes: &[u8]) -> Result<Vec<(Name, Value)>, DecodeError> {
+    decode_file(bytes).map(|f| f.table())
+}
+
+/// A packed file, checked as pymavlink checks it: the magic, entry count ≤ parameter count,
+/// every entry whole, of a known type, with a shared prefix no longer than the previous
+/// name, a name of 1–16 bytes of UTF-8 without NUL, and as many entries as announced.
+/// Never panics, whatever the bytes.
+///
+/// # Errors
+///
+/// [`DecodeError`], saying which check failed.
+pub fn decode_file(bytes: &[u8]) -> Result<ParamFile, DecodeError> {
+    let Some((header, mut rest)) = bytes.split_first_chunk::<HEADER>() else {
+        return Err(DecodeError::TooShort(bytes.len()));
+    };
+    let field = |i: usize| u16::from_le_bytes([header[i], header[i + 1]]);
+    let (magic, count, total) = (field(0), field(2), field(4));
+    let with_defaults = match magic {
+        MAGIC => false,
+        MAGIC_WITH_DEFAULTS => true,
+        m => return Err(DecodeError::BadMagic(m)),
+    };
+    if count > total {
+        return Err(DecodeError::BadCount { count, total });
+    }
+    let mut entries: Vec<(Name, Value, Option<Value>)> = Vec::new();
+    let mut last = [0u8; 16];
+    let mut last_len = 0usize;
+    loop {
+        let pad = rest.iter().take_while(|&&b| b == 0).count();
+        rest = &rest[pad..];
+        let offset = bytes.len() - rest.len();
+        let [kind, lens, tail @ ..] = rest else {
+            if rest.is_empty() {
+                break;
+            }
+            return Err(DecodeError::Truncated(offset));
+        };
+        let (ty, flags) = (kind & 0x0f, kind >> 4);
+        let len = match ty {
+            1 => 1,
+            2 => 2,
+            3 | 4 => 4,
+            _ => return Err(DecodeError::BadType { offset, ty }),
+        };
+        let has_default = with_defaults && flags & 1 != 0;
+        let shared = usize::from(lens & 0x0f);
+        let suffix_len = usize::from(lens >> 4) + 1;
+        let value_len = if has_default { 2 * len } else { len };
+        let Some((suffix, tail)) = tail.split_at_checked(suffix_len) else {
+            return Err(DecodeError::Truncated(offset));
+        };
+        let Some((values, tail)) = tail.split_at_checked(value_len) else {
+            return Err(DecodeError::Truncated(offset));
+        };
+        if shared > last_len {
+            return Err(DecodeError::BadPrefix(offset));
+        }
+        let name_len = shared + suffix_len;
+        if name_len > 16 {
+            return Err(DecodeError::BadName(offset));
+        }
+        last[shared..name_len].copy_from_slice(suffix);
+        last_len = name_len;
+        let text =
+            core::str::from_utf8(&last[..name_len]).map_err(|_| DecodeError::BadName(offset))?;
+        let name = Name::new(text).map_err(|_| DecodeError::BadName(offset))?;
+        let value = unpacked(ty, &values[..len]).ok_or(DecodeError::BadType { offset, ty })?;
+        let default = if has_default {
+            Some(unpacked(ty, &values[len..]).ok_or(DecodeError::BadType { offset, ty })?)
+        } else {
+            with_defaults.then_some(value)
+        };
+        entries.push((name, value, default));
+        rest = tail;
+    }
+    if entries.len() != usize::from(count) {
+        return Err(DecodeError::WrongCount {
+            found: entries.len(),
+            expected: count,
+        });
+    }
+    Ok(ParamFile {
+        entries,
+        total,
+        with_defaults,
+    })
+}
+
+/// What a request for the packed file asks (the query ArduPilot's server takes:
+/// `@PARAM/param.pck?withdefaults=1&start=N&count=C`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Query {
+    /// `withdefaults=1`.
+    pub with_defaults: bool,
+    /// `start=N`: the first parameter's index.
+    pub start: u16,
+    /// `count=C`: at most this many (`0`: all).
+    pub count: u16,
+}
+
+impl Query {
+    /// The query in `path` if it names the packed file ([`PATH`], normalised, optionally
+    /// followed by `?` and `&`-separated `key=value` pairs); unknown keys are ignored, as
+    /// ArduPilot does. `None` for another path.
+    ///
+    /// # Errors
+    ///
+    /// `Some(Err(()))` for a known key with a bad value (`withdefaults` other than 0 or 1,
+    /// `start` or `count` not below 65,535).
+    #[must_use]
+    pub fn parse(path: &str) -> Option<Result<Self, ()>> {
+        let rest = path.strip_prefix(PATH)?;
+        let mut q = Self::default();
+        let Some(args) = rest.strip_prefix('?') else {
+            return rest.is_empty().then_some(Ok(q));
+        };
+        for pair in args.split('&') {
+            let (key, value) = pair.split_once('=').unwrap_or((pair, ""));
+            let number = || {
+                value
+                    .parse::<u16>()
+                    .ok()
+                    .filter(|&v| v < u16::MAX)
+                    .ok_or(())
+            };
+            let ok = match key {
+                "withdefaults" => match value {
+                    "0" | "1" => {
+                        q.with_defaults = value == "1";
+                        Ok(())
+                    }
+                    _ => Err(()),
+                },
+                "start" => number().map(|v| q.start = v),
+                "count" => number().map(|v| q.count = v),
+                _ => Ok(()),
+            };
+            if ok.is_err() {
+                return Some(Err(()));
+            }
+        }
+        Some(Ok(q))
+    }
+
+    /// The file this query asks of `table` (entries: name, value, default): the slice it
+    /// selects, the header's total the whole table's size.
+    ///
+    /// # Errors
+    ///
+    /// As [`encode_with`]; [`EncodeError::TooMany`] also for a `start` past the table (as
+    /// ArduPilot, which refuses the read).
+    pub fn encode(self, table: &[(Name, Value, Option<Value>)]) -> Result<Vec<u8>, EncodeError> {
+        let total = u16::try_from(table.len()).map_err(|_| EncodeError::TooMany(table.len()))?;
+        let start = usize::from(self.start);
+        if start >= table.len() && start > 0 {
+            return Err(EncodeError::TooMany(start));
+        }
+        let rest = &table[start.min(table.len())..];
+        let slice = match self.count {
+            0 => rest,
+            c => &rest[..rest.len().min(usize::from(c))],
+        };
+        encode_with(
+            slice,
+            EncodeOptions {
+                with_defaults: self.with_defaults,
+                total: Some(total),
+                block: BLOCK,
+            },
+        )
+    }
+}
+
+/// A parameter table served as [`PATH`] by an [`Overlay`](super::Overlay): a
+/// [`Provider`](super::overlay::Provider) packing the table as it is when a client opens the
+/// file (with the [`Query`] in the path), each entry's default the value it had when the
+/// table was made. Listings show `@PARAM` in the root and `param.pck` in it.
+#[derive(Clone, Debug, Default)]
+pub struct TableFile {
+    entries: Vec<(Name, Value, Option<Value>)>,
+}
+
+impl TableFile {
+    /// `table`, whose values are also the defaults.
+    #[must_use]
+    pub fn new(table: &[(Name, Value)]) -> Self {
+        Self {
+            entries: table.iter().map(|&(n, v)| (n, v, Some(v))).collect(),
+        }
+    }
+
+    /// Sets a parameter's value (its default stays); `false` if the table has no such name.
+    pub fn set(&mut self, name: Name, value: Value) -> bool {
+        match self.entries.iter_mut().find(|e| e.0 == name) {
+            Some(e) => {
+                e.1 = value;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The entries: name, value, default.
+    #[must_use]
+    pub fn entries(&self) -> &[(Name, Value, Option<Value>)] {
+        &self.entries
+    }
+}
+
+impl super::overlay::Provider for TableFile {
+    fn provides(&self, path: &str) -> bool {
+        Query::parse(path).is_some()
+    }
+
+    fn contents(&mut self, path: &str) -> Result<Vec<u8>, super::BackendError> {
+        match Query::parse(path) {
+            Some(Ok(q)) => q
+                .encode(&self.entries)
+                .map_err(|_| super::BackendError::Fail),
+            Some(Err(())) => Err(super::BackendError::Fail),
+            None => Err(super::BackendError::NotFound),
+        }
+    }
+
+    fn entries(&mut self, dir: &str) -> Vec<super::DirEntry> {
+        let (parent, file) = PATH.split_once('/').unwrap_or(("", PATH));
+        if dir.is_empty() {
+            alloc::vec![super::overlay::dir_entry(parent)]
+        } else if dir == parent {
+            let size = Query::default()
+                .encode(&self.entries)
+                .map_or(0, |b| b.len());
+            alloc::vec![super::overlay::file_entry(file, size)]
+        } else {
+            Vec::new()
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use alloc::string::String;
+    use alloc::vec;
+
+    use proptest::prelude::*;
+
+    use super::*;
+
+    fn n(s: &str) -> Name {
+        Name::new(s).unwrap()
+    }
+
+    #[test]
+    fn entries_share_prefixes_with_the_previous_name() {
+        let table = vec![
+            (n("RTL_ALT"), Value::I32(1500)),
+            (n("RTL_SPEED"), Value::I16(-2)),
+            (n("RTL"), Value::I8(7)),
+            (n("X"), Value::F32(1.5)),
+        ];
+        let bytes = encode_with(
+            &table.iter().map(|&(a, b)| (a, b, None)).collect::<Vec<_>>(),
+            EncodeOptions {
+                block: 0,
+                ..EncodeOptions::default()
+            },
+        )
+        .unwrap();
+        let mut want = vec![0x1b, 0x67, 4, 0, 4, 0];
+        // RTL_ALT: int32, nothing shared, 7 bytes.
+        want.extend_from_slice(&[3, 0x60]);
+        want.extend_from_slice(b"RTL_ALT");
+        want.extend_from_slice(&1500i32.to_le_bytes());
+        // RTL_SPEED: int16, "RTL_" shared, "SPEED".
+        want.extend_from_slice(&[2, 0x44]);
+        want.extend_from_slice(b"SPEED");
+        want.extend_from_slice(&(-2i16).to_le_bytes());
+        // RTL, a prefix of the previous name: two shared, one byte follows.
+        want.extend_from_slice(&[1, 0x02, b'L', 7]);
+        want.extend_from_slice(&[4, 0x00, b'X']);
+        want.extend_from_slice(&1.5f32.to_le_bytes());
+        assert_eq!(bytes, want);
+        assert_eq!(decode(&bytes).unwrap(), table);
+    }
+
+    #[test]
+    fn values_never_cross_a_read_block() {
+        // Names chosen so records straddle 239-byte boundaries at every phase.
+        let table: Vec<(Name, Value)> = (0..400)
+            .map(|i| {
+                let name = alloc::format!("P{}_{}", "ABCDEFGHIJKL".get(..i % 12).unwrap(), i);
+                let v = if i % 2 == 0 {
+                    Value::F32(i as f32)
+                } else {
+                    Value::I16(i as i16)
+                };
+                (n(&name), v)
+            })
+            .collect();
+        let bytes = encode(&table).unwrap();
+        assert_eq!(decode(&bytes).unwrap(), table);
+        // Walk the records: every value ends in the block it starts in.
+        let mut pos = HEADER;
+        let mut padded = 0;
+        while pos < bytes.len() {
+            if bytes[pos] == 0 {
+                pos += 1;
+                padded += 1;
+                continue;
+            }
+            let len = [0, 1, 2, 4, 4][usize::from(bytes[pos] & 0x0f)];
+            let start = pos + 2 + usize::from(bytes[pos + 1] >> 4) + 1;
+            assert_eq!(start / BLOCK, (start + len - 1) / BLOCK, "value at {start}");
+            pos = start + len;
+        }
+        assert!(padded > 0, "some padding was needed");
+    }
+
+    #[test]
+    fn defaults_are_written_where_they_differ() {
+        let entries = vec![
+            (n("A"), Value::I8(1), Some(Value::I8(2))),
+            (n("B"), Value::F32(1.0), Some(Value::F32(1.0))),
+            (n("C"), Value::I16(5), None),
+            (n("D"), Value::I32(5), Some(Value::F32(9.4))),
+        ];
+        let bytes = encode_with(
+            &entries,
+            EncodeOptions {
+                with_defaults: true,
+                ..EncodeOptions::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(&bytes[..2], &MAGIC_WITH_DEFAULTS.to_le_bytes());
+        assert_eq!(bytes[6], 0x11, "A: int8 with a default");
+        let file = decode_file(&bytes).unwrap();
+        assert!(file.with_defaults);
+        assert_eq!(
+            file.entries,
+            vec![
+                (n("A"), Value::I8(1), Some(Value::I8(2))),
+                (n("B"), Value::F32(1.0), Some(Value::F32(1.0))),
+                (n("C"), Value::I16(5), Some(Value::I16(5))),
+                (n("D"), Value::I32(5), Some(Value::I32(9))),
+            ]
+        );
+    }
+
+    #[test]
+    fn unsigned_values_become_the_smallest_signed_type_holding_them() {
+        let table = vec![
+            (n("A"), Value::U8(100)),
+            (n("B"), Value::U8(200)),
+            (n("C"), Value::U16(40_000)),
+            (n("D"), Value::U32(7)),
+        ];
+        let back = decode(&encode(&table).unwrap()).unwrap();
+        assert_eq!(
+            back,
+            vec![
+                (n("A"), Value::I8(100)),
+                (n("B"), Value::I16(200)),
+                (n("C"), Value::I32(40_000)),
+                (n("D"), Value::I32(7)),
+            ]
+        );
+        assert_eq!(
+            encode(&[(n("E"), Value::U32(u32::MAX))]),
+            Err(EncodeError::Unrepresentable(n("E")))
+        );
+    }
+
+    #[test]
+    fn bad_files_are_refused() {
+        assert_eq!(decode(&[0x1b, 0x67]), Err(DecodeError::TooShort(2)));
+        assert_eq!(decode(&[0, 0, 0, 0, 0, 0]), Err(DecodeError::BadMagic(0)));
+        assert_eq!(
+            decode(&[0x1b, 0x67, 2, 0, 1, 0]),
+            Err(DecodeError::BadCount { count: 2, total: 1 })
+        );
+        assert_eq!(decode(&[0x1b, 0x67, 0, 0, 0, 0, 0, 0]), Ok(vec![]));
+        let one = [0x1b, 0x67, 1, 0, 1, 0, 1, 0x00, b'A', 5];
+        assert_eq!(decode(&one), Ok(vec![(n("A"), Value::I8(5))]));
+        assert_eq!(decode(&one[..9]), Err(DecodeError::Truncated(6)));
+        assert!(matches!(
+            decode(&[0x1b, 0x67, 1, 0, 1, 0, 5, 0x00, b'A', 5]),
+            Err(DecodeError::BadType { ty: 5, .. })
+        ));
+        assert_eq!(
+            decode(&[0x1b, 0x67, 1, 0, 1, 0, 1, 0x01, b'A', 5]),
+            Err(DecodeError::BadPrefix(6))
+        );
+        assert_eq!(
+            decode(&[0x1b, 0x67, 1, 0, 1, 0, 1, 0x00, 0xff, 5]),
+            Err(DecodeError::BadName(6))
+        );
+        assert_eq!(
+            decode(&[0x1b, 0x67, 2, 0, 2, 0, 1, 0x00, b'A', 5]),
+            Err(DecodeError::WrongCount {
+                found: 1,
+                expected: 2
+            })
+        );
+        // 15 shared + 2 bytes: too long.
+        let mut long = vec![0x1b, 0x67, 2, 0, 2, 0, 1, 0xf0];
+        long.extend_from_slice(b"ABCDEFGHIJKLMNOP");
+        long.extend_from_slice(&[1, 1, 0x1f, b'Q', b'R', 1]);
+        assert_eq!(decode(&long), Err(DecodeError::BadName(25)));
+    }
+
+    #[test]
+    fn queries_name_the_packed_file() {
+        assert_eq!(Query::parse("@PARAM/param.pck"), Some(Ok(Query::default())));
+        assert_eq!(
+            Query::parse("@PARAM/param.pck?withdefaults=1"),
+            Some(Ok(Query {
+                with_defaults: true,
+                ..Query::default()
+            }))
+        );
+        assert_eq!(
+            Query::parse("@PARAM/param.pck?start=2&count=3&x=y"),
+            Some(Ok(Query {
+                with_defaults: false,
+                start: 2,
+                count: 3
+            }))
+        );
+        assert_eq!(
+            Query::parse("@PARAM/param.pck?withdefaults=2"),
+            Some(Err(()))
+        );
+        assert_eq!(Query::parse("@PARAM/param.pckx"), None);
+        assert_eq!(Query::parse("param.pck"), None);
+        let table: Vec<_> = ["A", "B", "C", "D"]
+            .iter()
+            .enumerate()
+            .map(|(i, s)| (n(s), Value::I8(i as i8), None))
+            .collect();
+        let q = Query {
+            start: 1,
+            count: 2,
+            ..Query::default()
+        };
+        let file = decode_file(&q.encode(&table).unwrap()).unwrap();
+        assert_eq!(file.total, 4);
+        assert_eq!(
+            file.table(),
+            vec![(n("B"), Value::I8(1)), (n("C"), Value::I8(2))]
+        );
+        assert!(
+            Query {
+                start: 4,
+                ..Query::default()
+            }
+            .encode(&table)
+            .is_err()
+        );
+    }
+
+    #[test]
+    fn a_client_reads_the_table_from_a_server_over_an_overlay() {
+        use mavstack_core::time::Instant;
+
+        use super::super::{
+            ClientConfig, FtpClient, FtpEvent, FtpOutput, FtpServer, MemoryBackend, Overlay,
+            ServerConfig,
+        };
+        use crate::{Address, Service};
+
+        let (gcs, vehicle) = (Address::new(255, 190), Address::new(1, 1));
+        let table: Vec<(Name, Value)> = (0..300)
+            .map(|i| (n(&alloc::format!("PARAM_{i}")), Value::F32(i as f32)))
+            .collect();
+        let mut files = TableFile::new(&table);
+        assert!(files.set(n("PARAM_7"), Value::F32(-1.0)));
+        let mut server = FtpServer::new(
+            vehicle,
+            ServerConfig::default(),
+            Overlay::new(MemoryBackend::new(), files),
+        );
+        let mut now = Instant::from_secs(1);
+        let mut fetch = |path: &str| {
+            let mut client = FtpClient::new(gcs, vehicle, ClientConfig::default());
+            client.read(now, path).unwrap();
+            loop {
+                while let Some(out) = client.poll_transmit() {
+                    server.handle_message(now, gcs, &out.message);
+                }
+                while let Some(out) = server.poll_transmit() {
+                    client.handle_message(now, vehicle, &out.message);
+                }
+                if let Some(FtpEvent::Finished(r)) =
+                    core::iter::from_fn(|| client.poll_event()).last()
+                {
+                    return r;
+                }
+                now += core::time::Duration::from_millis(1);
+                client.handle_timeout(now);
+                server.handle_timeout(now);
+            }
+        };
+        let Ok(FtpOutput::Data(bytes)) = fetch("/@PARAM/param.pck") else {
+            panic!("read");
+        };
+        let mut want = table.clone();
+        want[7].1 = Value::F32(-1.0);
+        assert_eq!(decode(&bytes).unwrap(), want);
+        let Ok(FtpOutput::Data(bytes)) = fetch("@PARAM/param.pck?withdefaults=1") else {
+            panic!("read with defaults");
+        };
+        let file = decode_file(&bytes).unwrap();
+        assert!(file.with_defaults);
+        assert_eq!(file.entries[7].2, Some(Value::F32(7.0)));
+        assert!(fetch("@PARAM/param.pck?withdefaults=7").is_err());
+    }
+
+    fn value() -> impl Strategy<Value = Value> {
+        prop_oneof![
+            any::<i8>().prop_map(Value::I8),
+            any::<i16>().prop_map(Value::I16),
+            any::<i32>().prop_map(Value::I32),
+            // Any bits, NaNs included: compared bit for bit below.
+            any::<u32>().prop_map(|b| Value::F32(f32::from_bits(b))),
+        ]
+    }
+
+    fn table() -> impl Strategy<Value = Vec<(Name, Value)>> {
+        let name = "[A-Z_][A-Z0-9_]{0,15}".prop_map(|s: String| Name::new(&s).unwrap());
+        proptest::collection::vec((name, value()), 0..300)
+    }
+
+    fn same(a: &[(Name, Value)], b: &[(Name, Value)]) -> bool {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.0 == y.0 && x.1.same_as(y.1))
+    }
+
+    proptest! {
+        #[test]
+        fn tables_round_trip(table in table(), block in prop_oneof![Just(0usize), Just(BLOCK), 1usize..64]) {
+            let entries: Vec<_> = table.iter().map(|&(a, b)| (a, b, None)).collect();
+            let bytes = encode_with(&entries, EncodeOptions { block, ..EncodeOptions::default() }).unwrap();
+            let back = decode(&bytes).unwrap();
+            prop_assert!(same(&back, &table), "{:?} != {:?}", back, table);
+        }
+
+        #[test]
+        fn tables_with_defaults_round_trip(
+            entries in proptest::collection::vec(
+                ("[A-Z]{1,16}".prop_map(|s: String| Name::new(&s).unwrap()), value(), any::<bool>()),
+                0..100,
+            )
+        ) {
+            // Defaults of the value's own type, here its negation where it has one.
+            let entries: Vec<_> = entries
+                .into_iter()
+                .map(|(name, v, d)| {
+                    let default = match v {
+                        Value::I8(x) => Value::I8(x.wrapping_add(1)),
+                        Value::I16(x) => Value::I16(x.wrapping_add(1)),
+                        Value::I32(x) => Value::I32(x.wrapping_add(1)),
+                        other => other,
+                    };
+                    (name, v, d.then_some(default))
+                })
+                .collect();
+            let options = EncodeOptions { with_defaults: true, ..EncodeOptions::default() };
+            let file = decode_file(&encode_with(&entries, options).unwrap()).unwrap();
+            prop_assert_eq!(file.entries.len(), entries.len());
+            for ((n1, v1, d1), (n2, v2, d2)) in file.entries.iter().zip(&entries) {
+                prop_assert_eq!(n1, n2);
+                prop_assert!(v1.same_as(*v2));
+                prop_assert!(d1.unwrap().same_as(d2.unwrap_or(*v2)));
+            }
+        }
+
+        #[test]
+        fn any_bytes_decode_without_panicking(bytes in proptest::collection::vec(any::<u8>(), 0..400)) {
+            let _ = decode_file(&bytes);
+        }
+
+        #[test]
+        fn any_body_after_a_good_header_decodes_without_panicking(
+            magic in prop_oneof![Just(MAGIC), Just(MAGIC_WITH_DEFAULTS)],
+            count in 0u16..20,
+            body in proptest::collection::vec(
+                prop_oneof![3 => 0u8..6, 1 => any::<u8>(), 1 => Just(0x11u8), 1 => 0x20u8..0x40],
+                0..300,
+            ),
+        ) {
+            let mut bytes = magic.to_le_bytes().to_vec();
+            bytes.extend_from_slice(&count.to_le_bytes());
+            bytes.extend_from_slice(&u16::MAX.to_le_bytes());
+            bytes.extend_from_slice(&body);
+            if let Ok(file) = decode_file(&bytes) {
+                prop_assert_eq!(file.entries.len(), usize::from(count));
+            }
+        }
+    }
+}
