@@ -14,7 +14,7 @@ use mavstack::system::{System, SystemError, Wanted};
 use mavstack::{LinkSpec, Node};
 use mavstack_channel::SigningConfig;
 use mavstack_dialects::common::{
-    CommandInt, MavCmd, MavFrame, MavMissionType, MavParamType, MavResult,
+    CommandInt, MavCmd, MavFrame, MavMissionType, MavParamType, MavProtocolCapability, MavResult,
 };
 use mavstack_services::Address;
 use mavstack_services::command::{Command, CommandError};
@@ -64,13 +64,18 @@ pub(crate) struct RemoteArgs {
 
 #[derive(Debug, Subcommand)]
 pub(crate) enum ParamAction {
-    /// Fetch every parameter (PARAM_REQUEST_LIST, missing ones re-requested).
+    /// Fetch every parameter: over MAVFTP (`@PARAM/param.pck`) when the target offers it,
+    /// else PARAM_REQUEST_LIST (missing ones re-requested); the same output either way.
     List {
         #[command(flatten)]
         remote: RemoteArgs,
         /// Also save them as `NAME VALUE` lines (what `mavstack vehicle --params` reads).
         #[arg(long, value_name = "FILE")]
         save: Option<String>,
+        /// How: `auto` (MAVFTP when AUTOPILOT_VERSION advertises MAV_PROTOCOL_CAPABILITY_FTP,
+        /// PARAM_REQUEST_LIST when it does not or the download fails), `ftp` or `list`.
+        #[arg(long, value_enum, default_value_t = Via::Auto)]
+        via: Via,
     },
     /// Read parameters by name.
     Get {
@@ -90,6 +95,73 @@ pub(crate) enum ParamAction {
         #[arg(allow_negative_numbers = true)]
         value: f64,
     },
+}
+
+/// How `param list` fetches the table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub(crate) enum Via {
+    /// MAVFTP if the target advertises it, falling back to PARAM_REQUEST_LIST.
+    Auto,
+    /// MAVFTP only (`@PARAM/param.pck`).
+    Ftp,
+    /// PARAM_REQUEST_LIST only.
+    List,
+}
+
+/// How long `param list --via auto` waits for AUTOPILOT_VERSION.
+const CAPABILITIES_WAIT: core::time::Duration = core::time::Duration::from_secs(2);
+
+/// Retries per MAVFTP request when `--via auto` can still fall back.
+const AUTO_FTP_RETRIES: u8 = 3;
+
+/// The table over MAVFTP, with progress in bytes.
+async fn params_by_ftp(system: &mut System) -> Result<Vec<(Name, Value)>, SystemError> {
+    let show = showing_progress();
+    system
+        .params_via_ftp_with_progress(|done, total| {
+            if show {
+                eprint!("\r{done}/{total} bytes of @PARAM/param.pck");
+            }
+        })
+        .await
+}
+
+/// The table as `via` says, and how it came.
+async fn fetch_params(
+    system: &mut System,
+    via: Via,
+) -> Result<(Vec<(Name, Value)>, &'static str), SystemError> {
+    let list = "PARAM_REQUEST_LIST";
+    match via {
+        Via::List => Ok((
+            system.params_with_progress(progress("parameters")).await?,
+            list,
+        )),
+        Via::Ftp => Ok((params_by_ftp(system).await?, "MAVFTP")),
+        Via::Auto => {
+            let offered = system
+                .find_capabilities(CAPABILITIES_WAIT)
+                .await
+                .is_some_and(|c| c.contains(MavProtocolCapability::FTP));
+            if offered {
+                system.set_retries(AUTO_FTP_RETRIES);
+                let got = params_by_ftp(system).await;
+                system.set_retries(mavstack::system::PATIENT_RETRIES);
+                match got {
+                    Ok(table) => return Ok((table, "MAVFTP")),
+                    Err(SystemError::Stopped) => return Err(SystemError::Stopped),
+                    Err(e) => {
+                        end_progress();
+                        eprintln!("MAVFTP failed ({e}): PARAM_REQUEST_LIST instead");
+                    }
+                }
+            }
+            Ok((
+                system.params_with_progress(progress("parameters")).await?,
+                list,
+            ))
+        }
+    }
 }
 
 /// Which plan.
@@ -336,14 +408,14 @@ fn name_arg(text: &str) -> Result<Name, Failure> {
 pub(crate) fn param(action: ParamAction) -> Result<(), Failure> {
     runtime()?.block_on(async {
         match action {
-            ParamAction::List { remote: args, save } => {
+            ParamAction::List {
+                remote: args,
+                save,
+                via,
+            } => {
                 let mut remote = Remote::connect(&args).await?;
                 let began = remote.elapsed();
-                let table = remote
-                    .system
-                    .params_with_progress(progress("parameters"))
-                    .await
-                    .map_err(other)?;
+                let (table, how) = fetch_params(&mut remote.system, via).await.map_err(other)?;
                 end_progress();
                 let seconds = remote.since(began);
                 let target = remote.target();
@@ -381,7 +453,10 @@ pub(crate) fn param(action: ParamAction) -> Result<(), Failure> {
                         .collect()
                 };
                 print_lines(&lines)?;
-                eprintln!("{} parameters from {target} in {seconds:.2} s", table.len());
+                eprintln!(
+                    "{} parameters from {target} in {seconds:.2} s ({how})",
+                    table.len()
+                );
                 Ok(())
             }
             ParamAction::Get {

@@ -10,8 +10,7 @@ use core::time::Duration;
 use anyhow::anyhow;
 use clap::Args;
 use mavstack::router::{LinkRole, ProtocolVersionSupport, VersionMode};
-use mavstack::serve::Served;
-use mavstack::services::ftp::{DirBackend, FtpServer, ServerConfig};
+use mavstack::services::ftp::DirBackend;
 use mavstack::sim_vehicle::SimVehicle;
 use mavstack::{LinkSpec, Node, NodeBuilder};
 use mavstack_channel::SigningConfig;
@@ -84,8 +83,9 @@ pub(crate) struct VehicleArgs {
     /// a flight stack's estimator settles (ArduPilot SITL: about 40 s). Default 0.
     #[arg(long, value_name = "S", default_value_t = 0.0, value_parser = settle_seconds)]
     estimator_settle: f64,
-    /// Serve this directory over MAVFTP (read-only unless --ftp-writable); no path, `..`
-    /// or symlink leaves it. The vehicle then advertises MAV_PROTOCOL_CAPABILITY_FTP.
+    /// Serve this directory over MAVFTP beside `@PARAM/param.pck` (the vehicle always
+    /// serves that and advertises MAV_PROTOCOL_CAPABILITY_FTP); read-only unless
+    /// --ftp-writable; no path, `..` or symlink leaves it.
     #[arg(long, value_name = "DIR")]
     ftp_root: Option<std::path::PathBuf>,
     /// With --ftp-root: let clients create, write, rename and remove files and directories.
@@ -203,15 +203,6 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
         Some(path) => params::load(path).map_err(|e| Failure::Input(e.into()))?,
         None => params::defaults(args.autopilot),
     };
-    let config = SimConfig {
-        own: Address::new(args.sysid, args.compid),
-        autopilot: args.autopilot,
-        mavlink2: true,
-        params,
-        estimator_settle: Duration::from_secs_f64(args.estimator_settle),
-        data_streams_only: false,
-        ftp: args.ftp_root.is_some(),
-    };
     let files = args
         .ftp_root
         .as_ref()
@@ -225,32 +216,28 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
             })
         })
         .transpose()?;
+    // The vehicle's own MAVFTP server serves them beside `@PARAM/param.pck`.
+    let config = SimConfig {
+        own: Address::new(args.sysid, args.compid),
+        autopilot: args.autopilot,
+        mavlink2: true,
+        params,
+        estimator_settle: Duration::from_secs_f64(args.estimator_settle),
+        data_streams_only: false,
+        ftp: true,
+        ftp_files: files,
+    };
     runtime()?.block_on(async {
         let log = stderr_log(args.verbose);
-        let own = config.own;
         let vehicle = SimVehicle::start_logged(builder, config, log)
             .await
             .map_err(other)?;
         if let Some(addr) = vehicle.node().http_addr() {
             eprintln!("mavstack vehicle: status page on http://{addr}/");
         }
-        // The file server answers as the vehicle's own component, beside it.
-        let ftp = match files {
-            Some(backend) => Some(
-                Served::start(
-                    &vehicle.node().handle(),
-                    FtpServer::new(own, ServerConfig::default(), backend),
-                )
-                .await,
-            ),
-            None => None,
-        };
         tokio::select! {
             () = interrupted() => {}
             () = vehicle.node().closed() => {}
-        }
-        if let Some(ftp) = ftp {
-            ftp.stop().await;
         }
         vehicle.shutdown().await.map(drop).map_err(other)
     })

@@ -60,6 +60,8 @@ use mavstack_dialects::common::{
     RequestDataStream, Statustext, SysStatus, VfrHud,
 };
 use mavstack_services::command::{Command, CommandHandler, CommandServer, Request, Response};
+use mavstack_services::ftp::param_pck::TableFile;
+use mavstack_services::ftp::{DirBackend, FtpServer, Overlay, ServerConfig};
 use mavstack_services::mission::{MissionServer, MissionServerEvent};
 use mavstack_services::param::{Encoding, Name, ParamServer, ParamServerEvent, Value};
 use mavstack_services::stream::{self, Interval, StreamScheduler, request_message};
@@ -93,9 +95,14 @@ pub struct SimConfig {
     /// Refuse SET_MESSAGE_INTERVAL (MAV_RESULT_UNSUPPORTED) and take rates only through
     /// REQUEST_DATA_STREAM, as ArduPilot before 4.0 did.
     pub data_streams_only: bool,
-    /// Advertise MAV_PROTOCOL_CAPABILITY_FTP: a MAVFTP server runs beside the vehicle
-    /// (`mavstack vehicle --ftp-root`).
+    /// Serve MAVFTP as the vehicle's own component, and advertise
+    /// MAV_PROTOCOL_CAPABILITY_FTP: ArduPilot's packed parameter file `@PARAM/param.pck`
+    /// (made from the parameter table when a client opens it; defaults: the table the
+    /// vehicle started with), over [`ftp_files`](Self::ftp_files).
     pub ftp: bool,
+    /// With [`ftp`](Self::ftp): the directory served beside `@PARAM` (`mavstack vehicle
+    /// --ftp-root`); `None`, an empty read-only root.
+    pub ftp_files: Option<DirBackend>,
 }
 
 /// The messages the vehicle streams and their default intervals (`None`: on request only).
@@ -546,12 +553,17 @@ impl CommandHandler for Craft {
     }
 }
 
+/// The vehicle's MAVFTP server: `@PARAM/param.pck` over the served directory, if any.
+type Files = FtpServer<Overlay<DirBackend, TableFile>>;
+
 /// The simulated vehicle; see the [module docs](self).
 #[derive(Debug)]
 pub struct Vehicle {
     own: Address,
     commands: CommandServer<Craft>,
     params: ParamServer,
+    /// MAVFTP (with [`SimConfig::ftp`]).
+    files: Option<Files>,
     missions: MissionServer,
     timesync: Timesync,
     out: VecDeque<Outgoing>,
@@ -569,10 +581,19 @@ impl Vehicle {
             Autopilot::Px4 => Encoding::Bytewise,
         };
         let mut params = ParamServer::new(config.own, encoding);
-        for (name, value) in config.params {
+        for &(name, value) in &config.params {
             // A table from `params::load` has fewer than 65,535 entries.
             let _ = params.insert(name, value);
         }
+        let files = config.ftp.then(|| {
+            let table: Vec<(Name, Value)> = params.iter().copied().collect();
+            let provider = TableFile::new(&table);
+            let overlay = match config.ftp_files {
+                Some(dir) => Overlay::new(dir, provider),
+                None => Overlay::alone(provider),
+            };
+            FtpServer::new(config.own, ServerConfig::default(), overlay)
+        });
         let mut streams = StreamScheduler::new();
         for &(id, interval) in STREAMS {
             streams.support(id, interval);
@@ -591,6 +612,7 @@ impl Vehicle {
             own: config.own,
             commands: CommandServer::new(config.own, Default::default(), craft),
             params,
+            files,
             missions: MissionServer::new(config.own, Default::default()),
             timesync: Timesync::new(TimesyncConfig {
                 interval: None,
@@ -692,6 +714,9 @@ impl Vehicle {
         self.params.handle_message(now, from, message);
         self.missions.handle_message(now, from, message);
         self.timesync.handle_message(now, from, message);
+        if let Some(files) = &mut self.files {
+            files.handle_message(now, from, message);
+        }
         self.settle(now);
     }
 
@@ -705,6 +730,9 @@ impl Vehicle {
         self.params.handle_timeout(now);
         self.missions.handle_timeout(now);
         self.timesync.handle_timeout(now);
+        if let Some(files) = &mut self.files {
+            files.handle_timeout(now);
+        }
         self.settle(now);
     }
 
@@ -714,6 +742,10 @@ impl Vehicle {
             if let ParamServerEvent::Changed { from, name, value } = e {
                 self.log
                     .push_back(format!("param {name} = {} (set by {from})", value.as_f64()));
+                // The packed file is made from the table as it is when opened.
+                if let (Some(files), Some(now)) = (&mut self.files, self.params.get(name)) {
+                    files.backend_mut().provider_mut().set(name, now);
+                }
                 self.retune();
             }
         }
@@ -805,6 +837,7 @@ impl Vehicle {
             .or_else(|| self.params.poll_transmit())
             .or_else(|| self.missions.poll_transmit())
             .or_else(|| self.timesync.poll_transmit())
+            .or_else(|| self.files.as_mut().and_then(Service::poll_transmit))
     }
 
     /// When [`Vehicle::handle_timeout`] is next due.
@@ -815,6 +848,7 @@ impl Vehicle {
             self.params.poll_timeout(),
             self.missions.poll_timeout(),
             self.timesync.poll_timeout(),
+            self.files.as_ref().and_then(Service::poll_timeout),
         ]
         .into_iter()
         .flatten()

@@ -105,7 +105,7 @@ impl Service for Narrated {
 
 impl SimVehicle {
     /// A system 1, component 1 vehicle of `autopilot`'s flavour with `params`, advertising
-    /// MAVLink 2.
+    /// MAVLink 2, serving MAVFTP (`@PARAM/param.pck` only).
     #[must_use]
     pub const fn config(autopilot: Autopilot, params: Vec<(Name, Value)>) -> SimConfig {
         SimConfig {
@@ -118,7 +118,8 @@ impl SimVehicle {
             params,
             estimator_settle: core::time::Duration::ZERO,
             data_streams_only: false,
-            ftp: false,
+            ftp: true,
+            ftp_files: None,
         }
     }
 

@@ -31,12 +31,13 @@ use mavstack_core::wire::Version;
 use mavstack_core::{Message, MessageSet as _};
 use mavstack_dialects::common::{
     AutopilotVersion, CommandAck, CommandLong, GlobalPositionInt, HomePosition, MavAutopilot,
-    MavCmd, MavFrame, MavMessage, MavMissionType, MavType, MissionItemInt,
+    MavCmd, MavFrame, MavMessage, MavMissionType, MavProtocolCapability, MavType, MissionItemInt,
 };
 use mavstack_router::LinkId;
 use mavstack_services::command::{
     Command, CommandClient, CommandConfig, CommandError, CommandEvent,
 };
+use mavstack_services::ftp::param_pck::{self, DecodeError};
 use mavstack_services::ftp::{
     ClientConfig as FtpConfig, DirEntry, FtpClient, FtpError, FtpEvent, FtpOutput, StartError,
 };
@@ -127,6 +128,14 @@ pub enum SystemError {
         what: String,
         /// Why.
         source: FtpError,
+    },
+    /// The packed parameter file (`@PARAM/param.pck`) read over MAVFTP is not one.
+    #[error("{path}: {source}")]
+    ParamFile {
+        /// The file's path.
+        path: &'static str,
+        /// What is wrong with it.
+        source: DecodeError,
     },
     /// The request could not start (another like it is running).
     #[error("{0}")]
@@ -227,6 +236,8 @@ pub struct System {
     home_amsl: Option<f32>,
     /// Its HOME_POSITION, once seen.
     home: Option<HomePosition>,
+    /// The capabilities of its AUTOPILOT_VERSION, once seen.
+    capabilities: Option<MavProtocolCapability>,
     retries: u8,
     /// STATUSTEXT chunks put together.
     lines: Lines,
@@ -298,6 +309,7 @@ impl System {
             handshake: None,
             home_amsl: None,
             home: None,
+            capabilities: None,
             retries: PATIENT_RETRIES,
             lines: Lines::default(),
             said: Vec::new(),
@@ -403,6 +415,24 @@ impl System {
             z: home.altitude as f32 / 1000.0,
             ..MissionItemInt::default()
         })
+    }
+
+    /// The capabilities its AUTOPILOT_VERSION advertised, once one was seen during an
+    /// operation (see [`find_capabilities`](Self::find_capabilities)).
+    #[must_use]
+    pub const fn capabilities(&self) -> Option<MavProtocolCapability> {
+        self.capabilities
+    }
+
+    /// Its capabilities: the known ones, or else AUTOPILOT_VERSION requested once with
+    /// REQUEST_MESSAGE and awaited for up to `wait`; `None` when it never came.
+    pub async fn find_capabilities(&mut self, wait: Duration) -> Option<MavProtocolCapability> {
+        self.update();
+        if self.capabilities.is_none() {
+            self.request_once(AutopilotVersion::ID).await;
+            self.take_until(wait, |s, _| s.capabilities.is_some()).await;
+        }
+        self.capabilities
     }
 
     /// Sends one REQUEST_MESSAGE for `id` (no retries, no wait for its answer).
@@ -544,6 +574,35 @@ impl System {
             .await?;
         result.map_err(|source| SystemError::Param {
             what: "list".to_owned(),
+            source,
+        })
+    }
+
+    /// The whole parameter table in one MAVFTP download of ArduPilot's packed file,
+    /// `@PARAM/param.pck` ([`param_pck`]): the order and types of the file, the same table
+    /// as [`params`](Self::params) gives, in a fraction of the time on a long table. Only
+    /// systems whose MAVFTP server has that file (ArduPilot, `mavstack vehicle`) can answer;
+    /// [`find_capabilities`](Self::find_capabilities) tells whether there is a MAVFTP server.
+    ///
+    /// # Errors
+    /// Those of [`ftp_read`](Self::ftp_read) (no such file: [`SystemError::Ftp`]), and
+    /// [`SystemError::ParamFile`] for a file that is not a packed table.
+    pub async fn params_via_ftp(&mut self) -> Result<Vec<(Name, Value)>, SystemError> {
+        self.params_via_ftp_with_progress(|_, _| {}).await
+    }
+
+    /// Like [`params_via_ftp`](Self::params_via_ftp), telling `progress` (bytes so far,
+    /// size) as the file comes.
+    ///
+    /// # Errors
+    /// As [`params_via_ftp`](Self::params_via_ftp).
+    pub async fn params_via_ftp_with_progress(
+        &mut self,
+        progress: impl FnMut(u64, u64),
+    ) -> Result<Vec<(Name, Value)>, SystemError> {
+        let bytes = self.ftp_read(param_pck::PATH, progress).await?;
+        param_pck::decode(&bytes).map_err(|source| SystemError::ParamFile {
+            path: param_pck::PATH,
             source,
         })
     }
@@ -1227,6 +1286,9 @@ impl System {
             MavMessage::HomePosition(home) => {
                 self.home_amsl = Some(home.altitude as f32 / 1000.0);
                 self.home = Some(*home);
+            }
+            MavMessage::AutopilotVersion(v) if from.component == self.target.component => {
+                self.capabilities = Some(v.capabilities);
             }
             _ => {}
         }
