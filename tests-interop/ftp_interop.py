@@ -450,32 +450,10 @@ def _pymavlink_steps(ftp, root, files, work, tag, timeout, lossy):
     got = read(p) if os.path.exists(p) else None
     # After a get, pymavlink asks for session 1 and, unless CreateFile's ACK is already
     # waiting when it first looks, sends its first WriteFiles in that session before the
-    # ACK. ArduPilot adopts the id asked for (ftp.current_session = request.session);
-    # mavstack's server allocates its lowest free id (0) and NAKs them InvalidSession: a
-    # known mavstack bug, seen on most runs, reported and not counted until it is fixed.
-    name = f"{tag}: put /put-{sl}.bin in session {asked} (5003 bytes)"
-    if got == up:
-        R.ok(name)
-    elif ret is not None and int(ret.error_code) == 4:
-        print(f"KNOWN {name}: mavstack's server NAKs pymavlink's pipelined WriteFiles "
-              f"(session {asked}) InvalidSession: {diff_bytes(got, up)}; {_py_err(ret, mark)}",
-              flush=True)
-        from pymavlink.mavftp import MAVFTP
-
-        # the same put from a fresh MAVFTP: it asks for session 0, the id the server gives
-        ftp = MAVFTP(ftp.master, 1, 1, ftp.ftp_settings)
-        for attempt in range(tries):
-            mark = len(CATCH.lines)
-            ftp.cmd_ftp(["put", local, f"/put-{sl}.bin"])
-            ret = ftp.process_ftp_reply("put", timeout=timeout)
-            got = read(p) if os.path.exists(p) else None
-            if got == up:
-                break
-        R.check(f"{tag}: put /put-{sl}.bin in session 0 (5003 bytes, fresh MAVFTP)"
-                + (f" (try {attempt + 1})" if attempt else ""), got == up,
-                f"{diff_bytes(got, up)}; {_py_err(ret, mark)}")
-    else:
-        R.fail(name, f"{diff_bytes(got, up)}; {_py_err(ret, mark)}")
+    # ACK. ArduPilot adopts the id asked for (ftp.current_session = request.session), and
+    # so does mavstack's server when that id is free.
+    R.check(f"{tag}: put /put-{sl}.bin in session {asked} (5003 bytes)", got == up,
+            f"{diff_bytes(got, up)}; {_py_err(ret, mark)}")
     if got is not None and got == up:
         got = _quiet(crc, f"/put-{sl}.bin")
         for _ in range(tries - 1):

@@ -7,11 +7,9 @@
 //! inversion), upload, mkdir, rename, remove, rmdir, and paths that leave the root (`..`,
 //! absolute, symbolic links inside it leading out) refused with nothing outside changed.
 //!
-//! A known mavstack bug is printed as `KNOWN` and not counted: pymavlink's put after a get
-//! usually sends its first WriteFiles in the session id it asked for (1) before CreateFile's
-//! ACK; ArduPilot adopts that id, mavstack's server allocates 0 and NAKs them InvalidSession.
-//! The same put from a fresh MAVFTP (session 0) must then succeed. The vehicle's root also
-//! lists its virtual `@PARAM` directory.
+//! pymavlink's put after a get usually sends its first WriteFiles in the session id it asked
+//! for (1) before CreateFile's ACK: the server, as ArduPilot's, adopts that id. The
+//! vehicle's root also lists its virtual `@PARAM` directory.
 //!
 //! The lossy run (steps 1 and 4 through `lossy_relay.py`, 20 % loss each way) takes minutes
 //! with pymavlink's idle detection and is not run here: `ftp_interop.py --mavstack BIN

@@ -171,8 +171,20 @@ impl<B: Backend> FtpServer<B> {
             .find(|s| s.id == id && s.owner == from)
     }
 
-    fn free_id(&self) -> Option<u8> {
-        (0..self.config.max_sessions).find(|id| self.sessions.iter().all(|s| s.id != *id))
+    /// The id of a new session: the one the client asked for when no session has it (as
+    /// ArduPilot does: pymavlink sends its first WriteFiles in its own session number before
+    /// the CreateFile ACK comes), else the lowest free one; `None` when `max_sessions` are
+    /// open.
+    fn new_session_id(&self, wanted: u8) -> Option<u8> {
+        if self.sessions.len() >= usize::from(self.config.max_sessions) {
+            return None;
+        }
+        let free = |id: u8| self.sessions.iter().all(|s| s.id != id);
+        if free(wanted) {
+            Some(wanted)
+        } else {
+            (0..=u8::MAX).find(|&id| free(id))
+        }
     }
 
     fn open(&mut self, now: Instant, from: Address, req: &Payload, mode: OpenMode) -> Payload {
@@ -180,7 +192,7 @@ impl<B: Backend> FtpServer<B> {
             Ok(p) => p,
             Err(code) => return nak(req, code, None),
         };
-        let Some(id) = self.free_id() else {
+        let Some(id) = self.new_session_id(req.session) else {
             return nak(req, NakCode::NoSessionsAvailable, None);
         };
         let handle = match self.backend.open(&path, mode) {

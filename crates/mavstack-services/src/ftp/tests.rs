@@ -668,3 +668,28 @@ fn a_server_sending_nothing_useful_ends_the_read() {
         Some(&FtpEvent::Finished(Err(FtpError::Protocol)))
     );
 }
+
+/// A new session takes the number the client asked for when it is free (ArduPilot does the
+/// same; pymavlink writes in its own session number before CreateFile's ACK arrives), the
+/// lowest free one otherwise; the count of sessions stays bounded either way.
+#[test]
+fn a_session_takes_the_number_the_client_asked_for() {
+    let mut r = Raw::new();
+    let created = r.ask(GCS, Opcode::CreateFile, 7, 0, b"pub/new.bin");
+    assert_eq!((created.opcode, created.session), (Opcode::Ack, 7));
+    let wrote = r.ask(GCS, Opcode::WriteFile, 7, 0, b"abc");
+    assert_eq!(wrote.opcode, Opcode::Ack, "{wrote:?}");
+    // Number 7 is taken: another open gets the lowest free number.
+    let other = r.ask(OTHER, Opcode::OpenFileRO, 7, 0, b"pub/a.txt");
+    assert_eq!((other.opcode, other.session), (Opcode::Ack, 0));
+    for session in [200, 201] {
+        let p = r.ask(GCS, Opcode::OpenFileRO, session, 0, b"pub/a.txt");
+        assert_eq!((p.opcode, p.session), (Opcode::Ack, session));
+    }
+    let full = r.ask(GCS, Opcode::OpenFileRO, 9, 0, b"pub/a.txt");
+    assert_eq!(
+        nak_of(&full).map(|n| n.0),
+        Some(NakCode::NoSessionsAvailable)
+    );
+    assert_eq!(r.server.open_sessions(), 4);
+}
