@@ -4,8 +4,8 @@
 //! its own version and signing. The planted deviations, MAVProxy and MAVSDK as ground
 //! stations and the radios are in `interop_conform.rs` (pymavlink peers).
 
-mod ends;
-mod vehicle;
+use crate::ends;
+use crate::vehicle;
 
 use std::net::UdpSocket;
 use std::process::{Command, Output};

@@ -4,7 +4,7 @@
 //! converted both ways. How fast it runs is not asserted (a loaded machine would make that
 //! flake); that it ends without being stopped is.
 
-mod ends;
+use crate::ends;
 
 use std::process::Command;
 

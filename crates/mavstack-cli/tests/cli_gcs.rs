@@ -3,7 +3,7 @@
 //! implementations: `interop_services.rs` (pymavlink as the ground station and as the
 //! vehicle) and `interop_gcs.rs` (MAVProxy, MAVSDK).
 
-mod vehicle;
+use crate::vehicle;
 
 use std::net::UdpSocket;
 use std::process::{Command, Output};

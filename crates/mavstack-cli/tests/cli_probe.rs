@@ -2,7 +2,7 @@
 //! the handshake over the signed link; with another key it finds no system (every frame it
 //! gets fails verification). pymavlink's side of signing is in `interop_versions.rs`.
 
-mod vehicle;
+use crate::vehicle;
 
 use std::process::{Command, Output};
 

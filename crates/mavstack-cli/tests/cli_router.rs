@@ -2,7 +2,7 @@
 //! it is, and faults (a TCP client that vanishes and comes back, a flooding link while
 //! commands pass, a truncated or corrupted datagram).
 
-mod router;
+use crate::router;
 
 use router::Router;
 

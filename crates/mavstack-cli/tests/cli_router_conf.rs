@@ -3,7 +3,7 @@
 //! (`docs/contracts/router.md`, "--conf"). The parse of every key is tested in
 //! `crates/mavstack/src/router_conf/tests.rs`; these tests check what the router does with it.
 
-mod router;
+use crate::router;
 
 use router::Router;
 

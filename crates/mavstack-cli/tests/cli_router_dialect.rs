@@ -3,7 +3,7 @@
 //! resolve in that dialect (`docs/contracts/router.md`, "Dialect"). The oracle for a custom
 //! message is pymavlink with a module generated from the same XML.
 
-mod router;
+use crate::router;
 
 use router::Router;
 
@@ -12,7 +12,7 @@ use std::net::UdpSocket;
 use std::path::Path;
 use std::process::Command;
 
-mod support;
+use crate::support;
 
 use support::{require_pymavlink, run_script, text};
 

@@ -32,9 +32,8 @@
 //!
 //! Never skipped: without mosquitto, paho-mqtt, eclipse-zenoh or pymavlink they fail.
 
-#[path = "support/pymavlink_dialect.rs"]
-mod pymavlink_dialect;
-mod support;
+use crate::pymavlink_dialect;
+use crate::support;
 
 fn scenario(name: &str) {
     pymavlink_dialect::dialect_ready();

@@ -24,7 +24,7 @@
 //! our output are kept in a temporary directory whose path is printed. `MAVSTACK_INTEROP_SEED`
 //! (added to each test's own seed) and `MAVSTACK_INTEROP_FRAMES` vary the corpus.
 
-mod support;
+use crate::support;
 
 use std::ffi::{OsStr, OsString};
 

@@ -16,9 +16,8 @@
 //! script's self-tests check the peers themselves), never from conform's wording. Never
 //! skipped: without pymavlink 2.4.50 (and MAVProxy, MAVSDK from the test venv) they fail.
 
-#[path = "support/pymavlink_dialect.rs"]
-mod pymavlink_dialect;
-mod support;
+use crate::pymavlink_dialect;
+use crate::support;
 
 use std::ffi::OsStr;
 

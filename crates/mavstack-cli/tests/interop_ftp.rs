@@ -17,7 +17,7 @@
 //!
 //! Never skipped: without pymavlink 2.4.50 or mavsdk the script fails.
 
-mod support;
+use crate::support;
 
 use std::ffi::OsStr;
 

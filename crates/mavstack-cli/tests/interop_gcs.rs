@@ -45,7 +45,7 @@
 //!
 //! And across an MQTT broker: `gcs_mavproxy.py --via-broker` (see its test).
 
-mod support;
+use crate::support;
 
 use std::ffi::OsStr;
 use std::process::Command;

@@ -7,7 +7,7 @@
 //! microsecond (also through pymavlink's `mavlogdump.py`). Never skipped: without pymavlink
 //! 2.4.50 they fail.
 
-mod support;
+use crate::support;
 
 use std::ffi::OsStr;
 

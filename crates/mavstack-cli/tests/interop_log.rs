@@ -6,9 +6,8 @@
 //! The plot and a screenshot of the page are kept under `target/operator-tools/` for a
 //! person to look at. Never skipped: without pymavlink, chromium or chromedriver they fail.
 
-#[path = "support/pymavlink_dialect.rs"]
-mod pymavlink_dialect;
-mod support;
+use crate::pymavlink_dialect;
+use crate::support;
 
 use std::ffi::OsStr;
 

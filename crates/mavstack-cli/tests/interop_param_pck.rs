@@ -6,8 +6,8 @@
 //!
 //! Never skipped: without pymavlink 2.4.50 the script test fails.
 
-mod support;
-mod vehicle;
+use crate::support;
+use crate::vehicle;
 
 use std::ffi::OsStr;
 use std::process::{Command, Output};

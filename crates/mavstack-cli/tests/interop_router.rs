@@ -28,9 +28,8 @@
 //!
 //! Never skipped: without pymavlink 2.4.50 they fail.
 
-#[path = "support/pymavlink_dialect.rs"]
-mod pymavlink_dialect;
-mod support;
+use crate::pymavlink_dialect;
+use crate::support;
 
 fn scenario(name: &str) {
     pymavlink_dialect::dialect_ready();

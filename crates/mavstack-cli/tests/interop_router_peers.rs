@@ -6,7 +6,7 @@
 //! from a new port fetches every parameter of `mavstack vehicle` through the router, and the
 //! router exits 0 on SIGTERM. Never skipped: without pymavlink the test fails.
 
-mod support;
+use crate::support;
 
 use std::ffi::OsStr;
 

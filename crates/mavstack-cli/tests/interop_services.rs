@@ -20,7 +20,7 @@
 //!
 //! Never skipped: without pymavlink 2.4.50 they fail.
 
-mod support;
+use crate::support;
 
 use std::ffi::OsStr;
 

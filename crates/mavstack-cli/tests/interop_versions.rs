@@ -22,9 +22,8 @@
 //! Framing, signatures and field values are pymavlink's decoding. Never skipped: without
 //! pymavlink 2.4.50 they fail.
 
-#[path = "support/pymavlink_dialect.rs"]
-mod pymavlink_dialect;
-mod support;
+use crate::pymavlink_dialect;
+use crate::support;
 
 fn scenario(name: &str) {
     pymavlink_dialect::dialect_ready();

@@ -1,6 +1,5 @@
 //! A `mavstack router` process for the CLI tests: started with its arguments, returned once it
 //! says it is ready (what it printed on stderr before is kept), stopped with SIGTERM.
-#![allow(dead_code)] // each test binary compiles this module; not every one uses every method
 
 use core::time::Duration;
 use std::ffi::OsStr;

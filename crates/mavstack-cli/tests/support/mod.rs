@@ -89,7 +89,6 @@ pub(crate) fn run_script(name: &str, args: &[&OsStr]) -> String {
 /// Runs scenario `name` of a harness script that takes `SCENARIO --mavstack BIN` and ends
 /// with "<name>: ... ok" (router_interop.py, bridge_interop.py, version_interop.py), against
 /// `bin`; panics with its output unless it passes.
-#[allow(dead_code)] // each test binary compiles this module; not every one runs scenarios
 pub(crate) fn scenario(script: &str, name: &str, bin: &str) {
     require_pymavlink();
     let out = run_script(
