@@ -38,6 +38,18 @@ async fn vehicle_and_gcs(config: SimConfig) -> (SimVehicle, Node) {
     (vehicle, gcs)
 }
 
+/// The vehicle as a `System` of the ground station, and whether it advertises MAVFTP.
+async fn found(gcs: &Node) -> (System, bool) {
+    let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
+        .await
+        .expect("the vehicle is found");
+    let caps = v
+        .find_capabilities(Duration::from_secs(3))
+        .await
+        .expect("AUTOPILOT_VERSION");
+    (v, caps.contains(MavProtocolCapability::FTP))
+}
+
 /// Values compared bit for bit (NaN equals NaN).
 fn same(a: &[(Name, Value)], b: &[(Name, Value)]) -> bool {
     a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.0 == y.0 && x.1.same_as(y.1))
@@ -48,14 +60,8 @@ async fn params_via_ftp_equal_params_for_both_flavours() {
     for autopilot in [Autopilot::Ardupilot, Autopilot::Px4] {
         let defaults = params::defaults(autopilot);
         let (vehicle, gcs) = vehicle_and_gcs(SimVehicle::config(autopilot, defaults.clone())).await;
-        let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
-            .await
-            .expect("the vehicle is found");
-        let caps = v
-            .find_capabilities(Duration::from_secs(3))
-            .await
-            .expect("AUTOPILOT_VERSION");
-        assert!(caps.contains(MavProtocolCapability::FTP), "{autopilot}");
+        let (mut v, ftp) = found(&gcs).await;
+        assert!(ftp, "{autopilot}");
 
         let t = Instant::now();
         let listed = v.params().await.expect("PARAM_REQUEST_LIST");
@@ -97,14 +103,8 @@ async fn a_vehicle_without_mavftp_does_not_advertise_it_and_has_no_file() {
         ..SimVehicle::config(Autopilot::Ardupilot, params::defaults(Autopilot::Ardupilot))
     };
     let (vehicle, gcs) = vehicle_and_gcs(config).await;
-    let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
-        .await
-        .expect("the vehicle is found");
-    let caps = v
-        .find_capabilities(Duration::from_secs(3))
-        .await
-        .expect("AUTOPILOT_VERSION");
-    assert!(!caps.contains(MavProtocolCapability::FTP));
+    let (mut v, ftp) = found(&gcs).await;
+    assert!(!ftp);
     v.set_retries(1);
     let err = v.params_via_ftp().await.expect_err("nobody answers MAVFTP");
     assert!(matches!(err, SystemError::Ftp { .. }), "{err}");

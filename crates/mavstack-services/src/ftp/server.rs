@@ -12,6 +12,11 @@ use super::backend::{Backend, BackendError, OpenMode, normalize_path};
 use super::payload::{MAX_DATA, NakCode, Opcode, Payload, crc32};
 use crate::{Address, Outgoing, Service};
 
+/// Session `id` when `from` owns it.
+fn owned<H>(sessions: &[Session<H>], from: Address, id: u8) -> Option<&Session<H>> {
+    sessions.iter().find(|s| s.id == id && s.owner == from)
+}
+
 /// [`FtpServer`] settings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ServerConfig {
@@ -375,11 +380,7 @@ impl<B: Backend> FtpServer<B> {
     }
 
     fn read(&mut self, from: Address, req: &Payload) -> Payload {
-        let Some(s) = self
-            .sessions
-            .iter()
-            .find(|s| s.id == req.session && s.owner == from)
-        else {
+        let Some(s) = owned(&self.sessions, from, req.session) else {
             return nak(req, NakCode::InvalidSession, None);
         };
         let want = match req.data.len() {
@@ -398,11 +399,7 @@ impl<B: Backend> FtpServer<B> {
     }
 
     fn write(&mut self, from: Address, req: &Payload) -> Payload {
-        let Some(s) = self
-            .sessions
-            .iter()
-            .find(|s| s.id == req.session && s.owner == from)
-        else {
+        let Some(s) = owned(&self.sessions, from, req.session) else {
             return nak(req, NakCode::InvalidSession, None);
         };
         if !s.writable {
