@@ -33,7 +33,8 @@ pub(crate) enum FtpAction {
         remote: RemoteArgs,
         /// The file on the server.
         remote_path: String,
-        /// Where to write it (default: its name, in the current directory).
+        /// Where to write it: a file, or a directory to put it in under its name (default:
+        /// the current directory).
         local: Option<PathBuf>,
     },
     /// Upload a file.
@@ -121,6 +122,8 @@ pub(crate) fn ftp(action: &FtpAction) -> Result<(), Failure> {
         FtpAction::Get {
             remote_path, local, ..
         } => Some(match local {
+            // Into a directory: under the remote file's name.
+            Some(dir) if dir.is_dir() => dir.join(local_name(remote_path)?),
             Some(path) => path.clone(),
             None => local_name(remote_path)?,
         }),
