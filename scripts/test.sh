@@ -30,9 +30,7 @@ step "cargo clippy (all targets, all features, -D warnings)"
 cargo clippy --workspace --all-targets --all-features --locked -- -D warnings
 
 step "cargo test (workspace, all features)"
-# Most tests wait on peers (Python, MAVProxy, MAVSDK, sockets): four at a time keeps two
-# cores busy.
-RUST_TEST_THREADS="${RUST_TEST_THREADS:-4}" cargo test --workspace --all-features --locked --no-fail-fast
+cargo test --workspace --all-features --locked --no-fail-fast
 
 step "Python package: maturin builds the wheel, installed in .venv, pytest"
 # The same build as `pip install crates/mavstack-python` (release, abi3), then the package's
