@@ -381,7 +381,9 @@ def full(binary, keep, via=None):
             fail(f"param status: {m.group(0)!r} after 'Received {n} parameters'")
         saved = os.path.join(work, "fetched.parm")
         mp.cmd(f"param save {saved}")
-        _, m = mp.expect(r"Saved (\d+) parameters to", 10, "param save")
+        # MAVProxy also saves to its own log folder after a fetch ("Saved N parameters to
+        # .../mav.parm"): only the line naming our file says ours is written.
+        _, m = mp.expect(rf"Saved (\d+) parameters to {re.escape(saved)}", 10, "param save")
         if int(m.group(1)) != n:
             fail(f"param save wrote {m.group(1)} parameters, the vehicle reports {n}")
         values = read_param_file(saved)
@@ -667,7 +669,7 @@ def bench_run(binary, n_params, n_items, loss, seed, work):
         res.update(params=n, param_fetch_s=secs)
         saved = os.path.join(work, "fetched.parm")
         mp.cmd(f"param save {saved}")
-        mp.expect(r"Saved (\d+) parameters to", 30, "param save")
+        mp.expect(rf"Saved (\d+) parameters to {re.escape(saved)}", 30, "param save")
         values = read_param_file(saved)
         wrong = [(k, v, values.get(k)) for k, v in params.items()
                  if k not in values or abs(values[k] - v) > 1e-3]
