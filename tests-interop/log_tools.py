@@ -504,7 +504,7 @@ def status_page(bin_, tmp, artifacts):
 
         first = read()
         plain.rate = 40.0
-        time.sleep(4.0)
+        time.sleep(5.0)  # longer than the page's 3 s rate window
         second = read()
         if artifacts:
             driver.screenshot(os.path.join(artifacts, "status-page.png"))
@@ -519,7 +519,9 @@ def status_page(bin_, tmp, artifacts):
             check(float(b[name]["rx_rate"]) > 0, "link %s: rate in %s" % (name, b[name]["rx_rate"]))
         if "plain" in a and "plain" in b:
             ra, rb = float(a["plain"]["rx_rate"]), float(b["plain"]["rx_rate"])
-            check(rb > 2 * ra and 25 < rb < 50, "plain's rate in went %s → %s; its peer went 10 → 40 frames/s" % (ra, rb))
+            # Causality, not timing: the rate shown rose with the peer's and lies in a broad band
+            # around it (a loaded machine delays the peer's sends and the router's reads).
+            check(rb > 1.5 * ra and 20 < rb < 60, "plain's rate in went %s → %s; its peer went 10 → 40 frames/s" % (ra, rb))
         systems = {r["system"]: r["text"] for r in second if "system" in r}
         for sysid in (11, 12, 13):
             text = systems.get("%d/1" % sysid, "")
