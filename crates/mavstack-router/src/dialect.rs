@@ -32,7 +32,7 @@ pub fn target_of(info: Option<&MessageInfo>, payload: &[u8]) -> (u8, u8) {
 }
 
 /// Whether message `id` is configuration or control traffic (commands, parameters,
-/// missions, signing setup, the handshake, file transfer, HEARTBEAT): it goes through a
+/// missions, signing setup, the handshake, file transfer, log requests, HEARTBEAT): it goes through a
 /// link's priority queue and is never rate limited, so telemetry cannot starve it.
 #[must_use]
 pub const fn is_control(id: u32) -> bool {
@@ -49,6 +49,8 @@ pub const fn is_control(id: u32) -> bool {
         | 75..=77 // COMMAND_INT, COMMAND_LONG, COMMAND_ACK
         | 80 // COMMAND_CANCEL
         | 110 // FILE_TRANSFER_PROTOCOL
+        | 117..=119 // LOG_REQUEST_LIST, LOG_ENTRY, LOG_REQUEST_DATA (not LOG_DATA: bulk)
+        | 121..=122 // LOG_ERASE, LOG_REQUEST_END
         | 256 // SETUP_SIGNING
         | 300 // PROTOCOL_VERSION
         | 320..=324 // PARAM_EXT_*

@@ -42,6 +42,7 @@ mod convert;
 mod dedup;
 pub mod dialect;
 mod limit;
+pub mod log_readers;
 pub mod manual;
 pub mod options;
 mod queue;

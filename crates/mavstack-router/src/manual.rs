@@ -13,6 +13,11 @@
 //!   (`unknown_target`, on the link the frame came from);
 //! - never back to the link it came from.
 //!
+//! One exception to "no target, broadcast": LOG_DATA, the bulk of a log download, goes to
+//! the link that asked for the log (learned from the targeted LOG_REQUEST_DATA, kept while
+//! the transfer flows; see [`crate::log_readers`]). Flooding it, as mavlink-router does,
+//! copies a whole flight log onto every radio.
+//!
 //! Targets are read through the dialect's target offsets, extension fields included
 //! (COMMAND_ACK's `target_system` is one), bounds-checked against the payload as
 //! transmitted: a field that MAVLink 2 truncation removed reads as 0. A frame whose message

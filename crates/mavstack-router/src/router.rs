@@ -21,6 +21,7 @@ use crate::convert::{self, Origin, Plan};
 use crate::dedup::Dedup;
 use crate::dialect::{is_control, target_of};
 use crate::limit::Limiter;
+use crate::log_readers::{LOG_DATA, LOG_REQUEST_DATA, LOG_REQUEST_END, LogReaders};
 use crate::queue::OutQueue;
 use crate::route::{Route, Routes};
 use crate::stats::{Counters, DropReason, LinkMode, LinkStatus};
@@ -210,6 +211,7 @@ pub struct Router {
     links: Vec<Option<LinkState>>,
     routes: Routes,
     systems: Systems,
+    log_readers: LogReaders,
     dedup: Option<Dedup>,
     events: VecDeque<Event>,
     events_dropped: u64,
@@ -231,6 +233,7 @@ impl Router {
             links: Vec::new(),
             routes: Routes::default(),
             systems: Systems::default(),
+            log_readers: LogReaders::default(),
             dedup,
             events: VecDeque::new(),
             events_dropped: 0,
@@ -285,6 +288,7 @@ impl Router {
         let state = self.links.get_mut(link.index())?.take()?;
         self.routes.remove_link(link);
         self.systems.forget_link(link);
+        self.log_readers.forget_link(link);
         self.ready.retain(|&l| l != link);
         Some(state.counters)
     }
@@ -507,23 +511,30 @@ impl Router {
         dests.clear();
         let own = (self.config.system_id, self.config.component_id);
         let for_us = tsys == 0 || (tsys == own.0 && (tcomp == 0 || tcomp == own.1));
-        if tsys == 0 {
+        match msg_id {
+            LOG_REQUEST_DATA if tsys != 0 => self.log_readers.asked(now, tsys, src),
+            LOG_REQUEST_END if tsys != 0 => self.log_readers.ended(tsys, src),
+            _ => {}
+        }
+        let log_reader = if msg_id == LOG_DATA {
+            self.log_readers
+                .reader(now, sysid)
+                .filter(|&l| l != src && self.link(l).is_some())
+        } else {
+            None
+        };
+        if let Some(reader) = log_reader {
+            // LOG_DATA has no target: it goes to the link reading the log (and monitors).
+            dests.push(reader);
+            self.add_monitors(&mut dests);
+            dests.retain(|&l| l != src);
+        } else if tsys == 0 {
             dests.extend(self.links().filter(|&l| l != src));
         } else {
             let known = self
                 .routes
                 .links_to(now, self.config.route_ttl, tsys, tcomp, &mut dests);
-            // A monitor (a vehicle's fleet bridge link) gets every frame, targeted or not.
-            for (i, l) in self.links.iter().enumerate() {
-                if let Some(l) = l
-                    && l.config.monitor
-                {
-                    let id = LinkId(u32::try_from(i).unwrap_or(u32::MAX));
-                    if !dests.contains(&id) {
-                        dests.push(id);
-                    }
-                }
-            }
+            self.add_monitors(&mut dests);
             dests.retain(|&l| l != src);
             let local = self.config.local != LocalDelivery::None && tsys == own.0;
             if !known
@@ -569,6 +580,21 @@ impl Router {
             }
         }
         self.scratch = dests;
+    }
+
+    /// Adds every monitor link (a vehicle's fleet bridge link), which gets every frame,
+    /// targeted or not.
+    fn add_monitors(&self, dests: &mut Vec<LinkId>) {
+        for (i, l) in self.links.iter().enumerate() {
+            if let Some(l) = l
+                && l.config.monitor
+            {
+                let id = LinkId(u32::try_from(i).unwrap_or(u32::MAX));
+                if !dests.contains(&id) {
+                    dests.push(id);
+                }
+            }
+        }
     }
 
     /// Puts one frame onto link `dst`, converted as its framing needs.

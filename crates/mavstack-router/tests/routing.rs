@@ -9,8 +9,8 @@ use mavstack_core::signing::{SecretKey, append_signature, verify};
 use mavstack_core::time::Instant;
 use mavstack_core::wire::{self, Frame, FrameHeader, MAX_FRAME_LEN, Version};
 use mavstack_dialects::common::{
-    Attitude, CommandAck, CommandLong, Heartbeat, MavCmd, MavMessage, MavSysStatusSensorExtended,
-    ProtocolVersion, SysStatus,
+    Attitude, CommandAck, CommandLong, Heartbeat, LogData, LogRequestData, LogRequestEnd, MavCmd,
+    MavMessage, MavSysStatusSensorExtended, ProtocolVersion, SysStatus,
 };
 use mavstack_router::{
     LinkConfig, LinkId, MessageTable, Router, RouterConfig, SendTo, VersionMode,
@@ -133,6 +133,67 @@ fn broadcasts_go_everywhere_but_back_and_targeted_frames_only_where_the_target_i
     let ack = frame(&ack, Version::V2, (1, 1), 1, None);
     r.handle_datagram(T0, a, &ack);
     assert_eq!(drain(&mut r), vec![(b, ack)]);
+}
+
+#[test]
+fn log_data_goes_to_the_link_that_asked_for_the_log_not_everywhere() {
+    let mut r = router();
+    let (vehicle, gcs, radio) = (
+        link(&mut r, "vehicle", |_| {}),
+        link(&mut r, "gcs", |_| {}),
+        link(&mut r, "radio", |_| {}),
+    );
+    r.handle_datagram(T0, vehicle, &frame(&hb(), Version::V2, (1, 1), 0, None));
+    r.handle_datagram(T0, gcs, &frame(&hb(), Version::V2, (255, 190), 0, None));
+    r.handle_datagram(T0, radio, &frame(&hb(), Version::V2, (254, 190), 0, None));
+    drain(&mut r);
+    let chunk = |seq: u8| {
+        let data = LogData {
+            id: 3,
+            ofs: u32::from(seq) * 90,
+            count: 90,
+            data: [seq; 90],
+        };
+        frame(&data, Version::V2, (1, 1), seq, None)
+    };
+    // Nobody asked: LOG_DATA is a broadcast, as its lack of target fields says.
+    r.handle_datagram(T0, vehicle, &chunk(1));
+    let out = drain(&mut r);
+    assert_eq!((on(&out, gcs).len(), on(&out, radio).len()), (1, 1));
+    // The ground station asks for log 3: its data goes to it alone, for as long as it flows.
+    let ask = LogRequestData {
+        target_system: 1,
+        target_component: 1,
+        id: 3,
+        ofs: 0,
+        count: u32::MAX,
+    };
+    let ask = frame(&ask, Version::V2, (255, 190), 1, None);
+    r.handle_datagram(T0, gcs, &ask);
+    assert_eq!(drain(&mut r), vec![(vehicle, ask)]);
+    for (i, seq) in (2..40u8).enumerate() {
+        let at = T0 + Duration::from_millis(500 * i as u64);
+        r.handle_datagram(at, vehicle, &chunk(seq));
+        assert_eq!(drain(&mut r), vec![(gcs, chunk(seq))], "chunk {seq}");
+    }
+    // Its LOG_REQUEST_END ends that (the radio's cannot).
+    let end = |src: (u8, u8)| {
+        let end = LogRequestEnd {
+            target_system: 1,
+            target_component: 1,
+        };
+        frame(&end, Version::V2, src, 2, None)
+    };
+    let later = T0 + Duration::from_secs(20);
+    r.handle_datagram(later, radio, &end((254, 190)));
+    drain(&mut r);
+    r.handle_datagram(later, vehicle, &chunk(41));
+    assert_eq!(drain(&mut r), vec![(gcs, chunk(41))]);
+    r.handle_datagram(later, gcs, &end((255, 190)));
+    drain(&mut r);
+    r.handle_datagram(later, vehicle, &chunk(42));
+    let out = drain(&mut r);
+    assert_eq!((on(&out, gcs).len(), on(&out, radio).len()), (1, 1));
 }
 
 #[test]
