@@ -16,6 +16,15 @@ them), then with MAVFTP:
     name every parameter with its value, and the defaults file has the value the vehicle
     started with for the parameter that was set.
 
+Uploads (the ArduPilot flavour; ArduPilot sets the parameters of a `param.pck` written to it):
+
+  - MAVProxy 1.8.75's `param ftpload FILE` (its own packing, sent by its ftp module) changes
+    one parameter of each type; MAVProxy's `param fetch NAME` (PARAM_REQUEST_READ) then reads
+    each new value from the vehicle;
+  - `mavstack param load CONN FILE --via ftp`, then `--via set` with other values: pymavlink's
+    PARAM_REQUEST_READ reads every new value back, and a name the vehicle does not have is
+    reported and skipped.
+
 Exit 0 with "param_pck_interop: ... ok" lines, or 1 with FAIL lines.
 """
 
@@ -223,12 +232,138 @@ def check(autopilot, binary):
             vehicle.kill()
 
 
+def read_param(master, name):
+    """One value by PARAM_REQUEST_READ (C-cast, the ArduPilot flavour)."""
+    for _ in range(5):
+        master.mav.param_request_read_send(
+            master.target_system, master.target_component, name.encode(), -1
+        )
+        deadline = time.time() + 1
+        while time.time() < deadline:
+            m = master.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.5)
+            if m is not None and m.param_id == name:
+                return m.param_value
+    fail(f"PARAM_REQUEST_READ {name}: no answer")
+    return None
+
+
+def one_of_each_type(table):
+    """{pck type: (name, value)}: the first parameter of each type in the table."""
+    picked = {}
+    for name, value, ptype in table:
+        t = PCK_TYPE.get(ptype)
+        if t is not None and t not in picked and name not in ("MAV_SYSID", "MAV_GCS_SYSID", "FORMAT_VERSION"):
+            picked[t] = (name, value)
+    return picked
+
+
+def new_values(picked, step):
+    """A new value per picked parameter that its type holds."""
+    out = {}
+    for t, (name, value) in picked.items():
+        if t == 4:
+            out[name] = value + 1.25 * step
+        elif t == 1:
+            out[name] = value + step if value + step <= 127 else value - step
+        else:
+            out[name] = value + 100 * step
+    return out
+
+
+def write_file(path, values):
+    with open(path, "w", encoding="utf-8") as f:
+        for name, value in values.items():
+            f.write(f"{name} {value:g}\n" if float(value).is_integer() else f"{name} {value!r}\n")
+
+
+def same(got, want, name, what):
+    if got is None or abs(got - want) > 1e-5 * max(1.0, abs(want)):
+        fail(f"{what}: {name} = {got}, expected {want}")
+        return False
+    return True
+
+
+def uploads(binary):
+    from gcs_common import Vehicle
+    from gcs_mavproxy import MavProxy, param_read_back
+
+    port = free_udp_port()
+    with tempfile.TemporaryDirectory(prefix="param-pck-upload-") as tmp:
+        vehicle = Vehicle(binary, f"udpout:127.0.0.1:{port}", ["--autopilot", "ardupilot"], tmp)
+        try:
+            master = mavutil.mavlink_connection(
+                f"udpin:127.0.0.1:{port}", source_system=255, source_component=190
+            )
+            if master.wait_heartbeat(timeout=10) is None:
+                fail("upload: no HEARTBEAT")
+                return
+            table = param_list(master, "ardupilot")
+            picked = one_of_each_type(table)
+            if sorted(picked) != [1, 2, 3, 4]:
+                fail(f"upload: the vehicle lacks a parameter of some type: {picked}")
+                return
+            master.close()
+
+            # MAVProxy's `param ftpload`.
+            wanted = new_values(picked, 1)
+            path = os.path.join(tmp, "mavproxy.parm")
+            write_file(path, wanted)
+            mp = MavProxy(f"udpin:127.0.0.1:{port}", tmp, vehicle, extra=["--cmd=module load ftp"])
+            try:
+                mp.expect(r"Detected vehicle", 20, "MAVProxy connect")
+                mp.cmd("param fetch")
+                mp.expect(r"Received \d+ parameters", 30, "MAVProxy param fetch")
+                mp.cmd(f"param ftpload {path}")
+                mp.expect(r"Sending 4 params", 10, "MAVProxy param ftpload")
+                mp.expect(r"Parameter upload done", 30, "MAVProxy param ftpload")
+                for name, value in wanted.items():
+                    param_read_back(mp, name, value, f"MAVProxy ftpload {name}")
+            finally:
+                mp.close()
+            print(f"ok upload: MAVProxy param ftpload set {', '.join(wanted)} (read back)", flush=True)
+
+            # mavstack param load, by MAVFTP and by PARAM_SET.
+            for step, via in ((2, "ftp"), (3, "set")):
+                wanted = new_values(picked, step)
+                path = os.path.join(tmp, f"{via}.parm")
+                write_file(path, {**wanted, "NO_SUCH_PARAM": 1})
+                run = subprocess.run(
+                    [binary, "param", "load", f"udpin:127.0.0.1:{port}", path, "--via", via,
+                     "--timeout", "10"],
+                    capture_output=True, text=True, timeout=60,
+                )
+                if run.returncode != 0:
+                    fail(f"param load --via {via}: exit {run.returncode}\n{run.stdout}\n{run.stderr}")
+                    continue
+                if "NO_SUCH_PARAM" not in run.stderr:
+                    fail(f"param load --via {via}: the unknown name was not reported: {run.stderr}")
+                master = mavutil.mavlink_connection(
+                    f"udpin:127.0.0.1:{port}", source_system=255, source_component=190
+                )
+                if master.wait_heartbeat(timeout=10) is None:
+                    fail("upload: no HEARTBEAT after param load")
+                    return
+                ok = all(same(read_param(master, n), v, n, f"param load --via {via}")
+                         for n, v in wanted.items())
+                master.close()
+                if ok:
+                    print(f"ok upload: mavstack param load --via {via} set {len(wanted)} "
+                          f"parameters (pymavlink reads them back): {run.stdout.strip().splitlines()[-1]}",
+                          flush=True)
+        finally:
+            vehicle.stop()
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--mavstack", required=True)
     args = parser.parse_args()
     for autopilot in ("ardupilot", "px4"):
         check(autopilot, args.mavstack)
+    try:
+        uploads(args.mavstack)
+    except Exception as e:  # a gcs_common Failure, or MAVProxy gone
+        fail(f"upload: {e}")
     if FAILS:
         return 1
     print("param_pck_interop: all ok", flush=True)

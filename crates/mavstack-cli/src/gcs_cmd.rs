@@ -85,6 +85,19 @@ pub(crate) enum ParamAction {
         #[arg(required = true)]
         names: Vec<String>,
     },
+    /// Set the values of a parameter file (`NAME VALUE` lines, as `list --save` writes) that
+    /// differ from the target's, converted to each parameter's type, and check them read
+    /// back; names the target does not have are skipped with a warning.
+    Load {
+        #[command(flatten)]
+        remote: RemoteArgs,
+        /// The parameter file.
+        file: String,
+        /// How: `auto` (one MAVFTP upload of `@PARAM/param.pck` to an ArduPilot that
+        /// advertises MAVFTP, else PARAM_SET), `ftp` or `set`.
+        #[arg(long, value_enum, default_value_t = crate::param_load::LoadVia::Auto)]
+        via: crate::param_load::LoadVia,
+    },
     /// Set a parameter (its type is read from the target first) and confirm the new value.
     Set {
         #[command(flatten)]
@@ -109,7 +122,7 @@ pub(crate) enum Via {
 }
 
 /// How long `param list --via auto` waits for AUTOPILOT_VERSION.
-const CAPABILITIES_WAIT: core::time::Duration = core::time::Duration::from_secs(2);
+pub(crate) const CAPABILITIES_WAIT: core::time::Duration = core::time::Duration::from_secs(2);
 
 /// Retries per MAVFTP request when `--via auto` can still fall back.
 const AUTO_FTP_RETRIES: u8 = 3;
@@ -127,7 +140,7 @@ async fn params_by_ftp(system: &mut System) -> Result<Vec<(Name, Value)>, System
 }
 
 /// The table as `via` says, and how it came.
-async fn fetch_params(
+pub(crate) async fn fetch_params(
     system: &mut System,
     via: Via,
 ) -> Result<(Vec<(Name, Value)>, &'static str), SystemError> {
@@ -323,7 +336,7 @@ pub(crate) fn value_text(v: Value) -> String {
     }
 }
 
-fn value_json(v: Value) -> serde_json::Value {
+pub(crate) fn value_json(v: Value) -> serde_json::Value {
     match v {
         Value::F32(f) if f.is_finite() => json!(f),
         Value::F32(_) => serde_json::Value::Null,
@@ -350,7 +363,7 @@ pub(crate) fn print_lines(lines: &[String]) -> Result<(), Failure> {
 }
 
 /// Whether progress is shown: on a terminal, not when piped.
-fn showing_progress() -> bool {
+pub(crate) fn showing_progress() -> bool {
     std::io::IsTerminal::is_terminal(&std::io::stderr())
 }
 
@@ -365,7 +378,7 @@ fn progress(what: &'static str) -> impl FnMut(usize, usize) {
 }
 
 /// Clears the progress line.
-fn end_progress() {
+pub(crate) fn end_progress() {
     if showing_progress() {
         eprint!("\r\x1b[K");
     }
@@ -379,6 +392,12 @@ pub(crate) async fn set_param(
     current: Value,
     value: f64,
 ) -> Result<Param, Failure> {
+    let typed = typed_value(name, current, value)?;
+    system.set_param(name, typed).await.map_err(other)
+}
+
+/// `value` in `current`'s type, as PARAM_SET will carry it.
+pub(crate) fn typed_value(name: Name, current: Value, value: f64) -> Result<Value, Failure> {
     // A REAL32 holds what f32 holds: no infinity, no NaN (an integer type clamps instead).
     if current.param_type() == MavParamType::REAL32 && !(value as f32).is_finite() {
         return Err(Failure::Input(anyhow!(
@@ -398,7 +417,7 @@ pub(crate) async fn set_param(
             (v, _) => v,
         })
         .ok_or_else(|| other(format!("{name} has a type PARAM_SET cannot carry")))?;
-    system.set_param(name, typed).await.map_err(other)
+    Ok(typed)
 }
 
 fn name_arg(text: &str) -> Result<Name, Failure> {
@@ -485,6 +504,11 @@ pub(crate) fn param(action: ParamAction) -> Result<(), Failure> {
                 remote.close().await?;
                 print_lines(&lines)
             }
+            ParamAction::Load {
+                remote: args,
+                file,
+                via,
+            } => crate::param_load::load(&args, &file, via).await,
             ParamAction::Set {
                 remote: args,
                 name,

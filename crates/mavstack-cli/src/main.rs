@@ -19,6 +19,7 @@ mod log_plot;
 mod log_reader;
 mod logging;
 mod mission_file;
+mod param_load;
 mod probe_cmd;
 mod progress;
 mod radio_cmd;

@@ -2,7 +2,8 @@
 //! `mavstack vehicle`'s packed file with pymavlink 2.4.50's MAVFTP (`cmd_get` decoded by its
 //! own `ftp_param_decode`, and `cmd_getparams` with defaults) and compares it with
 //! PARAM_REQUEST_LIST, for both flavours; `mavstack param list --via ftp|list|auto` prints
-//! the same table every way.
+//! the same table every way. Uploads: MAVProxy 1.8.75's `param ftpload` and `mavstack param
+//! load --via ftp|set` change the vehicle's values, read back by MAVProxy and pymavlink.
 //!
 //! Never skipped: without pymavlink 2.4.50 the script test fails.
 
@@ -34,6 +35,13 @@ fn pymavlink_reads_the_packed_parameters_as_param_request_list_gives_them() {
                 .any(|l| l.starts_with(&format!("ok {flavour}: ")) && l.contains("same names")),
             "{flavour}:\n{out}"
         );
+    }
+    for upload in [
+        "ok upload: MAVProxy param ftpload set ",
+        "ok upload: mavstack param load --via ftp set 4 parameters",
+        "ok upload: mavstack param load --via set set 4 parameters",
+    ] {
+        assert!(out.lines().any(|l| l.starts_with(upload)), "{upload}:\n{out}");
     }
 }
 

@@ -736,8 +736,43 @@ impl Vehicle {
         self.settle(now);
     }
 
+    /// Applies the parameter files uploaded to `@PARAM/param.pck`, as ArduPilot does: each
+    /// known name set (converted to its type), unknown ones skipped, nothing broadcast.
+    fn apply_uploads(&mut self) {
+        let Some(files) = &mut self.files else { return };
+        let provider = files.backend_mut().provider_mut();
+        let mut changed = false;
+        while let Some(upload) = provider.take_upload() {
+            let table = match upload {
+                Ok(table) => table,
+                Err(e) => {
+                    self.log.push_back(format!("param.pck upload refused: {e}"));
+                    continue;
+                }
+            };
+            let (mut set, mut unknown) = (0usize, 0usize);
+            for (name, value) in table {
+                match self.params.set_quietly(name, value) {
+                    Ok(now) => {
+                        provider.set(name, now);
+                        set += 1;
+                    }
+                    Err(_) => unknown += 1,
+                }
+            }
+            self.log.push_back(format!(
+                "param.pck upload: {set} parameters set, {unknown} unknown skipped"
+            ));
+            changed |= set > 0;
+        }
+        if changed {
+            self.retune();
+        }
+    }
+
     /// Carries what one part did over to the others, and queues what is due.
     fn settle(&mut self, now: Instant) {
+        self.apply_uploads();
         while let Some(e) = self.params.poll_event() {
             if let ParamServerEvent::Changed { from, name, value } = e {
                 self.log

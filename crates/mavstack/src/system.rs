@@ -37,7 +37,7 @@ use mavstack_router::LinkId;
 use mavstack_services::command::{
     Command, CommandClient, CommandConfig, CommandError, CommandEvent,
 };
-use mavstack_services::ftp::param_pck::{self, DecodeError};
+use mavstack_services::ftp::param_pck::{self, DecodeError, EncodeError};
 use mavstack_services::ftp::{
     ClientConfig as FtpConfig, DirEntry, FtpClient, FtpError, FtpEvent, FtpOutput, StartError,
 };
@@ -136,6 +136,14 @@ pub enum SystemError {
         path: &'static str,
         /// What is wrong with it.
         source: DecodeError,
+    },
+    /// A parameter table that cannot be uploaded as a packed file.
+    #[error("{path}: {source}")]
+    ParamPack {
+        /// The file's path.
+        path: &'static str,
+        /// Why it cannot be packed.
+        source: EncodeError,
     },
     /// The request could not start (another like it is running).
     #[error("{0}")]
@@ -605,6 +613,29 @@ impl System {
             path: param_pck::PATH,
             source,
         })
+    }
+
+    /// Sets the parameters of `table` with one MAVFTP upload of ArduPilot's packed file
+    /// ([`param_pck::encode_upload`]), then reads the file back and returns the table as the
+    /// system has it now. The upload itself has no answer per parameter: ArduPilot converts
+    /// each value to its parameter's type and skips names it does not have, silently, so
+    /// compare what comes back. At most [`param_pck::MAX_UPLOAD`] bytes (about 5,000
+    /// changes); `progress` hears (bytes so far, size) of the upload.
+    ///
+    /// # Errors
+    /// [`SystemError::ParamPack`] for a table too large to pack; those of
+    /// [`ftp_write`](Self::ftp_write) and [`params_via_ftp`](Self::params_via_ftp).
+    pub async fn set_params_via_ftp(
+        &mut self,
+        table: &[(Name, Value)],
+        progress: impl FnMut(u64, u64),
+    ) -> Result<Vec<(Name, Value)>, SystemError> {
+        let bytes = param_pck::encode_upload(table).map_err(|source| SystemError::ParamPack {
+            path: param_pck::PATH,
+            source,
+        })?;
+        self.ftp_write(param_pck::PATH, &bytes, progress).await?;
+        self.params_via_ftp().await
     }
 
     /// One parameter, read by name.

@@ -1,7 +1,9 @@
-//! Virtual files over a [`Backend`]: [`Overlay`] serves read-only files whose contents a
-//! [`Provider`] makes when they are opened (ArduPilot's `@PARAM/param.pck`, say), and passes
-//! every other path to the backend under it.
+//! Virtual files over a [`Backend`]: [`Overlay`] serves files whose contents a [`Provider`]
+//! makes when they are opened (ArduPilot's `@PARAM/param.pck`, say), takes uploads to the
+//! ones the provider accepts them for (whole, when the session closes), and passes every
+//! other path to the backend under it.
 
+use alloc::string::String;
 use alloc::vec::Vec;
 
 use super::backend::{Backend, BackendError, OpenMode};
@@ -27,6 +29,29 @@ pub trait Provider {
         let _ = dir;
         Vec::new()
     }
+
+    /// The most bytes a client may write to `path` (one it provides) to upload it; `None`,
+    /// the default, keeps the file read-only.
+    fn upload_limit(&self, path: &str) -> Option<usize> {
+        let _ = path;
+        None
+    }
+
+    /// Takes what a client wrote to `path` (one with an [`upload_limit`](Self::upload_limit)),
+    /// whole, when its session closes: completed, reset or timed out alike, so check that it
+    /// is complete. Ignored by default.
+    fn upload(&mut self, path: &str, contents: Vec<u8>) {
+        let _ = (path, contents);
+    }
+}
+
+/// An upload in progress: what a session has written to a virtual file so far.
+#[derive(Debug)]
+struct Upload {
+    id: u64,
+    path: String,
+    data: Vec<u8>,
+    limit: usize,
 }
 
 /// A file an [`Overlay`] opened: one of its backend's, or a virtual file's contents.
@@ -36,16 +61,21 @@ pub enum OverlayHandle<H> {
     Inner(H),
     /// A virtual file, as made when it was opened.
     Virtual(Vec<u8>),
+    /// A virtual file opened to upload it (its bytes are kept by the overlay).
+    Upload(u64),
 }
 
-/// A [`Backend`] that serves a [`Provider`]'s virtual files, read-only (opening one to
-/// write, removing, renaming or truncating it is refused with
-/// [`BackendError::Protected`]), and every other path from the backend under it — or, with
+/// A [`Backend`] that serves a [`Provider`]'s virtual files (removing, renaming or
+/// truncating one is refused with [`BackendError::Protected`], and so is opening it to
+/// write unless the provider takes uploads of it), and every other path from the backend under it — or, with
 /// none ([`Overlay::alone`]), an empty read-only root.
 #[derive(Debug)]
 pub struct Overlay<B, P> {
     inner: Option<B>,
     provider: P,
+    /// Uploads of open sessions (as many as the server has sessions).
+    uploads: Vec<Upload>,
+    next_upload: u64,
 }
 
 impl<B: Backend, P: Provider> Overlay<B, P> {
@@ -55,6 +85,8 @@ impl<B: Backend, P: Provider> Overlay<B, P> {
         Self {
             inner: Some(inner),
             provider,
+            uploads: Vec::new(),
+            next_upload: 0,
         }
     }
 
@@ -64,6 +96,8 @@ impl<B: Backend, P: Provider> Overlay<B, P> {
         Self {
             inner: None,
             provider,
+            uploads: Vec::new(),
+            next_upload: 0,
         }
     }
 
@@ -87,6 +121,13 @@ impl<B: Backend, P: Provider> Overlay<B, P> {
     fn inner_or(&mut self, missing: BackendError) -> Result<&mut B, BackendError> {
         self.inner.as_mut().ok_or(missing)
     }
+
+    fn upload_mut(&mut self, id: u64) -> Result<&mut Upload, BackendError> {
+        self.uploads
+            .iter_mut()
+            .find(|u| u.id == id)
+            .ok_or(BackendError::Fail)
+    }
 }
 
 fn len_u64(n: usize) -> u64 {
@@ -98,10 +139,22 @@ impl<B: Backend, P: Provider> Backend for Overlay<B, P> {
 
     fn open(&mut self, path: &str, mode: OpenMode) -> Result<Self::Handle, BackendError> {
         if self.provider.provides(path) {
-            if mode != OpenMode::Read {
-                return Err(BackendError::Protected);
+            if mode == OpenMode::Read {
+                return self.provider.contents(path).map(OverlayHandle::Virtual);
             }
-            return self.provider.contents(path).map(OverlayHandle::Virtual);
+            let limit = self
+                .provider
+                .upload_limit(path)
+                .ok_or(BackendError::Protected)?;
+            let id = self.next_upload;
+            self.next_upload += 1;
+            self.uploads.push(Upload {
+                id,
+                path: String::from(path),
+                data: Vec::new(),
+                limit,
+            });
+            return Ok(OverlayHandle::Upload(id));
         }
         let missing = match mode {
             OpenMode::Read => BackendError::NotFound,
@@ -113,14 +166,26 @@ impl<B: Backend, P: Provider> Backend for Overlay<B, P> {
     }
 
     fn close(&mut self, handle: Self::Handle) {
-        if let (OverlayHandle::Inner(h), Some(inner)) = (handle, self.inner.as_mut()) {
-            inner.close(h);
+        match handle {
+            OverlayHandle::Inner(h) => {
+                if let Some(inner) = self.inner.as_mut() {
+                    inner.close(h);
+                }
+            }
+            OverlayHandle::Upload(id) => {
+                if let Some(i) = self.uploads.iter().position(|u| u.id == id) {
+                    let upload = self.uploads.swap_remove(i);
+                    self.provider.upload(&upload.path, upload.data);
+                }
+            }
+            OverlayHandle::Virtual(_) => {}
         }
     }
 
     fn size(&mut self, handle: &Self::Handle) -> Result<u64, BackendError> {
         match handle {
             OverlayHandle::Virtual(data) => Ok(len_u64(data.len())),
+            OverlayHandle::Upload(id) => Ok(len_u64(self.upload_mut(*id)?.data.len())),
             OverlayHandle::Inner(h) => self.inner_or(BackendError::Fail)?.size(h),
         }
     }
@@ -141,6 +206,7 @@ impl<B: Backend, P: Provider> Backend for Overlay<B, P> {
                 buf[..n].copy_from_slice(&rest[..n]);
                 Ok(n)
             }
+            OverlayHandle::Upload(_) => Err(BackendError::Fail),
             OverlayHandle::Inner(h) => self.inner_or(BackendError::Fail)?.read(h, offset, buf),
         }
     }
@@ -153,6 +219,20 @@ impl<B: Backend, P: Provider> Backend for Overlay<B, P> {
     ) -> Result<(), BackendError> {
         match handle {
             OverlayHandle::Virtual(_) => Err(BackendError::Protected),
+            OverlayHandle::Upload(id) => {
+                let upload = self.upload_mut(*id)?;
+                let end = usize::try_from(offset)
+                    .ok()
+                    .and_then(|o| o.checked_add(data.len()))
+                    .filter(|&end| end <= upload.limit)
+                    .ok_or(BackendError::NoSpace)?;
+                let start = end - data.len();
+                if upload.data.len() < end {
+                    upload.data.resize(end, 0);
+                }
+                upload.data[start..end].copy_from_slice(data);
+                Ok(())
+            }
             OverlayHandle::Inner(h) => self
                 .inner_or(BackendError::Protected)?
                 .write(h, offset, data),
@@ -212,7 +292,7 @@ impl<B: Backend, P: Provider> Backend for Overlay<B, P> {
 #[must_use]
 pub fn file_entry(name: &str, size: usize) -> DirEntry {
     DirEntry {
-        name: alloc::string::String::from(name),
+        name: String::from(name),
         kind: EntryKind::File {
             size: len_u64(size),
         },
@@ -223,14 +303,13 @@ pub fn file_entry(name: &str, size: usize) -> DirEntry {
 #[must_use]
 pub fn dir_entry(name: &str) -> DirEntry {
     DirEntry {
-        name: alloc::string::String::from(name),
+        name: String::from(name),
         kind: EntryKind::Directory,
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use alloc::string::String;
     use alloc::vec;
 
     use super::super::MemoryBackend;
@@ -291,6 +370,51 @@ mod tests {
         assert_eq!(names(o.list("").unwrap()), ["moved.txt", "v"]);
         assert_eq!(names(o.list("v").unwrap()), ["n"]);
         assert_eq!(o.list("w"), Err(BackendError::NotFound));
+    }
+
+    /// `up` takes uploads of at most 8 bytes and keeps them.
+    #[derive(Debug, Default)]
+    struct Inbox(Vec<(String, Vec<u8>)>);
+
+    impl Provider for Inbox {
+        fn provides(&self, path: &str) -> bool {
+            path == "up"
+        }
+        fn contents(&mut self, _path: &str) -> Result<Vec<u8>, BackendError> {
+            Ok(Vec::new())
+        }
+        fn upload_limit(&self, _path: &str) -> Option<usize> {
+            Some(8)
+        }
+        fn upload(&mut self, path: &str, contents: Vec<u8>) {
+            self.0.push((String::from(path), contents));
+        }
+    }
+
+    #[test]
+    fn uploads_reach_the_provider_whole_when_the_session_closes() {
+        let mut o: Overlay<MemoryBackend, Inbox> = Overlay::alone(Inbox::default());
+        let a = o.open("up", OpenMode::Create).unwrap();
+        let b = o.open("up", OpenMode::Write).unwrap();
+        // Pieces out of order, and a retransmission.
+        o.write(&a, 4, b"5678").unwrap();
+        o.write(&a, 0, b"1234").unwrap();
+        o.write(&a, 0, b"1234").unwrap();
+        assert_eq!(o.size(&a), Ok(8));
+        assert_eq!(o.write(&a, 5, b"9999"), Err(BackendError::NoSpace));
+        assert_eq!(o.write(&a, u64::MAX, b"9"), Err(BackendError::NoSpace));
+        o.write(&b, 0, b"x").unwrap();
+        assert!(o.provider().0.is_empty(), "nothing before the close");
+        o.close(a);
+        o.close(b);
+        assert_eq!(
+            o.provider().0,
+            [
+                (String::from("up"), b"12345678".to_vec()),
+                (String::from("up"), b"x".to_vec())
+            ]
+        );
+        assert!(o.uploads.is_empty());
     }
 
     #[test]

@@ -16,6 +16,13 @@
 //! - zero bytes before an entry are padding (an entry's first byte is never zero): ArduPilot
 //!   inserts them so that the entry's last value does not cross a read-block boundary.
 //!
+//! Uploads (writing the file sets the parameters in it, as ArduPilot does when the client's
+//! session closes) use the same layout with three differences, checked by
+//! [`decode_upload`] as ArduPilot's parser checks them: the magic is [`MAGIC`], the
+//! header's third field holds the file's length in bytes (so an upload is at most
+//! [`MAX_UPLOAD`] bytes), and there are neither defaults nor padding. [`encode_upload`]
+//! writes one. Names the vehicle does not have are skipped by it.
+//!
 //! The 64-bit types do not exist in this format, nor do the unsigned ones: [`encode`] writes
 //! an unsigned value as the smallest signed type that holds it (so it decodes as that signed
 //! type, same number), and refuses a `u32` above `i32::MAX`.
@@ -33,6 +40,9 @@ pub const PATH: &str = "@PARAM/param.pck";
 /// The read block [`encode`] pads for by default: the data of one MAVFTP reply.
 pub const BLOCK: usize = super::payload::MAX_DATA;
 
+/// The largest upload: its header holds the file's length in 16 bits.
+pub const MAX_UPLOAD: usize = u16::MAX as usize;
+
 const HEADER: usize = 6;
 
 /// Why a table cannot be packed.
@@ -48,6 +58,9 @@ pub enum EncodeError {
     /// An empty name (a `param_id` of NULs), which the format cannot hold.
     #[error("an empty parameter name")]
     EmptyName,
+    /// An upload longer than [`MAX_UPLOAD`] bytes.
+    #[error("{0} bytes: an upload holds at most 65535")]
+    TooLarge(usize),
 }
 
 /// Why bytes are not a packed parameter file.
@@ -85,6 +98,17 @@ pub enum DecodeError {
     /// An entry's name is longer than 16 bytes, contains a NUL or is not UTF-8.
     #[error("entry at byte {0}: not a parameter name")]
     BadName(usize),
+    /// An upload whose length differs from the one its header gives.
+    #[error("{found} bytes, the upload's header says {expected}")]
+    WrongLength {
+        /// Bytes received.
+        found: usize,
+        /// Bytes announced.
+        expected: u16,
+    },
+    /// An upload with default values (magic [`MAGIC_WITH_DEFAULTS`] or an entry's flag).
+    #[error("an upload cannot carry defaults")]
+    DefaultsInUpload,
     /// The number of entries differs from the header's.
     #[error("{found} entries, the header says {expected}")]
     WrongCount {
@@ -258,6 +282,76 @@ pub fn encode_with(
     Ok(out)
 }
 
+/// Packs `table` as an upload to [`PATH`]: no defaults, no padding, the file's length in
+/// the header's third field. A vehicle converts each value to its parameter's own type;
+/// give an int32 parameter an `I32` to keep all its bits.
+///
+/// # Errors
+///
+/// As [`encode_with`], and [`EncodeError::TooLarge`] past [`MAX_UPLOAD`] bytes.
+///
+/// ```
+/// use mavstack_services::ftp::param_pck;
+/// use mavstack_services::param::{Name, Value};
+/// let table = vec![(Name::new("RTL_ALT").unwrap(), Value::I32(2000))];
+/// let bytes = param_pck::encode_upload(&table).unwrap();
+/// assert_eq!(&bytes[..6], &[0x1b, 0x67, 1, 0, 15, 0]);
+/// assert_eq!(param_pck::decode_upload(&bytes).unwrap(), table);
+/// ```
+pub fn encode_upload(table: &[(Name, Value)]) -> Result<Vec<u8>, EncodeError> {
+    let entries: Vec<_> = table.iter().map(|&(n, v)| (n, v, None)).collect();
+    let options = EncodeOptions {
+        with_defaults: false,
+        total: None,
+        block: 0,
+    };
+    let mut bytes = encode_with(&entries, options)?;
+    let len = u16::try_from(bytes.len()).map_err(|_| EncodeError::TooLarge(bytes.len()))?;
+    bytes[4..HEADER].copy_from_slice(&len.to_le_bytes());
+    Ok(bytes)
+}
+
+/// The parameters in an uploaded file, checked as ArduPilot checks an upload: magic
+/// [`MAGIC`], the length the header gives, every entry whole with its flags clear and no
+/// padding, and the announced number of entries. Never panics, whatever the bytes.
+///
+/// # Errors
+///
+/// [`DecodeError`], saying which check failed.
+pub fn decode_upload(bytes: &[u8]) -> Result<Vec<(Name, Value)>, DecodeError> {
+    let Some(header) = bytes.first_chunk::<HEADER>() else {
+        return Err(DecodeError::TooShort(bytes.len()));
+    };
+    let field = |i: usize| u16::from_le_bytes([header[i], header[i + 1]]);
+    match field(0) {
+        MAGIC => {}
+        MAGIC_WITH_DEFAULTS => return Err(DecodeError::DefaultsInUpload),
+        m => return Err(DecodeError::BadMagic(m)),
+    }
+    if usize::from(field(4)) != bytes.len() {
+        return Err(DecodeError::WrongLength {
+            found: bytes.len(),
+            expected: field(4),
+        });
+    }
+    // No padding: a zero where an entry starts reads as an entry of type 0.
+    let mut reader = Entries::new(bytes, false, false);
+    let mut entries = Vec::new();
+    while let Some(entry) = reader.next_entry()? {
+        if entry.flags != 0 {
+            return Err(DecodeError::DefaultsInUpload);
+        }
+        entries.push((entry.name, entry.value));
+    }
+    if entries.len() != usize::from(field(2)) {
+        return Err(DecodeError::WrongCount {
+            found: entries.len(),
+            expected: field(2),
+        });
+    }
+    Ok(entries)
+}
+
 /// The MAV_PARAM_TYPE of a type code.
 fn unpacked_type(ty: u8) -> mavstack_dialects::common::MavParamType {
     use mavstack_dialects::common::MavParamType;
@@ -287,7 +381,7 @@ pub fn decode(bytes: &[u8]) -> Result<Vec<(Name, Value)>, DecodeError> {
 ///
 /// [`DecodeError`], saying which check failed.
 pub fn decode_file(bytes: &[u8]) -> Result<ParamFile, DecodeError> {
-    let Some((header, mut rest)) = bytes.split_first_chunk::<HEADER>() else {
+    let Some(header) = bytes.first_chunk::<HEADER>() else {
         return Err(DecodeError::TooShort(bytes.len()));
     };
     let field = |i: usize| u16::from_le_bytes([header[i], header[i + 1]]);
@@ -300,56 +394,11 @@ pub fn decode_file(bytes: &[u8]) -> Result<ParamFile, DecodeError> {
     if count > total {
         return Err(DecodeError::BadCount { count, total });
     }
+    let mut reader = Entries::new(bytes, with_defaults, true);
     let mut entries: Vec<(Name, Value, Option<Value>)> = Vec::new();
-    let mut last = [0u8; 16];
-    let mut last_len = 0usize;
-    loop {
-        let pad = rest.iter().take_while(|&&b| b == 0).count();
-        rest = &rest[pad..];
-        let offset = bytes.len() - rest.len();
-        let [kind, lens, tail @ ..] = rest else {
-            if rest.is_empty() {
-                break;
-            }
-            return Err(DecodeError::Truncated(offset));
-        };
-        let (ty, flags) = (kind & 0x0f, kind >> 4);
-        let len = match ty {
-            1 => 1,
-            2 => 2,
-            3 | 4 => 4,
-            _ => return Err(DecodeError::BadType { offset, ty }),
-        };
-        let has_default = with_defaults && flags & 1 != 0;
-        let shared = usize::from(lens & 0x0f);
-        let suffix_len = usize::from(lens >> 4) + 1;
-        let value_len = if has_default { 2 * len } else { len };
-        let Some((suffix, tail)) = tail.split_at_checked(suffix_len) else {
-            return Err(DecodeError::Truncated(offset));
-        };
-        let Some((values, tail)) = tail.split_at_checked(value_len) else {
-            return Err(DecodeError::Truncated(offset));
-        };
-        if shared > last_len {
-            return Err(DecodeError::BadPrefix(offset));
-        }
-        let name_len = shared + suffix_len;
-        if name_len > 16 {
-            return Err(DecodeError::BadName(offset));
-        }
-        last[shared..name_len].copy_from_slice(suffix);
-        last_len = name_len;
-        let text =
-            core::str::from_utf8(&last[..name_len]).map_err(|_| DecodeError::BadName(offset))?;
-        let name = Name::new(text).map_err(|_| DecodeError::BadName(offset))?;
-        let value = unpacked(ty, &values[..len]).ok_or(DecodeError::BadType { offset, ty })?;
-        let default = if has_default {
-            Some(unpacked(ty, &values[len..]).ok_or(DecodeError::BadType { offset, ty })?)
-        } else {
-            with_defaults.then_some(value)
-        };
-        entries.push((name, value, default));
-        rest = tail;
+    while let Some(e) = reader.next_entry()? {
+        let default = e.default.or_else(|| with_defaults.then_some(e.value));
+        entries.push((e.name, e.value, default));
     }
     if entries.len() != usize::from(count) {
         return Err(DecodeError::WrongCount {
@@ -362,6 +411,96 @@ pub fn decode_file(bytes: &[u8]) -> Result<ParamFile, DecodeError> {
         total,
         with_defaults,
     })
+}
+
+/// One entry as read.
+struct Entry {
+    name: Name,
+    value: Value,
+    /// Its flags nibble (bit 0: a default follows, read only in a file with defaults).
+    flags: u8,
+    default: Option<Value>,
+}
+
+/// Reads the entries after a file's header one at a time, checking each.
+struct Entries<'a> {
+    file: &'a [u8],
+    rest: &'a [u8],
+    with_defaults: bool,
+    skip_padding: bool,
+    last: [u8; 16],
+    last_len: usize,
+}
+
+impl<'a> Entries<'a> {
+    /// The entries of `file` (header included, at least [`HEADER`] bytes long).
+    fn new(file: &'a [u8], with_defaults: bool, skip_padding: bool) -> Self {
+        Self {
+            file,
+            rest: file.get(HEADER..).unwrap_or(&[]),
+            with_defaults,
+            skip_padding,
+            last: [0; 16],
+            last_len: 0,
+        }
+    }
+
+    /// The next entry, `None` at the end of the file.
+    fn next_entry(&mut self) -> Result<Option<Entry>, DecodeError> {
+        if self.skip_padding {
+            let pad = self.rest.iter().take_while(|&&b| b == 0).count();
+            self.rest = &self.rest[pad..];
+        }
+        let offset = self.file.len() - self.rest.len();
+        let [kind, lens, tail @ ..] = self.rest else {
+            if self.rest.is_empty() {
+                return Ok(None);
+            }
+            return Err(DecodeError::Truncated(offset));
+        };
+        let (ty, flags) = (kind & 0x0f, kind >> 4);
+        let len = match ty {
+            1 => 1,
+            2 => 2,
+            3 | 4 => 4,
+            _ => return Err(DecodeError::BadType { offset, ty }),
+        };
+        let reads_default = self.with_defaults && flags & 1 != 0;
+        let shared = usize::from(lens & 0x0f);
+        let suffix_len = usize::from(lens >> 4) + 1;
+        let value_len = if reads_default { 2 * len } else { len };
+        let Some((suffix, tail)) = tail.split_at_checked(suffix_len) else {
+            return Err(DecodeError::Truncated(offset));
+        };
+        let Some((values, tail)) = tail.split_at_checked(value_len) else {
+            return Err(DecodeError::Truncated(offset));
+        };
+        if shared > self.last_len {
+            return Err(DecodeError::BadPrefix(offset));
+        }
+        let name_len = shared + suffix_len;
+        if name_len > 16 {
+            return Err(DecodeError::BadName(offset));
+        }
+        self.last[shared..name_len].copy_from_slice(suffix);
+        self.last_len = name_len;
+        let text = core::str::from_utf8(&self.last[..name_len])
+            .map_err(|_| DecodeError::BadName(offset))?;
+        let name = Name::new(text).map_err(|_| DecodeError::BadName(offset))?;
+        let value = unpacked(ty, &values[..len]).ok_or(DecodeError::BadType { offset, ty })?;
+        let default = if reads_default {
+            Some(unpacked(ty, &values[len..]).ok_or(DecodeError::BadType { offset, ty })?)
+        } else {
+            None
+        };
+        self.rest = tail;
+        Ok(Some(Entry {
+            name,
+            value,
+            flags,
+            default,
+        }))
+    }
 }
 
 /// What a request for the packed file asks (the query ArduPilot's server takes:
@@ -449,13 +588,21 @@ impl Query {
     }
 }
 
+/// How many uploads a [`TableFile`] keeps until its owner takes them.
+const UPLOADS_KEPT: usize = 4;
+
 /// A parameter table served as [`PATH`] by an [`Overlay`](super::Overlay): a
 /// [`Provider`](super::overlay::Provider) packing the table as it is when a client opens the
 /// file (with the [`Query`] in the path), each entry's default the value it had when the
 /// table was made. Listings show `@PARAM` in the root and `param.pck` in it.
+///
+/// A client may also write [`PATH`] (at most [`MAX_UPLOAD`] bytes) to set parameters, as
+/// on ArduPilot: each upload, checked by [`decode_upload`] when the session closes, waits in
+/// [`take_upload`](Self::take_upload) for the owner to apply it (the last few are kept).
 #[derive(Clone, Debug, Default)]
 pub struct TableFile {
     entries: Vec<(Name, Value, Option<Value>)>,
+    uploads: alloc::collections::VecDeque<Result<Vec<(Name, Value)>, DecodeError>>,
 }
 
 impl TableFile {
@@ -464,7 +611,13 @@ impl TableFile {
     pub fn new(table: &[(Name, Value)]) -> Self {
         Self {
             entries: table.iter().map(|&(n, v)| (n, v, Some(v))).collect(),
+            uploads: alloc::collections::VecDeque::new(),
         }
+    }
+
+    /// The oldest upload not taken yet: the parameters it sets, or why it was refused.
+    pub fn take_upload(&mut self) -> Option<Result<Vec<(Name, Value)>, DecodeError>> {
+        self.uploads.pop_front()
     }
 
     /// Sets a parameter's value (its default stays); `false` if the table has no such name.
@@ -498,6 +651,17 @@ impl super::overlay::Provider for TableFile {
             Some(Err(())) => Err(super::BackendError::Fail),
             None => Err(super::BackendError::NotFound),
         }
+    }
+
+    fn upload_limit(&self, path: &str) -> Option<usize> {
+        (path == PATH).then_some(MAX_UPLOAD)
+    }
+
+    fn upload(&mut self, _path: &str, contents: Vec<u8>) {
+        if self.uploads.len() == UPLOADS_KEPT {
+            self.uploads.pop_front();
+        }
+        self.uploads.push_back(decode_upload(&contents));
     }
 
     fn entries(&mut self, dir: &str) -> Vec<super::DirEntry> {
@@ -647,6 +811,51 @@ mod tests {
             encode(&[(n("E"), Value::U32(u32::MAX))]),
             Err(EncodeError::Unrepresentable(n("E")))
         );
+    }
+
+    #[test]
+    fn uploads_are_checked_as_ardupilot_checks_them() {
+        // As MAVProxy's `param ftpload` packs: header, then entries without padding.
+        let good = [
+            0x1b, 0x67, 2, 0, 17, 0, 1, 0x00, b'A', 5, 4, 0x01, b'B', 0, 0, 0x80, 0x3f,
+        ];
+        assert_eq!(
+            decode_upload(&good),
+            Ok(vec![(n("A"), Value::I8(5)), (n("AB"), Value::F32(1.0))])
+        );
+        assert_eq!(
+            decode_upload(&good[..16]),
+            Err(DecodeError::WrongLength {
+                found: 16,
+                expected: 17
+            })
+        );
+        let mut defaults = good;
+        defaults[0] = 0x1c;
+        assert_eq!(decode_upload(&defaults), Err(DecodeError::DefaultsInUpload));
+        let mut flagged = good;
+        flagged[6] |= 0x20;
+        assert_eq!(decode_upload(&flagged), Err(DecodeError::DefaultsInUpload));
+        // Padding, which a download may carry, is not an upload's.
+        let padded = [0x1b, 0x67, 1, 0, 11, 0, 0, 1, 0x00, b'A', 5];
+        assert!(matches!(
+            decode_upload(&padded),
+            Err(DecodeError::BadType { offset: 6, ty: 0 })
+        ));
+        let mut miscounted = good;
+        miscounted[2] = 3;
+        assert_eq!(
+            decode_upload(&miscounted),
+            Err(DecodeError::WrongCount {
+                found: 2,
+                expected: 3
+            })
+        );
+        // Past 65,535 bytes an upload cannot say its length.
+        let big: Vec<_> = (0..10_000)
+            .map(|i| (n(&alloc::format!("PARAM_{i:010}")), Value::F32(1.0)))
+            .collect();
+        assert!(matches!(encode_upload(&big), Err(EncodeError::TooLarge(_))));
     }
 
     #[test]
@@ -820,6 +1029,19 @@ mod tests {
             let bytes = encode_with(&entries, EncodeOptions { block, ..EncodeOptions::default() }).unwrap();
             let back = decode(&bytes).unwrap();
             prop_assert!(same(&back, &table), "{:?} != {:?}", back, table);
+        }
+
+        #[test]
+        fn uploads_round_trip(table in table()) {
+            let bytes = encode_upload(&table).unwrap();
+            prop_assert_eq!(usize::from(u16::from_le_bytes([bytes[4], bytes[5]])), bytes.len());
+            let back = decode_upload(&bytes).unwrap();
+            prop_assert!(same(&back, &table), "{:?} != {:?}", back, table);
+        }
+
+        #[test]
+        fn any_upload_bytes_decode_without_panicking(bytes in proptest::collection::vec(any::<u8>(), 0..200)) {
+            let _ = decode_upload(&bytes);
         }
 
         #[test]

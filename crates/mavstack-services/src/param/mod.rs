@@ -641,14 +641,29 @@ impl ParamServer {
     ///
     /// [`TableError::Unknown`] for a name not in the table.
     pub fn set(&mut self, name: Name, value: Value) -> Result<Value, TableError> {
+        let (i, v) = self.store(name, value)?;
+        self.send_value(Address::BROADCAST, i);
+        Ok(v)
+    }
+
+    /// Sets a value locally (converted to the parameter's type) without telling anyone, as
+    /// ArduPilot does for the parameters of an uploaded `param.pck`. Returns the value now
+    /// in force.
+    ///
+    /// # Errors
+    ///
+    /// [`TableError::Unknown`] for a name not in the table.
+    pub fn set_quietly(&mut self, name: Name, value: Value) -> Result<Value, TableError> {
+        self.store(name, value).map(|(_, v)| v)
+    }
+
+    fn store(&mut self, name: Name, value: Value) -> Result<(u16, Value), TableError> {
         let &i = self.index.get(&name).ok_or(TableError::Unknown { name })?;
         let slot = &mut self.table[usize::from(i)];
         if let Some(v) = value.converted_to(slot.1.param_type()) {
             slot.1 = v;
         }
-        let v = slot.1;
-        self.send_value(Address::BROADCAST, i);
-        Ok(v)
+        Ok((i, slot.1))
     }
 
     fn count(&self) -> u16 {
