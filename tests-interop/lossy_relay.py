@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""A tiny UDP relay that drops a fraction of datagrams each way (seeded, so reproducible).
+"""A tiny UDP relay that drops a fraction of datagrams each way (seeded, so reproducible) and
+may delay the rest by a fixed time each way (a radio link's latency).
 
     vehicle --udpout--> [listen]  relay  [ephemeral] --> forward (a GCS on udpin)
     vehicle <---------- [listen]  relay  [ephemeral] <-- GCS replies
@@ -12,7 +13,8 @@ of one does not depend on the traffic of the other.
 
 Command line (runs until SIGINT/SIGTERM, then prints a JSON line of counters on stderr):
 
-    lossy_relay.py --listen 127.0.0.1:14600 --forward 127.0.0.1:14550 --loss 0.2 --seed 1
+    lossy_relay.py --listen 127.0.0.1:14600 --forward 127.0.0.1:14550 --loss 0.2 --seed 1 \
+        [--delay-ms 100]
 
 As a library:
 
@@ -23,6 +25,8 @@ As a library:
 """
 
 import argparse
+import heapq
+import itertools
 import json
 import random
 import select
@@ -30,6 +34,7 @@ import signal
 import socket
 import sys
 import threading
+import time
 
 
 def _addr(text):
@@ -41,9 +46,13 @@ class LossyRelay:
     """Relays datagrams between one near peer and one far address, dropping some."""
 
     def __init__(self, listen, forward, loss=0.2, seed=1, loss_up=None, loss_down=None,
-                 tap=None):
+                 tap=None, delay=0.0):
         # tap(way, datagram, dropped), if given, sees every datagram ("up": near -> far)
         self.tap = tap
+        # delay: seconds each datagram kept is held before it goes on (each way), in order
+        self.delay = delay
+        self._held = []  # heap of (due, n, sock, data, dest)
+        self._n = itertools.count()
         self.forward = forward
         self.loss_up = loss if loss_up is None else loss_up  # near -> far
         self.loss_down = loss if loss_down is None else loss_down  # far -> near
@@ -82,10 +91,14 @@ class LossyRelay:
     def run(self):
         socks = [self.near, self.far]
         while not self._stop.is_set():
+            wait = 0.1
+            if self._held:
+                wait = min(wait, max(0.0, self._held[0][0] - time.monotonic()))
             try:
-                ready, _, _ = select.select(socks, [], [], 0.1)
+                ready, _, _ = select.select(socks, [], [], wait)
             except (OSError, ValueError):
                 return
+            self._release()
             for sock in ready:
                 try:
                     data, addr = sock.recvfrom(65535)
@@ -112,6 +125,19 @@ class LossyRelay:
         if dropped:
             st["dropped"] += 1
             return
+        if self.delay > 0:
+            heapq.heappush(self._held, (time.monotonic() + self.delay, next(self._n), sock, data, dest))
+            return
+        self._send(sock, data, dest)
+
+    def _release(self):
+        now = time.monotonic()
+        while self._held and self._held[0][0] <= now:
+            _, _, sock, data, dest = heapq.heappop(self._held)
+            self._send(sock, data, dest)
+
+    @staticmethod
+    def _send(sock, data, dest):
         try:
             sock.sendto(data, dest)
         except OSError:
@@ -126,8 +152,10 @@ def main():
     ap.add_argument("--loss-up", type=float, help="near -> far drop probability")
     ap.add_argument("--loss-down", type=float, help="far -> near drop probability")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--delay-ms", type=float, default=0.0, help="hold each datagram this long (each way)")
     args = ap.parse_args()
-    relay = LossyRelay(args.listen, args.forward, args.loss, args.seed, args.loss_up, args.loss_down)
+    relay = LossyRelay(args.listen, args.forward, args.loss, args.seed, args.loss_up, args.loss_down,
+                       delay=args.delay_ms / 1000.0)
     done = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: done.set())
