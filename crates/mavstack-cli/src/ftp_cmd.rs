@@ -186,12 +186,16 @@ async fn run(
             // The size is known only once the file is open: the bar is drawn for a put.
             let data = system.ftp_read(remote_path, |_, _| {}).await;
             let data = data.map_err(other)?;
-            let theirs = system.ftp_crc32(remote_path).await.map_err(other)?;
             let ours = crc32(0, &data);
-            if ours != theirs {
-                return Err(other(format!(
-                    "ftp get {remote_path}: CRC32 {ours:08x} of what arrived, the server's is {theirs:08x}"
-                )));
+            // ArduPilot's `@` files (`@SYS/uarts.txt`, `@PARAM/param.pck`) are made anew at
+            // each open, so a CRC32 asked afterwards is of other contents: not checked.
+            if !generated_at_open(remote_path) {
+                let theirs = system.ftp_crc32(remote_path).await.map_err(other)?;
+                if ours != theirs {
+                    return Err(other(format!(
+                        "ftp get {remote_path}: CRC32 {ours:08x} of what arrived, the server's is {theirs:08x}"
+                    )));
+                }
             }
             let to = download_to.unwrap_or_else(|| Path::new("."));
             std::fs::write(to, &data)
@@ -252,4 +256,12 @@ async fn run(
             }]
         }
     })
+}
+
+/// Whether a remote file is one a server makes when it is opened, whose CRC32 cannot be
+/// compared with a download: ArduPilot's virtual directories (`@SYS`, `@PARAM`,
+/// `@MISSION`...), but not `@ROMFS`, which holds files built into the firmware.
+fn generated_at_open(path: &str) -> bool {
+    let path = path.trim_start_matches('/');
+    path.starts_with('@') && !path.starts_with("@ROMFS/")
 }

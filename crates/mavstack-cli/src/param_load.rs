@@ -155,11 +155,44 @@ async fn set_all(
             .await;
         end_progress();
         match uploaded {
-            Ok(now) => return Ok((now, "one MAVFTP upload")),
+            Ok(now) if via == LoadVia::Ftp => return Ok((now, "one MAVFTP upload")),
+            Ok(mut now) => {
+                // An upload has no answer per parameter, and a vehicle may skip some
+                // (ArduPilot 4.7 SITL left RTL_ALT alone in a one-entry file, whoever sent
+                // it): what did not take goes by PARAM_SET.
+                let missed: Vec<&Change> = changes
+                    .iter()
+                    .filter(|c| !now.iter().any(|&(n, v)| n == c.name && v.same_as(c.value)))
+                    .collect();
+                if missed.is_empty() {
+                    return Ok((now, "one MAVFTP upload"));
+                }
+                eprintln!(
+                    "the MAVFTP upload did not set {} of {} values: PARAM_SET for those",
+                    missed.len(),
+                    changes.len()
+                );
+                for (name, value) in param_set(system, &missed).await? {
+                    match now.iter_mut().find(|(n, _)| *n == name) {
+                        Some(slot) => slot.1 = value,
+                        None => now.push((name, value)),
+                    }
+                }
+                return Ok((now, "MAVFTP upload, then PARAM_SET for what it did not set"));
+            }
             Err(e) if via == LoadVia::Ftp => return Err(other(e)),
             Err(e) => eprintln!("MAVFTP upload failed ({e}): PARAM_SET instead"),
         }
     }
+    let all: Vec<&Change> = changes.iter().collect();
+    Ok((param_set(system, &all).await?, "PARAM_SET"))
+}
+
+/// Sets each of `changes` by PARAM_SET; returns the values the vehicle confirmed.
+async fn param_set(
+    system: &mut System,
+    changes: &[&Change],
+) -> Result<Vec<(Name, Value)>, Failure> {
     let mut now = Vec::with_capacity(changes.len());
     for (i, c) in changes.iter().enumerate() {
         if showing_progress() {
@@ -169,5 +202,5 @@ async fn set_all(
         now.push((p.name, p.value));
     }
     end_progress();
-    Ok((now, "PARAM_SET"))
+    Ok(now)
 }

@@ -176,6 +176,14 @@ impl FtpPathOp {
     }
 }
 
+/// A number that differs between runs (the wall clock's nanoseconds), to start MAVFTP
+/// sequence numbers where another process's client is unlikely to have stopped.
+fn clock_seed() -> u16 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| (d.subsec_nanos() >> 8) as u16 ^ d.as_secs() as u16)
+}
+
 /// The STATUSTEXT lines after an error's message.
 fn said(lines: &[String]) -> String {
     if lines.is_empty() {
@@ -251,6 +259,9 @@ pub struct System {
     lines: Lines,
     /// STATUSTEXT lines of the target since the current command started.
     said: Vec<String>,
+    /// Where the next MAVFTP client starts its sequence numbers (see
+    /// [`FtpClient::starting_after`]): from the clock at first, then where the last stopped.
+    ftp_seq: u16,
 }
 
 impl System {
@@ -321,6 +332,7 @@ impl System {
             retries: PATIENT_RETRIES,
             lines: Lines::default(),
             said: Vec::new(),
+            ftp_seq: clock_seed(),
         };
         if found_in == Version::V1 {
             let outcome = system
@@ -1228,7 +1240,8 @@ impl System {
             attempts: self.retries.saturating_add(1),
             ..FtpConfig::default()
         };
-        let mut client = FtpClient::new(self.own, self.target, config);
+        let mut client =
+            FtpClient::new(self.own, self.target, config).starting_after(self.ftp_seq);
         start(&mut client, clock::now())
             .map_err(|e| SystemError::Busy(format!("ftp {what}: {e}")))?;
         let result = self
@@ -1241,8 +1254,10 @@ impl System {
                     FtpEvent::Finished(result) => Some(result),
                 })
             })
-            .await?;
-        result.map_err(|source| SystemError::Ftp { what, source })
+            .await;
+        // The next operation's client starts past this one's numbers.
+        self.ftp_seq = client.last_seq().wrapping_add(1);
+        result?.map_err(|source| SystemError::Ftp { what, source })
     }
 
     // ----- the driver ----------------------------------------------------------------------

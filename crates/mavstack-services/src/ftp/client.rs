@@ -176,7 +176,8 @@ enum Op {
 /// estimate, doubled per resend, at most [`ClientConfig::timeout`]) up to
 /// [`ClientConfig::attempts`] times; replies are matched by sequence number, so late
 /// duplicates are ignored. Reads keep only bytes inside the announced size, whatever
-/// offsets the server sends.
+/// offsets the server sends; a NAK EndOfFile before that size ends the file there
+/// (ArduPilot announces an estimate, 12 bytes a parameter, for `@PARAM/param.pck`).
 #[derive(Debug)]
 pub struct FtpClient {
     me: Address,
@@ -230,6 +231,26 @@ impl FtpClient {
             queue: VecDeque::new(),
             events: VecDeque::new(),
         }
+    }
+
+    /// Starts its sequence numbers after `seq`: its first request carries `seq + 1`.
+    ///
+    /// Give each client of one server a number where the last one stopped
+    /// ([`last_seq`](Self::last_seq)), or one taken at random: ArduPilot answers a request
+    /// whose sysid, compid, session and sequence number are those of the last request it
+    /// answered by sending that old reply again, so a new client starting where a finished
+    /// one started (same ids, session 0) can be given the answer to another question (a
+    /// `FileNotFound` for every listing after one of a missing path, seen with SITL).
+    #[must_use]
+    pub const fn starting_after(mut self, seq: u16) -> Self {
+        self.seq = seq;
+        self
+    }
+
+    /// The sequence number of its last request.
+    #[must_use]
+    pub const fn last_seq(&self) -> u16 {
+        self.seq
     }
 
     /// Whether an operation is under way.
@@ -509,6 +530,17 @@ impl FtpClient {
                 (Phase::Transfer, nak) => {
                     let burst = reply.req_opcode == Opcode::BurstReadFile;
                     match nak {
+                        // The file ends before the size announced at open (ArduPilot
+                        // announces an estimate for `@PARAM/param.pck`): it ends there.
+                        Some((NakCode::Eof, _)) => {
+                            let end = reply.offset.max(r.high);
+                            let size = u32::try_from(r.data.len()).unwrap_or(u32::MAX);
+                            if end < size {
+                                r.data.truncate(end as usize);
+                                subtract(&mut r.missing, end, size);
+                            }
+                            self.next_read(now);
+                        }
                         // A burst ran into the end (or failed): carry on with ReadFile if
                         // it brought nothing.
                         Some(_) if burst => {

@@ -30,6 +30,14 @@ pub trait Provider {
         Vec::new()
     }
 
+    /// The size announced when `path` (one it provides) is opened with `contents`: their
+    /// length by default. A provider may announce more, as ArduPilot announces an estimate
+    /// for its packed parameters; reads end at the contents' real end (NAK EndOfFile).
+    fn announced_size(&self, path: &str, contents: &[u8]) -> u64 {
+        let _ = path;
+        len_u64(contents.len())
+    }
+
     /// The most bytes a client may write to `path` (one it provides) to upload it; `None`,
     /// the default, keeps the file read-only.
     fn upload_limit(&self, path: &str) -> Option<usize> {
@@ -59,8 +67,8 @@ struct Upload {
 pub enum OverlayHandle<H> {
     /// A file of the backend under it.
     Inner(H),
-    /// A virtual file, as made when it was opened.
-    Virtual(Vec<u8>),
+    /// A virtual file, as made when it was opened, and the size announced for it.
+    Virtual(Vec<u8>, u64),
     /// A virtual file opened to upload it (its bytes are kept by the overlay).
     Upload(u64),
 }
@@ -140,7 +148,9 @@ impl<B: Backend, P: Provider> Backend for Overlay<B, P> {
     fn open(&mut self, path: &str, mode: OpenMode) -> Result<Self::Handle, BackendError> {
         if self.provider.provides(path) {
             if mode == OpenMode::Read {
-                return self.provider.contents(path).map(OverlayHandle::Virtual);
+                let data = self.provider.contents(path)?;
+                let size = self.provider.announced_size(path, &data);
+                return Ok(OverlayHandle::Virtual(data, size));
             }
             let limit = self
                 .provider
@@ -178,13 +188,13 @@ impl<B: Backend, P: Provider> Backend for Overlay<B, P> {
                     self.provider.upload(&upload.path, upload.data);
                 }
             }
-            OverlayHandle::Virtual(_) => {}
+            OverlayHandle::Virtual(..) => {}
         }
     }
 
     fn size(&mut self, handle: &Self::Handle) -> Result<u64, BackendError> {
         match handle {
-            OverlayHandle::Virtual(data) => Ok(len_u64(data.len())),
+            OverlayHandle::Virtual(_, size) => Ok(*size),
             OverlayHandle::Upload(id) => Ok(len_u64(self.upload_mut(*id)?.data.len())),
             OverlayHandle::Inner(h) => self.inner_or(BackendError::Fail)?.size(h),
         }
@@ -197,7 +207,7 @@ impl<B: Backend, P: Provider> Backend for Overlay<B, P> {
         buf: &mut [u8],
     ) -> Result<usize, BackendError> {
         match handle {
-            OverlayHandle::Virtual(data) => {
+            OverlayHandle::Virtual(data, _) => {
                 let rest = usize::try_from(offset)
                     .ok()
                     .and_then(|o| data.get(o..))
@@ -218,7 +228,7 @@ impl<B: Backend, P: Provider> Backend for Overlay<B, P> {
         data: &[u8],
     ) -> Result<(), BackendError> {
         match handle {
-            OverlayHandle::Virtual(_) => Err(BackendError::Protected),
+            OverlayHandle::Virtual(..) => Err(BackendError::Protected),
             OverlayHandle::Upload(id) => {
                 let upload = self.upload_mut(*id)?;
                 let end = usize::try_from(offset)

@@ -653,6 +653,13 @@ impl super::overlay::Provider for TableFile {
         }
     }
 
+    /// As ArduPilot: 12 bytes a parameter (its estimate, to spare a scan of the table), or
+    /// the real length where that is more; the read ends at the real end.
+    fn announced_size(&self, _path: &str, contents: &[u8]) -> u64 {
+        let estimate = self.entries.len().saturating_mul(12);
+        u64::try_from(estimate.max(contents.len())).unwrap_or(u64::MAX)
+    }
+
     fn upload_limit(&self, path: &str) -> Option<usize> {
         (path == PATH).then_some(MAX_UPLOAD)
     }

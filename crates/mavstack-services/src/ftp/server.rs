@@ -68,6 +68,7 @@ struct Replay {
     client: Address,
     request: Payload,
     reply: Payload,
+    at: Instant,
 }
 
 /// A MAVLink FTP server: answers FILE_TRANSFER_PROTOCOL requests addressed to it with
@@ -77,8 +78,11 @@ struct Replay {
 ///   [`ServerConfig::max_sessions`] and belong to the client that opened them: another
 ///   client's requests on them get NAK InvalidSession. ResetSessions closes only the
 ///   sender's sessions. Sessions idle for [`ServerConfig::session_timeout`] are closed.
-/// - A request equal to the sender's previous one (a retransmission) is answered with the
-///   previous reply, without doing it again. BurstReadFile is not replayed but restarted.
+/// - A request equal to the sender's previous one (a retransmission), byte for byte and
+///   within the session timeout, is answered with the previous reply, without doing it
+///   again. BurstReadFile is not replayed but restarted. (ArduPilot replays on a matching
+///   sequence number alone, whatever the request and however old: a new client whose
+///   numbers start where the last one's did gets an answer to another question.)
 /// - Bursts are produced lazily by [`Service::poll_transmit`], so memory stays bounded;
 ///   pacing them to the link is the driver's job.
 /// - Paths are normalised with [`normalize_path`]: nothing outside the backend's root can
@@ -501,11 +505,11 @@ impl<B: Backend> Service for FtpServer<B> {
             // A reply: for a client, not for us.
             return false;
         }
-        if let Some(r) = self
-            .replays
-            .iter()
-            .find(|r| r.client == from && r.request == req)
-        {
+        if let Some(r) = self.replays.iter().find(|r| {
+            r.client == from
+                && r.request == req
+                && now.saturating_duration_since(r.at) < self.config.session_timeout
+        }) {
             let out = message(from, &r.reply);
             if let Some(s) = self.session(from, req.session) {
                 s.last = now;
@@ -524,6 +528,7 @@ impl<B: Backend> Service for FtpServer<B> {
                     client: from,
                     request: req,
                     reply: answer,
+                    at: now,
                 });
             }
         }

@@ -9,7 +9,7 @@ use mavstack_core::time::Instant;
 use mavstack_dialects::common::{FileTransferProtocol, MavMessage};
 
 use super::*;
-use crate::{Address, Service};
+use crate::{Address, Outgoing, Service};
 
 const GCS: Address = Address::new(255, 190);
 const OTHER: Address = Address::new(254, 190);
@@ -505,6 +505,28 @@ fn retransmissions_are_answered_without_redoing() {
         Some((NakCode::FileNotFound, None))
     );
     assert_eq!(r.server.backend().file("pub/new.txt"), Some(&b"xyz"[..]));
+    // The same bytes long after are a new client's question (a new process whose numbers
+    // start where the last one's did), answered afresh.
+    r.now += Duration::from_secs(60);
+    assert_eq!(
+        nak_of(&r.raw(GCS, rm.encode())[0]),
+        Some((NakCode::FileNotFound, None))
+    );
+}
+
+#[test]
+fn a_client_can_start_its_numbers_where_another_stopped() {
+    let mut a = FtpClient::new(GCS, VEHICLE, ClientConfig::default()).starting_after(u16::MAX);
+    a.list(Instant::from_secs(1), "").unwrap();
+    let Some(Outgoing {
+        message: MavMessage::FileTransferProtocol(m),
+        ..
+    }) = a.poll_transmit()
+    else {
+        panic!("no request")
+    };
+    assert_eq!(Payload::decode(&m.payload).unwrap().seq, 0, "wraps");
+    assert_eq!(a.last_seq(), 0);
 }
 
 #[test]
@@ -667,6 +689,87 @@ fn a_server_sending_nothing_useful_ends_the_read() {
         events.last(),
         Some(&FtpEvent::Finished(Err(FtpError::Protocol)))
     );
+}
+
+/// ArduPilot opens `@PARAM/param.pck` announcing an estimate (12 bytes a parameter) and
+/// ends the file earlier with NAK EndOfFile: the file is what came before it, by burst and
+/// by ReadFile alike.
+#[test]
+fn a_file_shorter_than_announced_ends_at_end_of_file() {
+    for burst in [true, false] {
+        let mut c = FtpClient::new(
+            GCS,
+            VEHICLE,
+            ClientConfig {
+                burst,
+                ..Default::default()
+            },
+        );
+        let now = Instant::from_secs(1);
+        let file = pattern(600);
+        c.read(now, "@PARAM/param.pck").unwrap();
+        let mut events = Vec::new();
+        for _ in 0..50 {
+            let Some(o) = c.poll_transmit() else { break };
+            let MavMessage::FileTransferProtocol(m) = o.message else {
+                panic!()
+            };
+            let req = Payload::decode(&m.payload).unwrap();
+            let at = req.offset as usize;
+            let mut replies = match req.opcode {
+                Opcode::OpenFileRO => {
+                    vec![Payload::request(
+                        0,
+                        1,
+                        Opcode::Ack,
+                        0,
+                        &1200u32.to_le_bytes(),
+                    )]
+                }
+                Opcode::TerminateSession => vec![Payload::request(0, 1, Opcode::Ack, 0, &[])],
+                _ if at >= file.len() => {
+                    vec![Payload::request(0, 1, Opcode::Nak, req.offset, &[6])]
+                }
+                Opcode::BurstReadFile => file[at..]
+                    .chunks(239)
+                    .enumerate()
+                    .map(|(i, chunk)| {
+                        let mut p =
+                            Payload::request(0, 1, Opcode::Ack, (at + i * 239) as u32, chunk);
+                        p.burst_complete = at + (i + 1) * 239 >= file.len();
+                        p
+                    })
+                    .collect(),
+                _ => {
+                    let end = (at + 239).min(file.len());
+                    vec![Payload::request(
+                        0,
+                        1,
+                        Opcode::Ack,
+                        req.offset,
+                        &file[at..end],
+                    )]
+                }
+            };
+            for reply in &mut replies {
+                reply.seq = req.seq.wrapping_add(1);
+                reply.req_opcode = req.opcode;
+                let msg = MavMessage::FileTransferProtocol(FileTransferProtocol {
+                    target_network: 0,
+                    target_system: GCS.system,
+                    target_component: GCS.component,
+                    payload: reply.encode(),
+                });
+                c.handle_message(now, VEHICLE, &msg);
+            }
+            events.extend(core::iter::from_fn(|| c.poll_event()));
+        }
+        assert_eq!(
+            events.last(),
+            Some(&FtpEvent::Finished(Ok(FtpOutput::Data(file.clone())))),
+            "burst {burst}"
+        );
+    }
 }
 
 /// A new session takes the number the client asked for when it is free (ArduPilot does the
