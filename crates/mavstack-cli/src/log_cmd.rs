@@ -27,6 +27,12 @@ pub(crate) enum LogAction {
     Plot(PlotArgs),
     /// A smaller log with exactly the frames selected, bytes and timestamps unchanged.
     Filter(FilterArgs),
+    /// A vehicle's logs (LOG_REQUEST_LIST): id, size and time; with `--json` one
+    /// `{"id","size","time_utc","time"}` object per log.
+    List(crate::log_download_cmd::ListArgs),
+    /// Download a vehicle's logs as `log_<ID>.bin` (LOG_REQUEST_DATA with lost chunks asked
+    /// for again, or MAVFTP where the vehicle keeps them as files).
+    Download(crate::log_download_cmd::DownloadArgs),
 }
 
 /// `mavstack log summary`.
@@ -74,6 +80,8 @@ pub(crate) fn run(action: LogAction) -> Result<(), Failure> {
         LogAction::Summary(args) => summary(&args),
         LogAction::Plot(args) => plot(&args),
         LogAction::Filter(args) => filter(&args),
+        LogAction::List(args) => crate::log_download_cmd::list(&args),
+        LogAction::Download(args) => crate::log_download_cmd::download(&args),
     }
 }
 

@@ -15,6 +15,7 @@ mod ftp_cmd;
 mod gcs_cmd;
 mod link_cmd;
 mod log_cmd;
+mod log_download_cmd;
 mod log_plot;
 mod log_reader;
 mod logging;
@@ -90,7 +91,8 @@ enum Command {
     /// Forward between many links, each with its own MAVLink version and signing, converting
     /// where they differ (runs until interrupted).
     Router(router_cmd::RouterArgs),
-    /// Logs: a summary, plots of fields, a smaller log of the frames selected.
+    /// Logs: a summary, plots of fields, a smaller log of the frames selected; a vehicle's
+    /// logs listed and downloaded.
     Log {
         #[command(subcommand)]
         action: log_cmd::LogAction,

@@ -1,6 +1,7 @@
 //! Progress on stderr for the long file commands (indicatif): a bar over a file's bytes
-//! (`decode`, `log ...`: files of 4 MB or more), a bar over frames (`replay`), a counter
-//! (`record`). Drawn only when stderr is a terminal: never when piped, redirected or in tests.
+//! (`decode`, `log ...`: files of 4 MB or more), a bar over bytes coming over a link (`log
+//! download`), a bar over frames (`replay`), a counter (`record`). Drawn only when stderr is
+//! a terminal: never when piped, redirected or in tests.
 
 use std::io::IsTerminal as _;
 
@@ -20,6 +21,17 @@ impl Progress {
         Self::drawn(
             what,
             total >= MIN_BYTES,
+            Some(total),
+            "{msg} [{bar:32}] {binary_bytes}/{binary_total_bytes} {binary_bytes_per_sec} {eta}",
+        )
+    }
+
+    /// A bar labelled `what` for `total` bytes coming over a link (drawn whatever the size:
+    /// a link is slow).
+    pub(crate) fn transfer(what: &str, total: u64) -> Self {
+        Self::drawn(
+            what,
+            true,
             Some(total),
             "{msg} [{bar:32}] {binary_bytes}/{binary_total_bytes} {binary_bytes_per_sec} {eta}",
         )

@@ -21,6 +21,7 @@ use tokio::sync::mpsc;
 
 use crate::link_cmd::{interrupted, runtime};
 use crate::{Failure, other};
+use mavstack_sim::logs::LogDir;
 use mavstack_sim::{Autopilot, SimConfig, params};
 
 /// `--autopilot NAME` (the names [`Autopilot`]'s `FromStr` takes).
@@ -91,6 +92,12 @@ pub(crate) struct VehicleArgs {
     /// With --ftp-root: let clients create, write, rename and remove files and directories.
     #[arg(long, requires = "ftp_root")]
     ftp_writable: bool,
+    /// Serve this directory's files as the vehicle's logs (log download: LOG_REQUEST_LIST,
+    /// LOG_REQUEST_DATA), numbered from 1 in name order, and over MAVFTP as
+    /// /APM/LOGS/00000001.BIN, ... as ArduPilot keeps them; without it, two generated logs
+    /// (LOG_* only). LOG_ERASE hides them; the files stay.
+    #[arg(long, value_name = "DIR")]
+    log_dir: Option<std::path::PathBuf>,
     /// Print what happens (link versions, handshakes, rejections, modes, parameter sets,
     /// plans) to stderr.
     #[arg(long, short)]
@@ -216,6 +223,14 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
             })
         })
         .transpose()?;
+    let log_dir = args
+        .log_dir
+        .as_ref()
+        .map(|dir| {
+            LogDir::new(dir)
+                .map_err(|e| Failure::Input(anyhow!("--log-dir {}: {e}", dir.display())))
+        })
+        .transpose()?;
     // The vehicle's own MAVFTP server serves them beside `@PARAM/param.pck`.
     let config = SimConfig {
         own: Address::new(args.sysid, args.compid),
@@ -226,6 +241,7 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
         data_streams_only: false,
         ftp: true,
         ftp_files: files,
+        log_dir,
     };
     runtime()?.block_on(async {
         let log = stderr_log(args.verbose);

@@ -41,7 +41,10 @@ fn pymavlink_reads_the_packed_parameters_as_param_request_list_gives_them() {
         "ok upload: mavstack param load --via ftp set 4 parameters",
         "ok upload: mavstack param load --via set set 4 parameters",
     ] {
-        assert!(out.lines().any(|l| l.starts_with(upload)), "{upload}:\n{out}");
+        assert!(
+            out.lines().any(|l| l.starts_with(upload)),
+            "{upload}:\n{out}"
+        );
     }
 }
 

@@ -45,6 +45,7 @@
 //! | [`mission`] | MISSION_COUNT, MISSION_REQUEST_INT, MISSION_ITEM_INT, MISSION_ACK, ... | [`mission::MissionClient`] | [`mission::MissionServer`] |
 //! | [`stream`] | SET_MESSAGE_INTERVAL, REQUEST_MESSAGE, MESSAGE_INTERVAL | [`stream::Subscriptions`], [`stream::set_message_interval`], [`stream::request_message`] | [`stream::StreamScheduler`], [`stream::StreamServer`] (a whole service) |
 //! | [`ftp`] | FILE_TRANSFER_PROTOCOL | [`ftp::FtpClient`] | [`ftp::FtpServer`] over a [`ftp::Backend`] ([`ftp::MemoryBackend`]) |
+//! | [`log_transfer`] | LOG_REQUEST_LIST, LOG_ENTRY, LOG_REQUEST_DATA, LOG_DATA, LOG_ERASE, LOG_REQUEST_END | [`log_transfer::LogClient`] (list, download with gaps asked again, erase) | [`log_transfer::LogServer`] over a [`log_transfer::LogStore`] ([`log_transfer::MemoryLogs`]), paced per tick |
 //! | [`plan`] | — | [`plan::to_vehicle`], [`plan::from_vehicle`], [`plan::same`]: a plan file's mission as each autopilot stores it (ArduPilot's home at 0, PX4's none) | — |
 //! | [`statustext`] | STATUSTEXT | [`statustext::Lines`] (chunks put together, text made safe to show) | — |
 //! | [`timesync`] | TIMESYNC | [`timesync::Timesync`] (estimates the offset) | the same type answers requests |
@@ -128,6 +129,7 @@ pub mod command;
 pub mod ftp;
 mod fuzzing;
 pub mod heartbeat;
+pub mod log_transfer;
 pub mod mission;
 #[cfg(feature = "json")]
 pub mod mission_json;

@@ -6,11 +6,13 @@
 //! [`Vehicle`] puts the server roles of `mavstack-services` together around a kinematic
 //! craft ([`flight::Flight`]): a [`CommandServer`] whose handler flies the craft, a
 //! [`ParamServer`] with the flavour's table (or a file's), a [`MissionServer`] whose plan the
-//! craft flies in mission mode, a [`StreamScheduler`] for telemetry rates, and TIMESYNC. Like
+//! craft flies in mission mode, a [`StreamScheduler`] for telemetry rates, TIMESYNC, MAVFTP,
+//! and log download (LOG_*) of its [`logs`] (a directory's files, or generated ones). Like
 //! every service it takes decoded messages and the time, and hands out messages to send:
 //! the caller moves them over its links (`mavstack vehicle` over a `mavstack-channel` link).
 
 pub mod flight;
+pub mod logs;
 pub mod modes;
 pub mod params;
 
@@ -62,6 +64,7 @@ use mavstack_dialects::common::{
 use mavstack_services::command::{Command, CommandHandler, CommandServer, Request, Response};
 use mavstack_services::ftp::param_pck::TableFile;
 use mavstack_services::ftp::{DirBackend, FtpServer, Overlay, ServerConfig};
+use mavstack_services::log_transfer::{LogServer, LogServerEvent};
 use mavstack_services::mission::{MissionServer, MissionServerEvent};
 use mavstack_services::param::{Encoding, Name, ParamServer, ParamServerEvent, Value};
 use mavstack_services::stream::{self, Interval, StreamScheduler, request_message};
@@ -103,6 +106,10 @@ pub struct SimConfig {
     /// With [`ftp`](Self::ftp): the directory served beside `@PARAM` (`mavstack vehicle
     /// --ftp-root`); `None`, an empty read-only root.
     pub ftp_files: Option<DirBackend>,
+    /// The logs it serves by log download (LOG_*): a directory's files (`mavstack vehicle
+    /// --log-dir`), also over MAVFTP as `APM/LOGS/00000001.BIN`, ... when [`ftp`](Self::ftp)
+    /// is on; `None`, the [`logs::GENERATED`] logs (LOG_* only).
+    pub log_dir: Option<logs::LogDir>,
 }
 
 /// The messages the vehicle streams and their default intervals (`None`: on request only).
@@ -554,7 +561,8 @@ impl CommandHandler for Craft {
 }
 
 /// The vehicle's MAVFTP server: `@PARAM/param.pck` over the served directory, if any.
-type Files = FtpServer<Overlay<DirBackend, TableFile>>;
+/// The logs of a [`logs::LogDir`] are a second overlay, under it.
+type Files = FtpServer<Overlay<Overlay<DirBackend, logs::LogFiles>, TableFile>>;
 
 /// The simulated vehicle; see the [module docs](self).
 #[derive(Debug)]
@@ -564,6 +572,8 @@ pub struct Vehicle {
     params: ParamServer,
     /// MAVFTP (with [`SimConfig::ftp`]).
     files: Option<Files>,
+    /// Log download (LOG_*).
+    logs: LogServer<logs::SimLogs>,
     missions: MissionServer,
     timesync: Timesync,
     out: VecDeque<Outgoing>,
@@ -585,13 +595,16 @@ impl Vehicle {
             // A table from `params::load` has fewer than 65,535 entries.
             let _ = params.insert(name, value);
         }
+        let logs = logs::SimLogs::new(config.log_dir);
+        let log_files = logs.ftp_view();
         let files = config.ftp.then(|| {
             let table: Vec<(Name, Value)> = params.iter().copied().collect();
             let provider = TableFile::new(&table);
-            let overlay = match config.ftp_files {
-                Some(dir) => Overlay::new(dir, provider),
-                None => Overlay::alone(provider),
+            let under = match config.ftp_files {
+                Some(dir) => Overlay::new(dir, log_files),
+                None => Overlay::alone(log_files),
             };
+            let overlay = Overlay::new(under, provider);
             FtpServer::new(config.own, ServerConfig::default(), overlay)
         });
         let mut streams = StreamScheduler::new();
@@ -613,6 +626,7 @@ impl Vehicle {
             commands: CommandServer::new(config.own, Default::default(), craft),
             params,
             files,
+            logs: LogServer::new(config.own, Default::default(), logs),
             missions: MissionServer::new(config.own, Default::default()),
             timesync: Timesync::new(TimesyncConfig {
                 interval: None,
@@ -714,6 +728,9 @@ impl Vehicle {
         self.params.handle_message(now, from, message);
         self.missions.handle_message(now, from, message);
         self.timesync.handle_message(now, from, message);
+        if self.logs.handle_message(now, from, message) {
+            self.note_logs();
+        }
         if let Some(files) = &mut self.files {
             files.handle_message(now, from, message);
         }
@@ -730,6 +747,7 @@ impl Vehicle {
         self.params.handle_timeout(now);
         self.missions.handle_timeout(now);
         self.timesync.handle_timeout(now);
+        self.logs.handle_timeout(now);
         if let Some(files) = &mut self.files {
             files.handle_timeout(now);
         }
@@ -852,6 +870,31 @@ impl Vehicle {
         self.log.push_back(text);
     }
 
+    /// Says what the log server did (a download's first request, not each gap's).
+    fn note_logs(&mut self) {
+        while let Some(e) = self.logs.poll_event() {
+            let line = match e {
+                LogServerEvent::Listing { to, entries } => {
+                    format!("log list: {entries} entries to {to}")
+                }
+                LogServerEvent::Sending {
+                    to,
+                    id,
+                    ofs: 0,
+                    bytes,
+                } => {
+                    format!("log {id}: sending {bytes} bytes to {to}")
+                }
+                LogServerEvent::NoSuchLog { from, id } => {
+                    format!("log {id} asked by {from}: there is none")
+                }
+                LogServerEvent::Erased { by } => format!("logs erased by {by}"),
+                _ => continue,
+            };
+            self.log.push_back(line);
+        }
+    }
+
     fn broadcast(&mut self, message: MavMessage) {
         self.out.push_back(Outgoing {
             target: Address::BROADCAST,
@@ -873,6 +916,7 @@ impl Vehicle {
             .or_else(|| self.missions.poll_transmit())
             .or_else(|| self.timesync.poll_transmit())
             .or_else(|| self.files.as_mut().and_then(Service::poll_transmit))
+            .or_else(|| self.logs.poll_transmit())
     }
 
     /// When [`Vehicle::handle_timeout`] is next due.
@@ -884,6 +928,7 @@ impl Vehicle {
             self.missions.poll_timeout(),
             self.timesync.poll_timeout(),
             self.files.as_ref().and_then(Service::poll_timeout),
+            self.logs.poll_timeout(),
         ]
         .into_iter()
         .flatten()

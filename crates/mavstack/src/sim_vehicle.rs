@@ -105,7 +105,7 @@ impl Service for Narrated {
 
 impl SimVehicle {
     /// A system 1, component 1 vehicle of `autopilot`'s flavour with `params`, advertising
-    /// MAVLink 2, serving MAVFTP (`@PARAM/param.pck` only).
+    /// MAVLink 2, serving MAVFTP (`@PARAM/param.pck` only) and its generated logs (LOG_*).
     #[must_use]
     pub const fn config(autopilot: Autopilot, params: Vec<(Name, Value)>) -> SimConfig {
         SimConfig {
@@ -120,6 +120,7 @@ impl SimVehicle {
             data_streams_only: false,
             ftp: true,
             ftp_files: None,
+            log_dir: None,
         }
     }
 

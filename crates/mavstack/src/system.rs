@@ -42,6 +42,10 @@ use mavstack_services::ftp::{
     ClientConfig as FtpConfig, DirEntry, FtpClient, FtpError, FtpEvent, FtpOutput, StartError,
 };
 use mavstack_services::heartbeat::{HeartbeatConfig, HeartbeatEvent, Heartbeats, Peer};
+use mavstack_services::log_transfer::{
+    ClientConfig as LogConfig, LogClient, LogError, LogEvent, LogInfo, LogOutput,
+    StartError as LogStartError,
+};
 use mavstack_services::mission::transfer::{Download, Upload};
 use mavstack_services::mission::{MissionClient, MissionConfig, MissionError, MissionEvent};
 use mavstack_services::param::list::ListFetch;
@@ -128,6 +132,20 @@ pub enum SystemError {
         what: String,
         /// Why.
         source: FtpError,
+    },
+    /// A log download operation (LOG_*) failed.
+    #[error("log {what}: {source}")]
+    Log {
+        /// Which (list, download of an id, erase).
+        what: String,
+        /// Why.
+        source: LogError,
+    },
+    /// The vehicle lists no log with this id.
+    #[error("the vehicle lists no log {id}")]
+    NoSuchLog {
+        /// The id asked for.
+        id: u16,
     },
     /// The packed parameter file (`@PARAM/param.pck`) read over MAVFTP is not one.
     #[error("{path}: {source}")]
@@ -259,6 +277,8 @@ pub struct System {
     lines: Lines,
     /// STATUSTEXT lines of the target since the current command started.
     said: Vec<String>,
+    /// Its logs as last listed ([`System::log_list`]).
+    logs: Option<Vec<LogInfo>>,
     /// Where the next MAVFTP client starts its sequence numbers (see
     /// [`FtpClient::starting_after`]): from the clock at first, then where the last stopped.
     ftp_seq: u16,
@@ -332,6 +352,7 @@ impl System {
             retries: PATIENT_RETRIES,
             lines: Lines::default(),
             said: Vec::new(),
+            logs: None,
             ftp_seq: clock_seed(),
         };
         if found_in == Version::V1 {
@@ -1240,8 +1261,7 @@ impl System {
             attempts: self.retries.saturating_add(1),
             ..FtpConfig::default()
         };
-        let mut client =
-            FtpClient::new(self.own, self.target, config).starting_after(self.ftp_seq);
+        let mut client = FtpClient::new(self.own, self.target, config).starting_after(self.ftp_seq);
         start(&mut client, clock::now())
             .map_err(|e| SystemError::Busy(format!("ftp {what}: {e}")))?;
         let result = self
@@ -1258,6 +1278,131 @@ impl System {
         // The next operation's client starts past this one's numbers.
         self.ftp_seq = client.last_seq().wrapping_add(1);
         result?.map_err(|source| SystemError::Ftp { what, source })
+    }
+
+    // ----- logs (LOG_*) ---------------------------------------------------------------------
+
+    fn log_client(&self) -> LogClient {
+        let config = LogConfig {
+            attempts: self.retries.max(1),
+            ..LogConfig::default()
+        };
+        LogClient::new(self.target, config)
+    }
+
+    /// Runs one log operation, started by `start`, to its end (`limit` at most).
+    async fn log_op(
+        &mut self,
+        what: String,
+        limit: Duration,
+        start: impl FnOnce(&mut LogClient, mavstack_core::time::Instant) -> Result<(), LogStartError>,
+        mut progress: impl FnMut(u64, u64),
+    ) -> Result<LogOutput, SystemError> {
+        let mut client = self.log_client();
+        start(&mut client, clock::now())
+            .map_err(|e| SystemError::Busy(format!("log {what}: {e}")))?;
+        let result = self
+            .run(&mut client, limit, |c| {
+                core::iter::from_fn(|| c.poll_event()).find_map(|e| match e {
+                    LogEvent::Progress { done, total } => {
+                        progress(done, total);
+                        None
+                    }
+                    LogEvent::Finished(result) => Some(result),
+                })
+            })
+            .await;
+        // Given up on (the limit, the node stopping): the vehicle is told to stop sending.
+        if client.is_busy() {
+            client.cancel();
+        }
+        while let Some(out) = client.poll_transmit() {
+            self.node.send_on(self.link, &out.message).await;
+        }
+        result?.map_err(|source| SystemError::Log { what, source })
+    }
+
+    /// The system's logs (LOG_REQUEST_LIST), by id; remembered for
+    /// [`log_download`](Self::log_download). Entries lost on the way are asked for again.
+    ///
+    /// # Errors
+    /// [`SystemError::Log`] (no answer, or entries still missing, after the retries),
+    /// [`SystemError::Timeout`] (2 minutes), [`SystemError::Stopped`].
+    pub async fn log_list(&mut self) -> Result<Vec<LogInfo>, SystemError> {
+        let output = self
+            .log_op(
+                "list".to_owned(),
+                Duration::from_secs(120),
+                |c, now| c.list(now),
+                |_, _| {},
+            )
+            .await?;
+        let LogOutput::Entries(entries) = output else {
+            return Err(SystemError::Busy(
+                "log list: the log client reported another operation".to_owned(),
+            ));
+        };
+        self.logs = Some(entries.clone());
+        Ok(entries)
+    }
+
+    /// Log `id`'s bytes (LOG_REQUEST_DATA, gaps asked for again), telling `progress` (bytes so
+    /// far, size) as they come. Its size is the one of the last [`log_list`](Self::log_list)
+    /// (listed first if there was none, or it did not have `id`); never more than that is
+    /// kept, and less when the vehicle ends the log earlier (sizes may be approximate).
+    ///
+    /// # Errors
+    /// [`SystemError::NoSuchLog`], [`SystemError::Log`] (nothing new for the retries'
+    /// time), [`SystemError::Busy`] (a log above 512 MiB), [`SystemError::Timeout`]
+    /// (6 hours), [`SystemError::Stopped`].
+    pub async fn log_download(
+        &mut self,
+        id: u16,
+        progress: impl FnMut(u64, u64),
+    ) -> Result<Vec<u8>, SystemError> {
+        let listed = |logs: &Option<Vec<LogInfo>>| {
+            logs.as_ref()
+                .and_then(|l| l.iter().find(|e| e.id == id).copied())
+        };
+        let entry = match listed(&self.logs) {
+            Some(entry) => entry,
+            None => {
+                self.log_list().await?;
+                listed(&self.logs).ok_or(SystemError::NoSuchLog { id })?
+            }
+        };
+        let output = self
+            .log_op(
+                format!("download {id}"),
+                Duration::from_secs(6 * 3600),
+                |c, now| c.download(now, entry.id, entry.size),
+                progress,
+            )
+            .await?;
+        match output {
+            LogOutput::Data(bytes) => Ok(bytes),
+            _ => Err(SystemError::Busy(format!(
+                "log download {id}: the log client reported another operation"
+            ))),
+        }
+    }
+
+    /// Erases every log (LOG_ERASE), then lists them to see that none is left (LOG_ERASE
+    /// has no answer), sending LOG_ERASE again while some are.
+    ///
+    /// # Errors
+    /// [`SystemError::Log`] (logs still listed: [`LogError::NotErased`]; no answer to the
+    /// list), [`SystemError::Timeout`] (2 minutes), [`SystemError::Stopped`].
+    pub async fn log_erase(&mut self) -> Result<(), SystemError> {
+        self.logs = None;
+        self.log_op(
+            "erase".to_owned(),
+            Duration::from_secs(120),
+            |c, now| c.erase(now),
+            |_, _| {},
+        )
+        .await
+        .map(drop)
     }
 
     // ----- the driver ----------------------------------------------------------------------

@@ -295,7 +295,7 @@ pub fn encode_with(
 /// use mavstack_services::param::{Name, Value};
 /// let table = vec![(Name::new("RTL_ALT").unwrap(), Value::I32(2000))];
 /// let bytes = param_pck::encode_upload(&table).unwrap();
-/// assert_eq!(&bytes[..6], &[0x1b, 0x67, 1, 0, 15, 0]);
+/// assert_eq!(&bytes[..6], &[0x1b, 0x67, 1, 0, 19, 0]);
 /// assert_eq!(param_pck::decode_upload(&bytes).unwrap(), table);
 /// ```
 pub fn encode_upload(table: &[(Name, Value)]) -> Result<Vec<u8>, EncodeError> {

@@ -1,0 +1,348 @@
+//! `mavstack log list | download`: a vehicle's logs, over `mavstack::system::System`
+//! (`log_list`, `log_download`: LOG_REQUEST_LIST / LOG_REQUEST_DATA, gaps asked for again)
+//! or, where the vehicle keeps them as files (`APM/LOGS/00000001.BIN`, as ArduPilot), over
+//! MAVFTP (`docs/contracts/cli.md`, "Log download").
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::anyhow;
+use clap::{ArgGroup, Args, ValueEnum};
+use mavstack::services::ftp::{EntryKind, crc32};
+use mavstack::services::log_transfer::LogInfo;
+use mavstack::system::{PATIENT_RETRIES, System, SystemError};
+use mavstack_dialects::common::MavProtocolCapability;
+use serde_json::json;
+
+use crate::gcs_cmd::{Remote, RemoteArgs, print_lines};
+use crate::link_cmd::runtime;
+use crate::progress::Progress;
+use crate::{Failure, other};
+
+/// `mavstack log list`.
+#[derive(Debug, Args)]
+pub(crate) struct ListArgs {
+    #[command(flatten)]
+    remote: RemoteArgs,
+}
+
+/// `mavstack log download`.
+#[derive(Debug, Args)]
+#[command(group(ArgGroup::new("which").required(true).args(["ids", "latest", "all"])))]
+pub(crate) struct DownloadArgs {
+    #[command(flatten)]
+    remote: RemoteArgs,
+    /// The logs to download, by id (as `log list` shows them).
+    ids: Vec<u16>,
+    /// The newest log (the highest id).
+    #[arg(long)]
+    latest: bool,
+    /// Every log.
+    #[arg(long)]
+    all: bool,
+    /// The directory to write them to, as `log_<ID>.bin` (made if missing).
+    #[arg(long, value_name = "DIR", default_value = ".")]
+    out: PathBuf,
+    /// How: `auto` (MAVFTP for a log the vehicle keeps as `APM/LOGS/<ID>.BIN` of the listed
+    /// size when AUTOPILOT_VERSION advertises MAVFTP, LOG_REQUEST_DATA otherwise or when
+    /// MAVFTP fails), `ftp` or `log`.
+    #[arg(long, value_enum, default_value_t = Via::Auto)]
+    via: Via,
+}
+
+/// How `log download` fetches a log.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub(crate) enum Via {
+    /// MAVFTP where the vehicle offers the file, LOG_REQUEST_DATA otherwise.
+    Auto,
+    /// MAVFTP only (`/APM/LOGS/<ID>.BIN`, ids and sizes from its listing).
+    Ftp,
+    /// LOG_REQUEST_DATA only.
+    Log,
+}
+
+/// Where ArduPilot keeps its logs on its MAVFTP server.
+const FTP_DIR: &str = "/APM/LOGS";
+
+/// How long `--via auto` waits for AUTOPILOT_VERSION.
+const CAPABILITIES_WAIT: core::time::Duration = core::time::Duration::from_secs(2);
+
+/// Retries per MAVFTP request when `--via auto` can still fall back.
+const AUTO_FTP_RETRIES: u8 = 3;
+
+/// A log's MAVFTP path: `/APM/LOGS/00000001.BIN` for 1.
+fn ftp_path(id: u16) -> String {
+    format!("{FTP_DIR}/{id:08}.BIN")
+}
+
+/// `(year, month, day)` of a day counted from 1970-01-01 (the proleptic Gregorian
+/// calendar; H. Hinnant's `civil_from_days`).
+fn civil(days: i64) -> (i64, u32, u32) {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = (doy - (153 * mp + 2) / 5 + 1) as u32;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    (year, month, day)
+}
+
+/// A LOG_ENTRY time as `2023-11-14T22:13:20Z`; `None` for 0 (not known).
+fn utc_text(secs: u32) -> Option<String> {
+    if secs == 0 {
+        return None;
+    }
+    let secs = i64::from(secs);
+    let (y, mo, d) = civil(secs.div_euclid(86_400));
+    let t = secs.rem_euclid(86_400);
+    Some(format!(
+        "{y:04}-{mo:02}-{d:02}T{:02}:{:02}:{:02}Z",
+        t / 3600,
+        t / 60 % 60,
+        t % 60
+    ))
+}
+
+pub(crate) fn list(args: &ListArgs) -> Result<(), Failure> {
+    runtime()?.block_on(async {
+        let mut remote = Remote::connect(&args.remote).await?;
+        let began = remote.elapsed();
+        let result = remote.system.log_list().await;
+        let seconds = remote.since(began);
+        remote.close().await?;
+        let entries = result.map_err(other)?;
+        let lines: Vec<String> = if args.remote.json {
+            entries
+                .iter()
+                .map(|e| {
+                    json!({"id": e.id, "size": e.size, "time_utc": e.time_utc, "time": utc_text(e.time_utc)})
+                        .to_string()
+                })
+                .collect()
+        } else if entries.is_empty() {
+            Vec::new()
+        } else {
+            core::iter::once(format!("{:>5}  {:>12}  time (UTC)", "id", "size"))
+                .chain(entries.iter().map(|e| {
+                    let time = utc_text(e.time_utc).unwrap_or_else(|| "-".to_owned());
+                    format!("{:>5}  {:>12}  {time}", e.id, e.size)
+                }))
+                .collect()
+        };
+        print_lines(&lines)?;
+        if !args.remote.json {
+            eprintln!("log list: {} logs in {seconds:.2} s", entries.len());
+        }
+        Ok(())
+    })
+}
+
+/// The logs MAVFTP shows in `/APM/LOGS` (files named `<8 digits>.BIN`), as entries (time 0).
+async fn ftp_logs(system: &mut System) -> Result<Vec<LogInfo>, SystemError> {
+    let mut logs: Vec<LogInfo> = system
+        .ftp_list(FTP_DIR)
+        .await?
+        .into_iter()
+        .filter_map(|e| {
+            let EntryKind::File { size } = e.kind else {
+                return None;
+            };
+            let digits = e.name.strip_suffix(".BIN")?;
+            if digits.len() != 8 || !digits.bytes().all(|b| b.is_ascii_digit()) {
+                return None;
+            }
+            Some(LogInfo {
+                id: digits.parse().ok()?,
+                time_utc: 0,
+                size: u32::try_from(size).ok()?,
+            })
+        })
+        .collect();
+    logs.sort_by_key(|l| l.id);
+    Ok(logs)
+}
+
+/// A log's bytes over MAVFTP, checked against the server's CRC32 of the file.
+async fn by_ftp(
+    system: &mut System,
+    id: u16,
+    progress: impl FnMut(u64, u64),
+) -> Result<Vec<u8>, Failure> {
+    let path = ftp_path(id);
+    let data = system.ftp_read(&path, progress).await.map_err(other)?;
+    let theirs = system.ftp_crc32(&path).await.map_err(other)?;
+    let ours = crc32(0, &data);
+    if ours != theirs {
+        return Err(other(format!(
+            "{path}: CRC32 {ours:08x} of what arrived, the server's is {theirs:08x}"
+        )));
+    }
+    Ok(data)
+}
+
+/// Writes `data` as `dir/log_<id>.bin`, through a `.part` file renamed when complete.
+fn write_log(dir: &Path, id: u16, data: &[u8]) -> Result<PathBuf, Failure> {
+    let to = dir.join(format!("log_{id}.bin"));
+    let part = dir.join(format!("log_{id}.bin.part"));
+    std::fs::write(&part, data)
+        .and_then(|()| std::fs::rename(&part, &to))
+        .map_err(|e| other(format!("cannot write {}: {e}", to.display())))?;
+    Ok(to)
+}
+
+pub(crate) fn download(args: &DownloadArgs) -> Result<(), Failure> {
+    std::fs::create_dir_all(&args.out)
+        .map_err(|e| Failure::Input(anyhow!("--out {}: {e}", args.out.display())))?;
+    runtime()?.block_on(async {
+        let mut remote = Remote::connect(&args.remote).await?;
+        let began = remote.elapsed();
+        let result = download_all(&mut remote.system, args).await;
+        let seconds = remote.since(began);
+        remote.close().await?;
+        let (lines, count) = result?;
+        print_lines(&lines)?;
+        if !args.remote.json {
+            eprintln!("log download: {count} logs in {seconds:.2} s");
+        }
+        Ok(())
+    })
+}
+
+/// Lists, picks and downloads; the lines to print and the number of logs.
+async fn download_all(
+    system: &mut System,
+    args: &DownloadArgs,
+) -> Result<(Vec<String>, usize), Failure> {
+    // What the vehicle has: its LOG_ENTRY list, or with --via ftp its /APM/LOGS files.
+    let listed = match args.via {
+        Via::Ftp => ftp_logs(system).await.map_err(other)?,
+        Via::Auto | Via::Log => system.log_list().await.map_err(other)?,
+    };
+    let wanted: Vec<LogInfo> = if args.all {
+        listed.clone()
+    } else if args.latest {
+        let newest = listed
+            .iter()
+            .max_by_key(|e| e.id)
+            .ok_or_else(|| other("the vehicle has no logs"))?;
+        vec![*newest]
+    } else {
+        args.ids
+            .iter()
+            .map(|&id| {
+                listed
+                    .iter()
+                    .find(|e| e.id == id)
+                    .copied()
+                    .ok_or_else(|| other(SystemError::NoSuchLog { id }))
+            })
+            .collect::<Result<_, _>>()?
+    };
+    // --via auto: the files MAVFTP offers, by id and size, when it is advertised.
+    let ftp_files: Vec<LogInfo> = match args.via {
+        Via::Ftp => listed,
+        Via::Log => Vec::new(),
+        Via::Auto => {
+            let offered = system
+                .find_capabilities(CAPABILITIES_WAIT)
+                .await
+                .is_some_and(|c| c.contains(MavProtocolCapability::FTP));
+            if offered {
+                system.set_retries(AUTO_FTP_RETRIES);
+                let files = ftp_logs(system).await.unwrap_or_default();
+                system.set_retries(PATIENT_RETRIES);
+                files
+            } else {
+                Vec::new()
+            }
+        }
+    };
+    let mut lines = Vec::new();
+    for entry in &wanted {
+        let id = entry.id;
+        let as_file = ftp_files.iter().any(|f| f.id == id && f.size == entry.size);
+        let mut bar = Progress::transfer(&format!("log {id}"), u64::from(entry.size));
+        let start = Instant::now();
+        let mut via = "log";
+        let mut data = None;
+        if as_file {
+            if args.via == Via::Auto {
+                system.set_retries(AUTO_FTP_RETRIES);
+            }
+            let got = by_ftp(system, id, |done, _| bar.set(done)).await;
+            system.set_retries(PATIENT_RETRIES);
+            match got {
+                Ok(bytes) => {
+                    via = "ftp";
+                    data = Some(bytes);
+                }
+                Err(e) if args.via == Via::Ftp => {
+                    bar.finish();
+                    return Err(e);
+                }
+                Err(Failure::Other(e) | Failure::Input(e)) => {
+                    bar.finish();
+                    eprintln!("log {id}: MAVFTP failed ({e}): LOG_REQUEST_DATA instead");
+                }
+            }
+        }
+        let data = match data {
+            Some(bytes) => bytes,
+            None => {
+                let got = system.log_download(id, |done, _| bar.set(done)).await;
+                bar.finish();
+                got.map_err(other)?
+            }
+        };
+        bar.finish();
+        let seconds = start.elapsed().as_secs_f64();
+        let to = write_log(&args.out, id, &data)?;
+        let kib_s = if seconds > 0.0 {
+            data.len() as f64 / 1024.0 / seconds
+        } else {
+            0.0
+        };
+        lines.push(if args.remote.json {
+            json!({"id": id, "file": to.display().to_string(), "bytes": data.len(),
+                   "seconds": (seconds * 1e6).round() / 1e6,
+                   "kib_per_s": (kib_s * 10.0).round() / 10.0, "via": via})
+            .to_string()
+        } else {
+            format!(
+                "log {id} → {}: {} bytes in {seconds:.2} s ({kib_s:.1} KiB/s) by {}",
+                to.display(),
+                data.len(),
+                if via == "ftp" {
+                    "MAVFTP"
+                } else {
+                    "LOG_REQUEST_DATA"
+                }
+            )
+        });
+    }
+    Ok((lines, wanted.len()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn times_are_utc_dates() {
+        assert_eq!(utc_text(0), None);
+        assert_eq!(utc_text(1).as_deref(), Some("1970-01-01T00:00:01Z"));
+        assert_eq!(
+            utc_text(1_700_000_000).as_deref(),
+            Some("2023-11-14T22:13:20Z")
+        );
+        assert_eq!(
+            utc_text(951_782_400).as_deref(),
+            Some("2000-02-29T00:00:00Z")
+        );
+        assert_eq!(utc_text(u32::MAX).as_deref(), Some("2106-02-07T06:28:15Z"));
+        assert_eq!(ftp_path(1), "/APM/LOGS/00000001.BIN");
+    }
+}
