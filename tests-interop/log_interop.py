@@ -26,7 +26,7 @@ d. `mavstack log download --all --via log` against a log server written here wit
    20 % of its LOG_DATA (seeded): every gap must be asked for again, the files equal.
 e. `mavstack log list` and `mavstack log download --all` against `mavstack vehicle`, by
    LOG_REQUEST_DATA (`--via log`) and over MAVFTP (`--via ftp`, `/APM/LOGS/0000000N.BIN`),
-   and `--via auto` choosing MAVFTP.
+   and `--via auto` choosing LOG_REQUEST_DATA first.
 
 One `ok ...` or `FAIL ...` line per check, a `throughput` line per download (bytes, seconds,
 KiB/s) and a summary; exit status 1 if anything failed. A peer that cannot be imported or
@@ -584,7 +584,7 @@ def mavstack_steps(binary, port, logs, work):
             got[o["id"]] = o["size"]
         want = {i: len(d) for i, d in logs.items()}
         R.check(f"{tag}: log list --json (id: size)", got == want, f"got {got}")
-    for via, shows in (("log", "log"), ("ftp", "ftp"), ("auto", "ftp")):
+    for via, shows in (("log", "log"), ("ftp", "ftp"), ("auto", "log")):
         out_dir = os.path.join(work, f"e-{via}")
         cmd = [binary, "log", "download", conn, "--all", "--via", via, "--out", out_dir,
                "--json"]

@@ -43,9 +43,9 @@ pub(crate) struct DownloadArgs {
     /// The directory to write them to, as `log_<ID>.bin` (made if missing).
     #[arg(long, value_name = "DIR", default_value = ".")]
     out: PathBuf,
-    /// How: `auto` (MAVFTP for a log the vehicle keeps as `APM/LOGS/<ID>.BIN` of the listed
-    /// size when AUTOPILOT_VERSION advertises MAVFTP, LOG_REQUEST_DATA otherwise or when
-    /// MAVFTP fails), `ftp` or `log`.
+    /// How: `auto` (LOG_REQUEST_DATA, then MAVFTP if that fails and the vehicle keeps the
+    /// log as a file, `APM/LOGS/<ID>.BIN` or `logs/` in SITL, of the listed size), `ftp` or
+    /// `log`. (ArduPilot SITL sent a 578 KB log at 5 MB/s by LOG_DATA, 40 KiB/s by MAVFTP.)
     #[arg(long, value_enum, default_value_t = Via::Auto)]
     via: Via,
 }
@@ -53,16 +53,17 @@ pub(crate) struct DownloadArgs {
 /// How `log download` fetches a log.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub(crate) enum Via {
-    /// MAVFTP where the vehicle offers the file, LOG_REQUEST_DATA otherwise.
+    /// LOG_REQUEST_DATA, then MAVFTP where the vehicle offers the file.
     Auto,
-    /// MAVFTP only (`/APM/LOGS/<ID>.BIN`, ids and sizes from its listing).
+    /// MAVFTP only (`/APM/LOGS/<ID>.BIN`, or `/logs/` as SITL keeps them; ids and sizes from its listing).
     Ftp,
     /// LOG_REQUEST_DATA only.
     Log,
 }
 
-/// Where ArduPilot keeps its logs on its MAVFTP server.
-const FTP_DIR: &str = "/APM/LOGS";
+/// Where ArduPilot keeps its logs on its MAVFTP server: `APM/LOGS` on a board, `logs` in
+/// the working directory of SITL; the first that lists is used.
+const FTP_DIRS: [&str; 2] = ["/APM/LOGS", "/logs"];
 
 /// How long `--via auto` waits for AUTOPILOT_VERSION.
 const CAPABILITIES_WAIT: core::time::Duration = core::time::Duration::from_secs(2);
@@ -70,9 +71,9 @@ const CAPABILITIES_WAIT: core::time::Duration = core::time::Duration::from_secs(
 /// Retries per MAVFTP request when `--via auto` can still fall back.
 const AUTO_FTP_RETRIES: u8 = 3;
 
-/// A log's MAVFTP path: `/APM/LOGS/00000001.BIN` for 1.
-fn ftp_path(id: u16) -> String {
-    format!("{FTP_DIR}/{id:08}.BIN")
+/// A log's MAVFTP path in `dir`: `/APM/LOGS/00000001.BIN` for 1.
+fn ftp_path(dir: &str, id: u16) -> String {
+    format!("{dir}/{id:08}.BIN")
 }
 
 /// `(year, month, day)` of a day counted from 1970-01-01 (the proleptic Gregorian
@@ -140,11 +141,19 @@ pub(crate) fn list(args: &ListArgs) -> Result<(), Failure> {
     })
 }
 
-/// The logs MAVFTP shows in `/APM/LOGS` (files named `<8 digits>.BIN`), as entries (time 0).
-async fn ftp_logs(system: &mut System) -> Result<Vec<LogInfo>, SystemError> {
-    let mut logs: Vec<LogInfo> = system
-        .ftp_list(FTP_DIR)
-        .await?
+/// The logs MAVFTP shows in the first of [`FTP_DIRS`] that lists (files named
+/// `<8 digits>.BIN`), as entries (time 0), and that directory.
+async fn ftp_logs(system: &mut System) -> Result<(&'static str, Vec<LogInfo>), SystemError> {
+    let mut listed = Err(SystemError::Busy(String::new()));
+    let mut dir = FTP_DIRS[0];
+    for d in FTP_DIRS {
+        listed = system.ftp_list(d).await;
+        dir = d;
+        if listed.is_ok() {
+            break;
+        }
+    }
+    let mut logs: Vec<LogInfo> = listed?
         .into_iter()
         .filter_map(|e| {
             let EntryKind::File { size } = e.kind else {
@@ -162,18 +171,39 @@ async fn ftp_logs(system: &mut System) -> Result<Vec<LogInfo>, SystemError> {
         })
         .collect();
     logs.sort_by_key(|l| l.id);
-    Ok(logs)
+    Ok((dir, logs))
+}
+
+/// The log files MAVFTP offers when AUTOPILOT_VERSION advertises it (none otherwise, or
+/// when listing fails), noting their directory in `dir`.
+async fn offered_files(system: &mut System, dir: &mut &'static str) -> Vec<LogInfo> {
+    let offered = system
+        .find_capabilities(CAPABILITIES_WAIT)
+        .await
+        .is_some_and(|c| c.contains(MavProtocolCapability::FTP));
+    if !offered {
+        return Vec::new();
+    }
+    system.set_retries(AUTO_FTP_RETRIES);
+    let files = match ftp_logs(system).await {
+        Ok((d, files)) => {
+            *dir = d;
+            files
+        }
+        Err(_) => Vec::new(),
+    };
+    system.set_retries(PATIENT_RETRIES);
+    files
 }
 
 /// A log's bytes over MAVFTP, checked against the server's CRC32 of the file.
 async fn by_ftp(
     system: &mut System,
-    id: u16,
+    path: &str,
     progress: impl FnMut(u64, u64),
 ) -> Result<Vec<u8>, Failure> {
-    let path = ftp_path(id);
-    let data = system.ftp_read(&path, progress).await.map_err(other)?;
-    let theirs = system.ftp_crc32(&path).await.map_err(other)?;
+    let data = system.ftp_read(path, progress).await.map_err(other)?;
+    let theirs = system.ftp_crc32(path).await.map_err(other)?;
     let ours = crc32(0, &data);
     if ours != theirs {
         return Err(other(format!(
@@ -216,9 +246,14 @@ async fn download_all(
     system: &mut System,
     args: &DownloadArgs,
 ) -> Result<(Vec<String>, usize), Failure> {
-    // What the vehicle has: its LOG_ENTRY list, or with --via ftp its /APM/LOGS files.
+    // What the vehicle has: its LOG_ENTRY list, or with --via ftp its log files.
+    let mut ftp_dir = FTP_DIRS[0];
     let listed = match args.via {
-        Via::Ftp => ftp_logs(system).await.map_err(other)?,
+        Via::Ftp => {
+            let (dir, logs) = ftp_logs(system).await.map_err(other)?;
+            ftp_dir = dir;
+            logs
+        }
         Via::Auto | Via::Log => system.log_list().await.map_err(other)?,
     };
     let wanted: Vec<LogInfo> = if args.all {
@@ -241,61 +276,54 @@ async fn download_all(
             })
             .collect::<Result<_, _>>()?
     };
-    // --via auto: the files MAVFTP offers, by id and size, when it is advertised.
-    let ftp_files: Vec<LogInfo> = match args.via {
-        Via::Ftp => listed,
-        Via::Log => Vec::new(),
-        Via::Auto => {
-            let offered = system
-                .find_capabilities(CAPABILITIES_WAIT)
-                .await
-                .is_some_and(|c| c.contains(MavProtocolCapability::FTP));
-            if offered {
-                system.set_retries(AUTO_FTP_RETRIES);
-                let files = ftp_logs(system).await.unwrap_or_default();
-                system.set_retries(PATIENT_RETRIES);
-                files
-            } else {
-                Vec::new()
-            }
-        }
+    // The files MAVFTP offers, by id and size: listed already for --via ftp, looked for by
+    // --via auto only when LOG_REQUEST_DATA fails.
+    let mut ftp_files: Option<Vec<LogInfo>> = match args.via {
+        Via::Ftp => Some(listed),
+        Via::Log | Via::Auto => None,
     };
     let mut lines = Vec::new();
     for entry in &wanted {
         let id = entry.id;
-        let as_file = ftp_files.iter().any(|f| f.id == id && f.size == entry.size);
         let mut bar = Progress::transfer(&format!("log {id}"), u64::from(entry.size));
         let start = Instant::now();
         let mut via = "log";
         let mut data = None;
-        if as_file {
-            if args.via == Via::Auto {
-                system.set_retries(AUTO_FTP_RETRIES);
-            }
-            let got = by_ftp(system, id, |done, _| bar.set(done)).await;
-            system.set_retries(PATIENT_RETRIES);
-            match got {
-                Ok(bytes) => {
-                    via = "ftp";
-                    data = Some(bytes);
-                }
-                Err(e) if args.via == Via::Ftp => {
+        if args.via != Via::Ftp {
+            match system.log_download(id, |done, _| bar.set(done)).await {
+                Ok(bytes) => data = Some(bytes),
+                Err(e) if args.via == Via::Log => {
                     bar.finish();
-                    return Err(e);
+                    return Err(other(e));
                 }
-                Err(Failure::Other(e) | Failure::Input(e)) => {
+                Err(e) => {
                     bar.finish();
-                    eprintln!("log {id}: MAVFTP failed ({e}): LOG_REQUEST_DATA instead");
+                    eprintln!("log {id}: LOG_REQUEST_DATA failed ({e}): MAVFTP instead");
                 }
             }
         }
-        let data = match data {
-            Some(bytes) => bytes,
-            None => {
-                let got = system.log_download(id, |done, _| bar.set(done)).await;
-                bar.finish();
-                got.map_err(other)?
+        if data.is_none() {
+            if ftp_files.is_none() {
+                ftp_files = Some(offered_files(system, &mut ftp_dir).await);
             }
+            let as_file = ftp_files
+                .iter()
+                .flatten()
+                .any(|f| f.id == id && f.size == entry.size);
+            if !as_file {
+                bar.finish();
+                return Err(other(format!(
+                    "log {id}: not offered as a file of {} bytes over MAVFTP",
+                    entry.size
+                )));
+            }
+            let got = by_ftp(system, &ftp_path(ftp_dir, id), |done, _| bar.set(done)).await;
+            bar.finish();
+            data = Some(got?);
+            via = "ftp";
+        }
+        let Some(data) = data else {
+            return Err(other(format!("log {id}: nothing downloaded")));
         };
         bar.finish();
         let seconds = start.elapsed().as_secs_f64();
@@ -343,6 +371,6 @@ mod tests {
             Some("2000-02-29T00:00:00Z")
         );
         assert_eq!(utc_text(u32::MAX).as_deref(), Some("2106-02-07T06:28:15Z"));
-        assert_eq!(ftp_path(1), "/APM/LOGS/00000001.BIN");
+        assert_eq!(ftp_path(FTP_DIRS[0], 1), "/APM/LOGS/00000001.BIN");
     }
 }

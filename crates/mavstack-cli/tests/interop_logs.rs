@@ -4,7 +4,7 @@
 //! doing LOG_REQUEST_LIST / LOG_REQUEST_DATA itself (with the server's answers to a range, to
 //! a request at the end, to an unknown id and to LOG_REQUEST_END checked), by MAVSDK 4.1.0's
 //! log_files plugin, and by `mavstack log download` (by LOG_DATA, over MAVFTP, and `auto`
-//! choosing MAVFTP); and `mavstack log download` against a log server written with pymavlink
+//! choosing LOG_DATA); and `mavstack log download` against a log server written with pymavlink
 //! that drops 20 % of its LOG_DATA, whose gaps must be asked for again. Every file is
 //! compared with the original byte for byte; the script prints the throughput of each
 //! download.
