@@ -10,11 +10,11 @@ use std::io::Write as _;
 
 use anyhow::anyhow;
 use clap::{Args, Subcommand, ValueEnum};
-use mavstack::system::{System, SystemError, Wanted};
+use mavstack::system::{ParamsVia, System, SystemError, Wanted};
 use mavstack::{LinkSpec, Node};
 use mavstack_channel::SigningConfig;
 use mavstack_dialects::common::{
-    CommandInt, MavCmd, MavFrame, MavMissionType, MavParamType, MavProtocolCapability, MavResult,
+    CommandInt, MavCmd, MavFrame, MavMissionType, MavParamType, MavResult,
 };
 use mavstack_services::Address;
 use mavstack_services::command::{Command, CommandError};
@@ -121,60 +121,35 @@ pub(crate) enum Via {
     List,
 }
 
-/// How long `param list --via auto` waits for AUTOPILOT_VERSION.
-pub(crate) const CAPABILITIES_WAIT: core::time::Duration = core::time::Duration::from_secs(2);
-
-/// Retries per MAVFTP request when `--via auto` can still fall back.
-const AUTO_FTP_RETRIES: u8 = 3;
-
-/// The table over MAVFTP, with progress in bytes.
-async fn params_by_ftp(system: &mut System) -> Result<Vec<(Name, Value)>, SystemError> {
-    let show = showing_progress();
-    system
-        .params_via_ftp_with_progress(|done, total| {
-            if show {
-                eprint!("\r{done}/{total} bytes of @PARAM/param.pck");
-            }
-        })
-        .await
-}
-
-/// The table as `via` says, and how it came.
+/// The table as `via` says, with progress on a terminal, and how it came.
 pub(crate) async fn fetch_params(
     system: &mut System,
     via: Via,
 ) -> Result<(Vec<(Name, Value)>, &'static str), SystemError> {
-    let list = "PARAM_REQUEST_LIST";
-    match via {
-        Via::List => Ok((
-            system.params_with_progress(progress("parameters")).await?,
-            list,
-        )),
-        Via::Ftp => Ok((params_by_ftp(system).await?, "MAVFTP")),
-        Via::Auto => {
-            let offered = system
-                .find_capabilities(CAPABILITIES_WAIT)
-                .await
-                .is_some_and(|c| c.contains(MavProtocolCapability::FTP));
-            if offered {
-                system.set_retries(AUTO_FTP_RETRIES);
-                let got = params_by_ftp(system).await;
-                system.set_retries(mavstack::system::PATIENT_RETRIES);
-                match got {
-                    Ok(table) => return Ok((table, "MAVFTP")),
-                    Err(SystemError::Stopped) => return Err(SystemError::Stopped),
-                    Err(e) => {
-                        end_progress();
-                        eprintln!("MAVFTP failed ({e}): PARAM_REQUEST_LIST instead");
-                    }
+    let via = match via {
+        Via::Auto => ParamsVia::Auto,
+        Via::Ftp => ParamsVia::Ftp,
+        Via::List => ParamsVia::List,
+    };
+    let show = showing_progress();
+    let got = system
+        .params_by(via, |way, done, total| {
+            if show {
+                match way {
+                    ParamsVia::Ftp => eprint!("\r{done}/{total} bytes of @PARAM/param.pck"),
+                    _ => eprint!("\r\x1b[K{done}/{total} parameters"),
                 }
             }
-            Ok((
-                system.params_with_progress(progress("parameters")).await?,
-                list,
-            ))
-        }
-    }
+        })
+        .await;
+    end_progress();
+    let (table, way) = got?;
+    let how = if way == ParamsVia::Ftp {
+        "MAVFTP"
+    } else {
+        "PARAM_REQUEST_LIST"
+    };
+    Ok((table, how))
 }
 
 /// Which plan.

@@ -15,9 +15,11 @@ use mavstack_dialects::common::MavProtocolCapability;
 use mavstack_services::param::{Name, Value};
 use serde_json::json;
 
+use mavstack::system::CAPABILITIES_WAIT;
+
 use crate::gcs_cmd::{
-    CAPABILITIES_WAIT, Remote, RemoteArgs, Via, end_progress, fetch_params, print_lines,
-    showing_progress, typed_value, value_json, value_text,
+    Remote, RemoteArgs, Via, end_progress, fetch_params, print_lines, showing_progress,
+    typed_value, value_json, value_text,
 };
 use crate::{Failure, other};
 

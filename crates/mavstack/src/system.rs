@@ -171,6 +171,26 @@ pub enum SystemError {
     Stopped,
 }
 
+/// How [`System::params_by`] fetches the parameter table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ParamsVia {
+    /// MAVFTP (`@PARAM/param.pck`) when the system's AUTOPILOT_VERSION advertises
+    /// MAV_PROTOCOL_CAPABILITY_FTP (asked for [`CAPABILITIES_WAIT`] at most), with
+    /// [`AUTO_FTP_RETRIES`] per request; PARAM_REQUEST_LIST when it does not, or when the
+    /// download fails.
+    Auto,
+    /// MAVFTP only.
+    Ftp,
+    /// PARAM_REQUEST_LIST only.
+    List,
+}
+
+/// How long [`ParamsVia::Auto`] waits for AUTOPILOT_VERSION.
+pub const CAPABILITIES_WAIT: Duration = Duration::from_secs(2);
+
+/// Retries per MAVFTP request while [`ParamsVia::Auto`] can still fall back.
+pub const AUTO_FTP_RETRIES: u8 = 3;
+
 /// The MAVFTP operations on one path that return nothing ([`System::ftp_simple`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum FtpPathOp {
@@ -669,6 +689,56 @@ impl System {
         })?;
         self.ftp_write(param_pck::PATH, &bytes, progress).await?;
         self.params_via_ftp().await
+    }
+
+    /// The whole parameter table as `via` says, and the way it came ([`ParamsVia::Ftp`] or
+    /// [`ParamsVia::List`]): the same table either way (names, values, types). `progress`
+    /// hears the way, and (done, total) in bytes of the file or in parameters. A fallback
+    /// of [`ParamsVia::Auto`] is logged as a warning with the reason.
+    ///
+    /// # Errors
+    /// Those of [`params_via_ftp`](Self::params_via_ftp) for [`ParamsVia::Ftp`], of
+    /// [`params`](Self::params) otherwise.
+    pub async fn params_by(
+        &mut self,
+        via: ParamsVia,
+        mut progress: impl FnMut(ParamsVia, u64, u64),
+    ) -> Result<(Vec<(Name, Value)>, ParamsVia), SystemError> {
+        let ftp = match via {
+            ParamsVia::Ftp => true,
+            ParamsVia::List => false,
+            ParamsVia::Auto => self
+                .find_capabilities(CAPABILITIES_WAIT)
+                .await
+                .is_some_and(|c| c.contains(MavProtocolCapability::FTP)),
+        };
+        if ftp {
+            let retries = self.retries;
+            if via == ParamsVia::Auto {
+                self.retries = AUTO_FTP_RETRIES;
+            }
+            let got = self
+                .params_via_ftp_with_progress(|done, total| {
+                    progress(ParamsVia::Ftp, done, total);
+                })
+                .await;
+            self.retries = retries;
+            match got {
+                Ok(table) => return Ok((table, ParamsVia::Ftp)),
+                Err(e) if via == ParamsVia::Ftp || matches!(e, SystemError::Stopped) => {
+                    return Err(e);
+                }
+                Err(e) => {
+                    tracing::warn!("MAVFTP failed ({e}): PARAM_REQUEST_LIST instead");
+                }
+            }
+        }
+        let table = self
+            .params_with_progress(|done, total| {
+                progress(ParamsVia::List, done as u64, total as u64);
+            })
+            .await?;
+        Ok((table, ParamsVia::List))
     }
 
     /// One parameter, read by name.

@@ -11,7 +11,7 @@ use mavstack::router::{LinkRole, ProtocolVersionSupport};
 use mavstack::services::param::{Name, Value};
 use mavstack::sim::{Autopilot, SimConfig, params};
 use mavstack::sim_vehicle::SimVehicle;
-use mavstack::system::{System, SystemError, Wanted};
+use mavstack::system::{PATIENT_RETRIES, ParamsVia, System, SystemError, Wanted};
 use mavstack::{LinkSpec, Node};
 
 fn none(_: &str) -> Option<u32> {
@@ -78,6 +78,12 @@ async fn params_via_ftp_equal_params_for_both_flavours() {
             "{autopilot}: {listed:?} != {by_ftp_table:?}"
         );
         assert_eq!(listed.len(), defaults.len());
+        let (auto, way) = v
+            .params_by(ParamsVia::Auto, |_, _, _| {})
+            .await
+            .expect("the table, auto");
+        assert_eq!(way, ParamsVia::Ftp, "{autopilot}: advertised, so by MAVFTP");
+        assert!(same(&listed, &auto), "{autopilot}");
 
         // The file is made from the table as it is when opened.
         let (name, old) = listed
@@ -108,6 +114,14 @@ async fn a_vehicle_without_mavftp_does_not_advertise_it_and_has_no_file() {
     v.set_retries(1);
     let err = v.params_via_ftp().await.expect_err("nobody answers MAVFTP");
     assert!(matches!(err, SystemError::Ftp { .. }), "{err}");
+    // Auto asks nothing of MAVFTP here: the table comes by PARAM_REQUEST_LIST.
+    v.set_retries(PATIENT_RETRIES);
+    let (table, way) = v
+        .params_by(ParamsVia::Auto, |_, _, _| {})
+        .await
+        .expect("the table");
+    assert_eq!(way, ParamsVia::List);
+    assert_eq!(table.len(), params::defaults(Autopilot::Ardupilot).len());
     gcs.shutdown().await.expect("gcs stops");
     vehicle.shutdown().await.expect("vehicle stops");
 }
