@@ -135,6 +135,7 @@ pub mod mission;
 pub mod mission_json;
 pub mod param;
 pub mod plan;
+mod ranges;
 mod rtt;
 pub mod statustext;
 pub mod stream;

@@ -9,6 +9,7 @@ use mavstack_core::time::Instant;
 use mavstack_dialects::common::{FileTransferProtocol, MavMessage};
 
 use super::payload::{DirEntry, MAX_DATA, NakCode, Opcode, Payload, parse_entries};
+use crate::ranges::{subtract, total};
 use crate::rtt::Rtt;
 use crate::{Address, Outgoing, Service};
 
@@ -196,24 +197,6 @@ fn path_bytes(path: &str) -> Result<Vec<u8>, StartError> {
         return Err(StartError::PathTooLong);
     }
     Ok(path.as_bytes().to_vec())
-}
-
-/// Removes `[s, e)` from sorted disjoint ranges.
-fn subtract(ranges: &mut Vec<(u32, u32)>, s: u32, e: u32) {
-    let mut out = Vec::with_capacity(ranges.len() + 1);
-    for &(a, b) in ranges.iter() {
-        if e <= a || b <= s {
-            out.push((a, b));
-            continue;
-        }
-        if a < s {
-            out.push((a, s));
-        }
-        if e < b {
-            out.push((e, b));
-        }
-    }
-    *ranges = out;
 }
 
 impl FtpClient {
@@ -602,7 +585,7 @@ impl FtpClient {
         dst.copy_from_slice(src);
         subtract(&mut r.missing, start, end);
         r.high = r.high.max(end);
-        let left: u64 = r.missing.iter().map(|&(a, b)| u64::from(b - a)).sum();
+        let left: u64 = total(&r.missing);
         let total = u64::from(size);
         self.events.push_back(FtpEvent::Progress {
             done: total - left,
@@ -614,7 +597,7 @@ impl FtpClient {
         let Some(Op::Read(r)) = self.op.as_mut() else {
             return;
         };
-        let left: u64 = r.missing.iter().map(|&(a, b)| u64::from(b - a)).sum();
+        let left: u64 = total(&r.missing);
         if left < r.left {
             r.left = left;
             r.stalls = 0;

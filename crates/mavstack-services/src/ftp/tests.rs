@@ -650,6 +650,36 @@ fn an_oversized_file_is_refused_before_allocating() {
     assert_eq!(w.server.open_sessions(), 0);
 }
 
+/// Runs `c` against a server written as `answer` (the replies to each request, their
+/// sequence numbers and request opcodes filled in), for at most 50 requests; the events.
+fn talk(
+    c: &mut FtpClient,
+    now: Instant,
+    mut answer: impl FnMut(&Payload) -> Vec<Payload>,
+) -> Vec<FtpEvent> {
+    let mut events = Vec::new();
+    for _ in 0..50 {
+        let Some(o) = c.poll_transmit() else { break };
+        let MavMessage::FileTransferProtocol(m) = o.message else {
+            panic!()
+        };
+        let req = Payload::decode(&m.payload).unwrap();
+        for mut reply in answer(&req) {
+            reply.seq = req.seq.wrapping_add(1);
+            reply.req_opcode = req.opcode;
+            let msg = MavMessage::FileTransferProtocol(FileTransferProtocol {
+                target_network: 0,
+                target_system: GCS.system,
+                target_component: GCS.component,
+                payload: reply.encode(),
+            });
+            c.handle_message(now, VEHICLE, &msg);
+        }
+        events.extend(core::iter::from_fn(|| c.poll_event()));
+    }
+    events
+}
+
 #[test]
 fn a_server_sending_nothing_useful_ends_the_read() {
     let mut c = FtpClient::new(
@@ -662,29 +692,13 @@ fn a_server_sending_nothing_useful_ends_the_read() {
     );
     let now = Instant::from_secs(1);
     c.read(now, "f").unwrap();
-    let mut events = Vec::new();
-    for _ in 0..50 {
-        let Some(o) = c.poll_transmit() else { break };
-        let MavMessage::FileTransferProtocol(m) = o.message else {
-            panic!()
-        };
-        let req = Payload::decode(&m.payload).unwrap();
-        let mut reply = match req.opcode {
+    let events = talk(&mut c, now, |req| {
+        vec![match req.opcode {
             Opcode::OpenFileRO => Payload::request(0, 1, Opcode::Ack, 0, &1000u32.to_le_bytes()),
             // Always the wrong place.
             _ => Payload::request(0, 1, Opcode::Ack, req.offset + 1, &[9; 239]),
-        };
-        reply.seq = req.seq.wrapping_add(1);
-        reply.req_opcode = req.opcode;
-        let msg = MavMessage::FileTransferProtocol(FileTransferProtocol {
-            target_network: 0,
-            target_system: GCS.system,
-            target_component: GCS.component,
-            payload: reply.encode(),
-        });
-        c.handle_message(now, VEHICLE, &msg);
-        events.extend(core::iter::from_fn(|| c.poll_event()));
-    }
+        }]
+    });
     assert_eq!(
         events.last(),
         Some(&FtpEvent::Finished(Err(FtpError::Protocol)))
@@ -708,15 +722,9 @@ fn a_file_shorter_than_announced_ends_at_end_of_file() {
         let now = Instant::from_secs(1);
         let file = pattern(600);
         c.read(now, "@PARAM/param.pck").unwrap();
-        let mut events = Vec::new();
-        for _ in 0..50 {
-            let Some(o) = c.poll_transmit() else { break };
-            let MavMessage::FileTransferProtocol(m) = o.message else {
-                panic!()
-            };
-            let req = Payload::decode(&m.payload).unwrap();
+        let events = talk(&mut c, now, |req| {
             let at = req.offset as usize;
-            let mut replies = match req.opcode {
+            match req.opcode {
                 Opcode::OpenFileRO => {
                     vec![Payload::request(
                         0,
@@ -750,20 +758,8 @@ fn a_file_shorter_than_announced_ends_at_end_of_file() {
                         &file[at..end],
                     )]
                 }
-            };
-            for reply in &mut replies {
-                reply.seq = req.seq.wrapping_add(1);
-                reply.req_opcode = req.opcode;
-                let msg = MavMessage::FileTransferProtocol(FileTransferProtocol {
-                    target_network: 0,
-                    target_system: GCS.system,
-                    target_component: GCS.component,
-                    payload: reply.encode(),
-                });
-                c.handle_message(now, VEHICLE, &msg);
             }
-            events.extend(core::iter::from_fn(|| c.poll_event()));
-        }
+        });
         assert_eq!(
             events.last(),
             Some(&FtpEvent::Finished(Ok(FtpOutput::Data(file.clone())))),

@@ -11,6 +11,7 @@ use mavstack_dialects::common::{
 };
 
 use super::{CHUNK, LogInfo};
+use crate::ranges::{subtract, total};
 use crate::rtt::Rtt;
 use crate::{Address, Outgoing, Service};
 
@@ -172,28 +173,6 @@ enum Op {
     List(List),
     Download(Download),
     Erase(Erase),
-}
-
-/// Removes `[s, e)` from sorted disjoint ranges.
-fn subtract(ranges: &mut Vec<(u32, u32)>, s: u32, e: u32) {
-    let mut out = Vec::with_capacity(ranges.len() + 1);
-    for &(a, b) in ranges.iter() {
-        if e <= a || b <= s {
-            out.push((a, b));
-            continue;
-        }
-        if a < s {
-            out.push((a, s));
-        }
-        if e < b {
-            out.push((e, b));
-        }
-    }
-    *ranges = out;
-}
-
-fn left(ranges: &[(u32, u32)]) -> u64 {
-    ranges.iter().map(|&(a, b)| u64::from(b - a)).sum()
 }
 
 /// A MAVLink log client for one vehicle, sans-IO like every [`Service`].
@@ -633,13 +612,13 @@ impl LogClient {
         let end = ofs + n as u64;
         // Only what lies inside the announced size is kept.
         let (s, e) = (ofs.min(size), end.min(size));
-        let before = left(&d.missing);
+        let before = total(&d.missing);
         if s < e {
             let (su, eu) = (s as usize, e as usize);
             d.data[su..eu].copy_from_slice(&m.data[..eu - su]);
             subtract(&mut d.missing, s as u32, e as u32);
         }
-        let now_left = left(&d.missing);
+        let now_left = total(&d.missing);
         let (a, b) = (u64::from(d.asked.0), u64::from(d.asked.1));
         let answers = (a <= ofs && ofs < b) || (n == 0 && ofs == a);
         // A short chunk (or none) before the end of what was asked: the log ends there.
