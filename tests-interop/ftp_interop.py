@@ -36,6 +36,9 @@ import traceback
 os.environ["MAVLINK20"] = "1"
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
+from interop_checks import (  # noqa: E402
+    MAVSDK_LOG, Proc, Results, diff_bytes, free_port, quiet_mavsdk, read,
+)
 
 BURST = 80 * 239  # pymavlink's burst_read_size 80 × 239-byte payloads
 
@@ -74,54 +77,10 @@ def _crc_bitwise(data):
 
 # ---------------------------------------------------------------- results
 
-class Results:
-    def __init__(self):
-        self.failed = []
-        self.passed = 0
-        self.throughput = []
-
-    def ok(self, name, detail=""):
-        self.passed += 1
-        print(f"ok    {name}" + (f": {detail}" if detail else ""), flush=True)
-
-    def fail(self, name, detail):
-        self.failed.append(name)
-        print(f"FAIL  {name}: {detail}", flush=True)
-
-    def check(self, name, cond, detail=""):
-        if cond:
-            self.ok(name)
-        else:
-            self.fail(name, detail or "check failed")
-        return cond
-
-    def guard(self, name, fn, *args, **kw):
-        """Runs fn; an exception is a FAIL of `name`."""
-        t = time.monotonic()
-        try:
-            return fn(*args, **kw)
-        except Exception as e:  # noqa: BLE001
-            tb = traceback.format_exc(limit=4).strip().splitlines()
-            self.fail(name, f"{type(e).__name__}: {e} [{' | '.join(tb[-3:])}]")
-            return None
-
-    def rate(self, who, nbytes, seconds):
-        kib = nbytes / 1024 / seconds if seconds > 0 else float("inf")
-        line = f"throughput  {who}: {nbytes} bytes in {seconds:.2f} s = {kib:.1f} KiB/s"
-        self.throughput.append(line)
-        print(line, flush=True)
-
-
 R = Results()
 
 
 # ---------------------------------------------------------------- the file set
-
-def free_port(kind=socket.SOCK_STREAM):
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
 
 def free_both():
     """A port free for UDP and TCP at once."""
@@ -203,52 +162,7 @@ def disk_listing(path):
     return out
 
 
-def read(path):
-    with open(path, "rb") as f:
-        return f.read()
-
-
-def diff_bytes(got, want):
-    if got is None:
-        return "nothing"
-    if len(got) != len(want):
-        return f"{len(got)} bytes, want {len(want)}"
-    if got == want:
-        return "equal"
-    first = next(i for i in range(len(got)) if got[i] != want[i])
-    return f"first difference at byte {first}"
-
-
 # ---------------------------------------------------------------- processes
-
-class Proc:
-    def __init__(self, cmd, log):
-        self.cmd = cmd
-        self.log_path = log
-        self._log = open(log, "wb")  # noqa: SIM115
-        self.p = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=self._log,
-                                  stderr=subprocess.STDOUT)
-
-    def alive(self):
-        return self.p.poll() is None
-
-    def tail(self, n=15):
-        try:
-            lines = read(self.log_path).decode(errors="replace").splitlines()
-            return " / ".join(lines[-n:])
-        except OSError:
-            return ""
-
-    def stop(self):
-        if self.p.poll() is None:
-            self.p.terminate()
-            try:
-                self.p.wait(5)
-            except subprocess.TimeoutExpired:
-                self.p.kill()
-                self.p.wait()
-        self._log.close()
-
 
 def start_vehicle(binary, link, root, work, tag):
     cmd = [binary, "vehicle", link, "--ftp-root", root, "--ftp-writable", "--start-mavlink2"]
@@ -306,22 +220,6 @@ class LogCatcher(logging.Handler):
 
 
 CATCH = LogCatcher()
-MAVSDK_LOG = []
-
-
-def quiet_mavsdk():
-    """MAVSDK's log goes to a list (its warnings are shown when something fails)."""
-    try:
-        from mavsdk.logging import log_subscribe
-    except Exception:  # noqa: BLE001
-        return
-
-    def keep(level, message, _file, _line):
-        MAVSDK_LOG.append(f"{level.name} {message}")
-        del MAVSDK_LOG[:-200]
-        return True
-
-    log_subscribe(keep)
 
 
 def slug(tag):
