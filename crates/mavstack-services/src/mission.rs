@@ -547,6 +547,14 @@ impl MissionClient {
             && !matches!(r.op, Op::SetCurrent { .. })
             && (a.mission_type == ty || matches!(r.op, Op::Clear { .. }))
         {
+            if matches!(r.op, Op::Upload(_))
+                && a.r#type == MavMissionResult::MAV_MISSION_INVALID_SEQUENCE
+            {
+                // ArduPilot's answer to an item it did not ask for (our resend after its
+                // request was lost); the upload goes on, and it asks again for the item it
+                // wants. Retries and the timeout still bound the upload.
+                return (Some(r), true);
+            }
             let done_upload = matches!(r.op, Op::Upload(Upload::AwaitingAck(_)))
                 || matches!(&r.op, Op::Upload(Upload::AwaitingRequest(s)) if s.items.is_empty());
             let result = if a.r#type != MavMissionResult::MAV_MISSION_ACCEPTED {

@@ -352,6 +352,61 @@ fn out_of_sequence_items_are_dropped_and_the_expected_one_requested() {
     );
 }
 
+/// ArduPilot 4.7, its MISSION_REQUEST for item 1 lost: our resend of item 0 gets
+/// MISSION_ACK INVALID_SEQUENCE, then it asks for item 1 again. The upload goes on.
+#[test]
+fn an_invalid_sequence_ack_mid_upload_does_not_end_it() {
+    let mut c = MissionClient::new(GCS, MissionConfig::default());
+    c.upload(T0, VEHICLE, MavMissionType::MISSION, items(2))
+        .unwrap();
+    let _count = c.poll_transmit();
+    let request = |seq| {
+        MavMessage::MissionRequestInt(MissionRequestInt {
+            target_system: GCS.system,
+            target_component: GCS.component,
+            seq,
+            mission_type: MavMissionType::MISSION,
+        })
+    };
+    let ack = |r#type| {
+        MavMessage::MissionAck(mavstack_dialects::common::MissionAck {
+            target_system: GCS.system,
+            target_component: GCS.component,
+            r#type,
+            mission_type: MavMissionType::MISSION,
+            ..Default::default()
+        })
+    };
+    c.handle_message(T0, VEHICLE, &request(0));
+    assert!(matches!(
+        c.poll_transmit().unwrap().message,
+        MavMessage::MissionItemInt(MissionItemInt { seq: 0, .. })
+    ));
+    // The request for 1 is lost; item 0 goes again on the timeout.
+    let t = c.poll_timeout().unwrap();
+    c.handle_timeout(t);
+    assert!(c.poll_transmit().is_some());
+    c.handle_message(
+        t,
+        VEHICLE,
+        &ack(MavMissionResult::MAV_MISSION_INVALID_SEQUENCE),
+    );
+    assert_eq!(c.poll_event(), None, "not the end");
+    c.handle_message(t, VEHICLE, &request(1));
+    assert!(matches!(
+        c.poll_transmit().unwrap().message,
+        MavMessage::MissionItemInt(MissionItemInt { seq: 1, .. })
+    ));
+    c.handle_message(t, VEHICLE, &ack(MavMissionResult::MAV_MISSION_ACCEPTED));
+    assert_eq!(
+        c.poll_event(),
+        Some(MissionEvent::Uploaded {
+            mission_type: MavMissionType::MISSION,
+            result: Ok(())
+        })
+    );
+}
+
 #[test]
 fn sim_rejection_ends_the_upload() {
     let mut p = sim(Knobs::clean(), 6);
