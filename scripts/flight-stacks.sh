@@ -9,9 +9,13 @@
 #   PX4_SITL_DIR        PX4's build directory (build/px4_sitl_default: bin/px4, etc/)
 #   MAVSTACK            the mavstack binary (default: target/release/mavstack, built if missing)
 #   FLIGHT              the `flight` example (default: target/release/examples/flight, likewise)
-#   ONLY                scenarios to run (comma-separated; default: all)
-# ArduPilot listens on tcp:127.0.0.1:5760 (SERIAL0); PX4 sends to udp 127.0.0.1:14550; the
-# simulator runs as `mavstack vehicle udpout:127.0.0.1:14550`. Results: target/flight-stacks/.
+#   ONLY                scenarios to run (comma-separated; default: all; `none`: none, e.g. with BENCH)
+#   BENCH               1: also tests-interop/flight_bench.py against each target (times beside
+#                       MAVProxy and MAVSDK, clean and lossy UDP): target/flight-stacks/bench.md
+#   BENCH_TOOLS         the bench's tools (default mavstack,mavproxy,mavsdk); BENCH_LINKS (clean,lossy)
+# ArduPilot listens on tcp:127.0.0.1:5760 (SERIAL0) and sends SERIAL1 to udp 127.0.0.1:14561 (the
+# bench's UDP link); PX4 sends to udp 127.0.0.1:14550; the simulator runs as `mavstack vehicle
+# udpout:127.0.0.1:14550`. Results: target/flight-stacks/.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -26,7 +30,7 @@ if [ ! -x "$flight" ]; then
 fi
 out="$root/target/flight-stacks"
 rm -rf "$out"
-mkdir -p "$out"
+mkdir -p "$out/bench"
 only=()
 if [ -n "${ONLY:-}" ]; then
     only=(--only "$ONLY")
@@ -53,8 +57,18 @@ PY
 
 scenarios() {
     local name="$1" conn="$2"
+    [ "${ONLY:-}" = none ] && return 0
     "$py" tests-interop/flight_stacks.py --mavstack "$bin" --flight "$flight" --name "$name" \
         --conn "$conn" --out "$out/$name.json" "${only[@]}" || true
+}
+
+# The bench against a vehicle sending UDP to 127.0.0.1:PORT (BENCH=1).
+bench() {
+    local name="$1" port="$2"
+    [ "${BENCH:-}" = 1 ] || return 0
+    "$py" tests-interop/flight_bench.py --mavstack "$bin" --name "$name" --port "$port" \
+        --tools "${BENCH_TOOLS:-mavstack,mavproxy,mavsdk}" --links "${BENCH_LINKS:-clean,lossy}" \
+        --out "$out/bench/$name.json" || true
 }
 
 if [ -n "${ARDUPILOT_SITL:-}" ]; then
@@ -64,11 +78,12 @@ if [ -n "${ARDUPILOT_SITL:-}" ]; then
     # TCP 5760, listening at once (--serial0 tcp:0 does not wait for a client).
     setsid bash -c 'cd "$1"; shift; exec "$@"' wrapper "$dir" "$ARDUPILOT_SITL" --model quad \
         --defaults "${ARDUPILOT_DEFAULTS:?ARDUPILOT_DEFAULTS: the copter defaults file}" \
-        --serial0 tcp:0 -I0 --home -35.363261,149.165230,584,353 </dev/null >"$dir/sitl.log" 2>&1 &
+        --serial0 tcp:0 --serial1 udpclient:127.0.0.1:14561 -I0 --home -35.363261,149.165230,584,353 </dev/null >"$dir/sitl.log" 2>&1 &
     pids+=($!)
     for _ in $(seq 100); do (exec 3<>/dev/tcp/127.0.0.1/5760) 2>/dev/null && break; sleep 0.2; done
     wait_heartbeat tcp:127.0.0.1:5760
     scenarios ardupilot tcp:127.0.0.1:5760
+    bench ardupilot 14561
     stop_all
     sleep 1
 else
@@ -78,14 +93,16 @@ fi
 if [ -n "${PX4_SITL_DIR:-}" ]; then
     dir="$out/px4-run"
     mkdir -p "$dir"
+    # exec: the background job is px4 itself (setsid does not fork outside a job-controlled
+    # shell), so stop_all ends this instance by its pid and no other PX4 on the machine.
     (cd "$dir" && PX4_SIMULATOR=sihsim PX4_SIM_MODEL=sihsim_quadx PX4_SYS_AUTOSTART=10040 \
-        setsid "$PX4_SITL_DIR/bin/px4" -d -i 0 -w "$dir" "$PX4_SITL_DIR/etc" \
+        exec setsid "$PX4_SITL_DIR/bin/px4" -d -i 0 -w "$dir" "$PX4_SITL_DIR/etc" \
         </dev/null >"$dir/px4.log" 2>&1) &
     pids+=($!)
     wait_heartbeat udpin:127.0.0.1:14550
     scenarios px4 udpin:127.0.0.1:14550
+    bench px4 14550
     stop_all
-    pkill -f "$PX4_SITL_DIR/bin/px4" 2>/dev/null || true
     sleep 1
 else
     echo "px4: skipped (PX4_SITL_DIR is not set)" | tee "$out/px4.skipped"
@@ -102,8 +119,13 @@ for flavour in ardupilot px4; do
         "${extra[@]}" >"$out/sim-$flavour.log" 2>&1 &
     pids+=($!)
     scenarios "sim-$flavour" udpin:127.0.0.1:14550
+    bench "sim-$flavour" 14550
     stop_all
 done
+
+if [ "${BENCH:-}" = 1 ] && ls "$out"/bench/*.json >/dev/null 2>&1; then
+    "$py" tests-interop/flight_bench.py --combine "$out"/bench/*.json --md "$out/bench.md"
+fi
 
 "$py" - "$out" <<'PY'
 import glob, json, os, sys

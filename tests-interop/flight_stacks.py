@@ -22,24 +22,39 @@ Scenarios (in this order, each independent of the ones before but the flight, la
   arm_refused  right after start, arming is refused with the reason shown (STATUSTEXT); n/a
                when the vehicle is ready at once
   signing      `mavstack signing setup` proven by a signed answer, then removed
+  router       the vehicle behind `mavstack router` (CONN as its vehicle link), with peers on
+               links of their own: `mavstack param list`, MAVProxy (param fetch count, `wp
+               list`), MAVSDK's native binding (get_all_params count) and, on a `version=1`
+               link, a MAVLink 1 peripheral (pymavlink's v1.0 codec, compid 158): its HEARTBEAT
+               reaches MAVProxy and the vehicle link (converted to MAVLink 2), and it receives
+               the vehicle's HEARTBEAT in MAVLink 1. Passes when each peer got the full
+               parameter count of a direct fetch (`mavstack param list` on CONN, first)
+  record       `mavstack record CONN FILE.tlog --duration 10`, then `mavstack log summary
+               --json FILE` and pymavlink's reading of the same tlog agree on the count of
+               every message type (per system and component)
   flight       (with --flight BIN, the `flight` example of crates/mavstack) telemetry at
                requested rates (ATTITUDE 10 Hz, GLOBAL_POSITION_INT 5 Hz, within 20 % over 5 s),
                then arm (refusals waited out), take off, a 4-item mission flown to its end
                (MISSION_ITEM_REACHED for every item), RTL, landed and disarmed
 """
 import argparse
+import asyncio
 import json
 import math
 import os
+import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 
 from pymavlink import mavutil
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
 KEY = "a1" * 32
+PERIPHERAL_COMPID = 158  # MAV_COMP_ID_PERIPHERAL
 
 
 def run(argv, timeout=120):
@@ -246,6 +261,263 @@ class Runner:
         self.report("signing", "pass" if ok else "fail", s + s2,
                     "%s; %s" % (out.strip(), (out2.strip() or err2.strip()[-300:])))
 
+    def router(self):
+        """The vehicle behind `mavstack router`, peers on links of their own (see the docstring)."""
+        t0 = time.monotonic()
+        table = getattr(self, "table", None)
+        if not table:
+            table, _, err = self.our_params()
+            if table is None:
+                return self.report("router", "fail", time.monotonic() - t0,
+                                   "direct param list failed: %s" % err)
+        direct = len(table)
+        with tempfile.TemporaryDirectory(prefix="fs-router-") as work:
+            try:
+                detail, ok = router_session(self.bin, self.conn, work, direct)
+            except Exception as e:  # gcs_common.Failure and the peers' own errors
+                detail, ok = "%s: %s" % (type(e).__name__, str(e).strip()[:700]), False
+        self.report("router", "pass" if ok else "fail", time.monotonic() - t0,
+                    "direct %d; %s" % (direct, detail))
+
+    def record(self, seconds=10):
+        with tempfile.TemporaryDirectory(prefix="fs-record-") as d:
+            path = os.path.join(d, "rec.tlog")
+            rc, out, err, s = self.mavstack("record", self.conn, path, "--duration", str(seconds),
+                                            timeout=seconds + 30)
+            if rc != 0 or not os.path.exists(path):
+                return self.report("record", "fail", s, "record (exit %s): %s" % (rc, err.strip()[-300:]))
+            rc, out, err, _ = self.mavstack("log", "summary", path, "--json")
+            if rc != 0:
+                return self.report("record", "fail", s, "log summary (exit %s): %s" % (rc, err.strip()[-300:]))
+            summary = json.loads(out)
+            ours = {}
+            for sysrow in summary.get("systems", []):
+                for name, t in sysrow.get("types", {}).items():
+                    ours[(sysrow["sysid"], sysrow["compid"], name)] = t["count"]
+            theirs, bad = pymavlink_tlog_counts(path)
+        differ = sorted("%d/%d %s: %s vs %s" % (k[0], k[1], k[2], ours.get(k), theirs.get(k))
+                        for k in set(ours) | set(theirs) if ours.get(k) != theirs.get(k))
+        frames = sum(ours.values())
+        ok = frames > 0 and not differ and summary.get("bad_frames", 0) == 0
+        self.report("record", "pass" if ok else "fail", s,
+                    "%d frames, %d types in %.1f s (MAVLink 2: %s, MAVLink 1: %s); pymavlink %d frames, "
+                    "%d bad%s" % (frames, len(ours), summary.get("duration_s", 0),
+                                  summary.get("versions", {}).get("2"), summary.get("versions", {}).get("1"),
+                                  sum(theirs.values()), bad,
+                                  "; counts agree per type" if not differ else "; differ: %s" % differ[:6]))
+
+
+def pymavlink_tlog_counts(path):
+    """{(sysid, compid, type): count} of a tlog as pymavlink reads it, and its BAD_DATA count."""
+    m = mavutil.mavlink_connection(path, dialect="ardupilotmega", robust_parsing=True)
+    counts, bad = {}, 0
+    while True:
+        msg = m.recv_msg()
+        if msg is None:
+            break
+        t = msg.get_type()
+        if t == "BAD_DATA":
+            bad += 1
+            continue
+        sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
+        if t.startswith("UNKNOWN_"):
+            # pymavlink's unknown message has no header of its own: the frame's bytes have it
+            buf = bytes(msg.get_msgbuf())
+            sysid, compid = (buf[5], buf[6]) if buf[:1] == b"\xfd" else (buf[3], buf[4])
+        k = (sysid, compid, t)
+        counts[k] = counts.get(k, 0) + 1
+    m.close()
+    return counts, bad
+
+
+class Peripheral:
+    """A MAVLink 1 only component (pymavlink's v1.0 codec, so never MAVLink 2): a HEARTBEAT once
+    a second to a router's `udpin` link; counts what it receives by framing, and the vehicle's
+    HEARTBEATs (MAVLink 1, checksum checked by the v1.0 decoder)."""
+
+    def __init__(self, port, sysid=1, compid=PERIPHERAL_COMPID):
+        from pymavlink.dialects.v10 import ardupilotmega as v1
+        self.v1 = v1
+        self.mav = v1.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+        self.sysid, self.compid = sysid, compid
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.1)
+        self.dest = ("127.0.0.1", port)
+        self.sent = 0
+        self.got = {"mavlink1": 0, "mavlink2": 0, "vehicle_heartbeats_v1": 0, "undecodable": 0}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self):
+        nxt = 0.0
+        while not self._stop.is_set():
+            if time.monotonic() >= nxt:
+                hb = self.mav.heartbeat_encode(self.v1.MAV_TYPE_ONBOARD_CONTROLLER,
+                                               self.v1.MAV_AUTOPILOT_INVALID, 0, 0,
+                                               self.v1.MAV_STATE_ACTIVE)
+                try:
+                    self.sock.sendto(hb.pack(self.mav), self.dest)
+                    self.sent += 1
+                except OSError:
+                    pass
+                nxt = time.monotonic() + 1.0
+            try:
+                data = self.sock.recv(65535)
+            except (socket.timeout, OSError):
+                continue
+            i = 0
+            while i < len(data):
+                if data[i] == 0xFE and i + 8 <= len(data):
+                    n = 8 + data[i + 1]
+                    frame = data[i:i + n]
+                    self.got["mavlink1"] += 1
+                    if frame[5] == 0 and frame[4] == 1:
+                        try:
+                            self.mav.decode(bytearray(frame))
+                            self.got["vehicle_heartbeats_v1"] += 1
+                        except Exception:
+                            self.got["undecodable"] += 1
+                    i += n
+                elif data[i] == 0xFD and i + 12 <= len(data):
+                    self.got["mavlink2"] += 1
+                    i += 12 + data[i + 1] + (13 if data[i + 2] & 1 else 0)
+                else:
+                    i += 1
+
+    def stop(self):
+        self._stop.set()
+        self._thread.join(2)
+        self.sock.close()
+
+
+class _NoVehicle:
+    """What gcs_mavproxy.MavProxy asks of its vehicle when the vehicle is not ours."""
+
+    def check_alive(self):
+        pass
+
+    def log(self, tail=0):
+        return "(the vehicle is not a process of this script)"
+
+
+async def mavsdk_native_params(url, timeout=120.0):
+    """MAVSDK's native binding: connect, get_all_params; returns (count, seconds)."""
+    from gcs_mavsdk import Native
+    api = Native()
+    await asyncio.wait_for(api.connect(url), 30)
+    try:
+        t = time.monotonic()
+        allp = await asyncio.wait_for(api.param.get_all_params(), timeout)
+        n = len(list(allp.int_params)) + len(list(allp.float_params)) + len(list(getattr(allp, "custom_params", [])))
+        return n, time.monotonic() - t
+    finally:
+        try:
+            await asyncio.wait_for(api.close(), 5)
+        except Exception:
+            pass
+
+
+def free_udp():
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def router_session(binary, conn, work, direct):
+    """One router between CONN and the peers; returns (detail, ok)."""
+    from gcs_common import Router, link_stats
+    from gcs_mavproxy import MavProxy, fetch_all
+    ports = {k: free_udp() for k in ("mavstack", "mavproxy", "mavsdk", "legacy")}
+    links = ["%s?name=vehicle" % conn,
+             "udpout:127.0.0.1:%d?name=mavstack" % ports["mavstack"],
+             "udpout:127.0.0.1:%d?name=mavproxy" % ports["mavproxy"],
+             "udpout:127.0.0.1:%d?name=mavsdk" % ports["mavsdk"],
+             "udpin:127.0.0.1:%d?version=1&name=legacy" % ports["legacy"]]
+    router = Router(binary, links, work)
+    periph = Peripheral(ports["legacy"])
+    mp = None
+    parts, ok = [], True
+    try:
+        mp = MavProxy("udpin:127.0.0.1:%d" % ports["mavproxy"], work, _NoVehicle(), router=router)
+        mp.expect(r"Detected vehicle \d+:\d+", 30, "MAVProxy connect through the router")
+        # mavstack param list on its own link
+        t = time.monotonic()
+        p = subprocess.run([binary, "param", "list", "udpin:127.0.0.1:%d" % ports["mavstack"], "--json"],
+                           capture_output=True, text=True, timeout=180)
+        n = sum(1 for line in p.stdout.splitlines() if line.startswith("{"))
+        ok &= p.returncode == 0 and n == direct
+        parts.append("mavstack param list %d in %.1f s%s" % (n, time.monotonic() - t,
+                                                             "" if p.returncode == 0 else " (exit %d: %s)" % (
+                                                                 p.returncode, p.stderr.strip()[-200:])))
+        # MAVProxy: a full fetch, then wp list
+        n, secs = fetch_all(mp, 120, "MAVProxy param fetch through the router")
+        ok &= n == direct
+        parts.append("MAVProxy param fetch %d in %.1f s" % (n, secs))
+        mp.cmd("wp list")
+        _, m = mp.expect(r"Requesting (\d+) waypoints", 20, "MAVProxy wp list: MISSION_COUNT")
+        count = int(m.group(1))
+        if count > 0:  # an empty mission (PX4's at start) ends at MISSION_COUNT 0
+            _, m = mp.expect(r"Saved (\d+) waypoints to", 60, "MAVProxy wp list: the items")
+            ok &= int(m.group(1)) == count
+        parts.append("MAVProxy wp list %d/%d items" % (int(m.group(1)), count))
+        # MAVSDK (native binding)
+        try:
+            n, secs = asyncio.run(mavsdk_native_params("udpin://127.0.0.1:%d" % ports["mavsdk"]))
+            ok &= n == direct
+            parts.append("MAVSDK get_all_params %d in %.1f s" % (n, secs))
+        except Exception as e:
+            ok = False
+            parts.append("MAVSDK: %s %s" % (type(e).__name__, str(e)[-200:]))
+        # the MAVLink 1 peripheral, both ways
+        time.sleep(1.5)
+        seen = sum(1 for m in _tlog_msgs(mp.tlog()) if m.get_type() == "HEARTBEAT"
+                   and m.get_srcComponent() == PERIPHERAL_COMPID)
+        g = periph.got
+        p_ok = seen > 0 and g["vehicle_heartbeats_v1"] > 0 and g["mavlink2"] == 0
+        ok &= p_ok
+        parts.append("peripheral (MAVLink 1): sent %d HEARTBEATs, MAVProxy saw %d; received %d vehicle "
+                     "HEARTBEATs in MAVLink 1, %d frames in MAVLink 1, %d in MAVLink 2" % (
+                         periph.sent, seen, g["vehicle_heartbeats_v1"], g["mavlink1"], g["mavlink2"]))
+    finally:
+        if mp is not None:
+            mp.close()
+        periph.stop()
+        try:
+            stats = router.stop()
+        except Exception as e:
+            router.kill()
+            stats, ok = None, False
+            parts.append("router stop: %s" % str(e)[-200:])
+    if stats:
+        veh = link_stats(stats, "vehicle")
+        to2 = sum(int((e.get("conversions") or {}).get("to_mavlink2") or 0) for e in veh)
+        leg = link_stats(stats, "legacy")
+        to1 = sum(int((e.get("conversions") or {}).get("to_mavlink1") or 0) for e in leg)
+        drops = {}
+        for e in stats.get("links", []):
+            for k, v in (e.get("dropped") or {}).items():
+                if v:
+                    drops["%s.%s" % (e.get("name"), k)] = drops.get("%s.%s" % (e.get("name"), k), 0) + v
+        ok &= to2 > 0
+        parts.append("router: vehicle link got %d frames converted to MAVLink 2, legacy link %d to "
+                     "MAVLink 1; drops %s" % (to2, to1, drops or "none"))
+    return "; ".join(parts), ok
+
+
+def _tlog_msgs(path):
+    m = mavutil.mavlink_connection(path, dialect="ardupilotmega", robust_parsing=True)
+    while True:
+        msg = m.recv_msg()
+        if msg is None:
+            break
+        yield msg
+    m.close()
+
+
 
 def flight_steps(runner):
     """The `flight` example's steps, each a scenario row: rates, then the flight."""
@@ -317,7 +589,8 @@ def compare_plans(sent, got):
     return diffs
 
 
-SCENARIOS = ["probe", "conform", "params", "param_set", "mission", "arm_refused", "signing", "flight"]
+SCENARIOS = ["probe", "conform", "params", "param_set", "mission", "arm_refused", "signing", "router", "record",
+             "flight"]
 
 
 def main():
