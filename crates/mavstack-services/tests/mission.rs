@@ -374,7 +374,6 @@ fn an_invalid_sequence_ack_mid_upload_does_not_end_it() {
             target_component: GCS.component,
             r#type,
             mission_type: MavMissionType::MISSION,
-            ..Default::default()
         })
     };
     c.handle_message(T0, VEHICLE, &request(0));
