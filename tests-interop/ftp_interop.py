@@ -37,7 +37,7 @@ os.environ["MAVLINK20"] = "1"
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from interop_checks import (  # noqa: E402
-    MAVSDK_LOG, Proc, Results, diff_bytes, free_port, quiet_mavsdk, read,
+    Proc, Results, diff_bytes, free_port, quiet_mavsdk, read, show_mavsdk_log,
 )
 
 BURST = 80 * 239  # pymavlink's burst_read_size 80 × 239-byte payloads
@@ -684,7 +684,7 @@ def main():
     R.check("crc32 table = bitwise", mavftp_crc32(b"123456789") == _crc_bitwise(b"123456789"))
     rc = subprocess.run([binary, "ftp", "--help"], capture_output=True, check=False).returncode
     if not R.check("mavstack ftp exists", rc == 0, f"`{binary} ftp --help` exits {rc}"):
-        return finish(t0)
+        return R.summary("ftp_interop", t0)
 
     quiet_mavsdk()
     work = tempfile.mkdtemp(prefix="ftp-interop-")
@@ -744,21 +744,11 @@ def main():
         for p in procs:
             p.stop()
         if R.failed:
-            for line in [m for m in MAVSDK_LOG if not m.startswith("DEBUG")][-15:]:
-                print(f"      mavsdk log: {line}", flush=True)
+            show_mavsdk_log()
             print(f"      (work directory kept: {work})", flush=True)
         else:
             shutil.rmtree(work, ignore_errors=True)
-    return finish(t0)
-
-
-def finish(t0):
-    dt = time.monotonic() - t0
-    if R.failed:
-        print(f"ftp_interop: {len(R.failed)} FAILED, {R.passed} ok in {dt:.1f} s", flush=True)
-        return 1
-    print(f"ftp_interop: all {R.passed} checks ok in {dt:.1f} s", flush=True)
-    return 0
+    return R.summary("ftp_interop", t0)
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@ MAVSDK's log kept quiet. Used by ftp_interop.py and log_interop.py."""
 
 import socket
 import subprocess
+import time
 import traceback
 
 
@@ -36,6 +37,16 @@ class Results:
             tb = traceback.format_exc(limit=4).strip().splitlines()
             self.fail(name, f"{type(e).__name__}: {e} [{' | '.join(tb[-3:])}]")
             return None
+
+    def summary(self, script, t0):
+        """The last line (`SCRIPT: all N checks ok in S s`, or how many failed) and the exit
+        status: 1 if anything failed."""
+        dt = time.monotonic() - t0
+        if self.failed:
+            print(f"{script}: {len(self.failed)} FAILED, {self.passed} ok in {dt:.1f} s", flush=True)
+            return 1
+        print(f"{script}: all {self.passed} checks ok in {dt:.1f} s", flush=True)
+        return 0
 
     def rate(self, who, nbytes, seconds):
         kib = nbytes / 1024 / seconds if seconds > 0 else float("inf")
@@ -112,3 +123,9 @@ def quiet_mavsdk():
         return True
 
     log_subscribe(keep)
+
+
+def show_mavsdk_log():
+    """Prints MAVSDK's last log lines but its DEBUG ones (after a failure)."""
+    for line in [m for m in MAVSDK_LOG if not m.startswith("DEBUG")][-15:]:
+        print(f"      mavsdk log: {line}", flush=True)

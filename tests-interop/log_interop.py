@@ -52,7 +52,7 @@ os.environ["MAVLINK20"] = "1"
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from interop_checks import (  # noqa: E402
-    MAVSDK_LOG, Proc, Results, diff_bytes, free_port, quiet_mavsdk, read,
+    Proc, Results, diff_bytes, free_port, quiet_mavsdk, read, show_mavsdk_log,
 )
 
 CHUNK = 90
@@ -519,12 +519,12 @@ def main():
     rc = subprocess.run([binary, "log", "download", "--help"], capture_output=True,
                         check=False).returncode
     if not R.check("mavstack log download exists", rc == 0, f"exits {rc}"):
-        return finish(t0)
+        return R.summary("log_interop", t0)
     try:
         from pymavlink import mavutil  # noqa: F401
     except Exception as e:  # noqa: BLE001
         R.fail("import pymavlink", f"{type(e).__name__}: {e}")
-        return finish(t0)
+        return R.summary("log_interop", t0)
     work = tempfile.mkdtemp(prefix="log-interop-")
     vehicle = None
     try:
@@ -551,23 +551,13 @@ def main():
         if vehicle is not None:
             vehicle.stop()
         if R.failed:
-            for line in [m for m in MAVSDK_LOG if not m.startswith("DEBUG")][-15:]:
-                print(f"      mavsdk log: {line}", flush=True)
+            show_mavsdk_log()
             if vehicle is not None:
                 print(f"      vehicle log: {vehicle.tail(20)}", flush=True)
             print(f"      (work directory kept: {work})", flush=True)
         else:
             shutil.rmtree(work, ignore_errors=True)
-    return finish(t0)
-
-
-def finish(t0):
-    dt = time.monotonic() - t0
-    if R.failed:
-        print(f"log_interop: {len(R.failed)} FAILED, {R.passed} ok in {dt:.1f} s", flush=True)
-        return 1
-    print(f"log_interop: all {R.passed} checks ok in {dt:.1f} s", flush=True)
-    return 0
+    return R.summary("log_interop", t0)
 
 
 if __name__ == "__main__":
