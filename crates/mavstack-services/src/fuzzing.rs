@@ -144,3 +144,17 @@ pub fn fuzz_services(data: &[u8], heap: &dyn Fn() -> Option<usize>) {
         }
     }
 }
+
+/// `len` pseudo-random bytes (xorshift64 from `state`, which it advances): sample inputs for
+/// the fuzz targets' tests on stable.
+#[cfg(test)]
+pub(crate) fn sample_bytes(state: &mut u64, len: usize) -> alloc::vec::Vec<u8> {
+    (0..len)
+        .map(|_| {
+            *state ^= *state << 13;
+            *state ^= *state >> 7;
+            *state ^= *state << 17;
+            *state as u8
+        })
+        .collect()
+}

@@ -219,15 +219,7 @@ mod tests {
     fn the_properties_hold_on_sample_inputs() {
         let mut state = 0x9e37_79b9_7f4a_7c15u64;
         for len in [0usize, 1, 2, 13, 251, 600, 2000] {
-            let data: Vec<u8> = (0..len)
-                .map(|_| {
-                    state ^= state << 13;
-                    state ^= state >> 7;
-                    state ^= state << 17;
-                    state as u8
-                })
-                .collect();
-            super::fuzz_ftp(&data);
+            super::fuzz_ftp(&crate::fuzzing::sample_bytes(&mut state, len));
         }
         let mut requests = Vec::new();
         for opcode in 0u8..20 {
