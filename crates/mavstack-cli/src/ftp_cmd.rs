@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use clap::Subcommand;
 use mavstack::services::ftp::{EntryKind, crc32};
-use mavstack::system::FtpPathOp;
+use mavstack::system::{FtpPathOp, System};
 use serde_json::json;
 
 use crate::gcs_cmd::{Remote, RemoteArgs, print_lines};
@@ -184,19 +184,9 @@ async fn run(
         }
         FtpAction::Get { remote_path, .. } => {
             // The size is known only once the file is open: the bar is drawn for a put.
-            let data = system.ftp_read(remote_path, |_, _| {}).await;
-            let data = data.map_err(other)?;
-            let ours = crc32(0, &data);
-            // ArduPilot's `@` files (`@SYS/uarts.txt`, `@PARAM/param.pck`) are made anew at
-            // each open, so a CRC32 asked afterwards is of other contents: not checked.
-            if !generated_at_open(remote_path) {
-                let theirs = system.ftp_crc32(remote_path).await.map_err(other)?;
-                if ours != theirs {
-                    return Err(other(format!(
-                        "ftp get {remote_path}: CRC32 {ours:08x} of what arrived, the server's is {theirs:08x}"
-                    )));
-                }
-            }
+            let (data, ours) = read_checked(system, remote_path, |_, _| {})
+                .await
+                .map_err(Failure::Other)?;
             let to = download_to.unwrap_or_else(|| Path::new("."));
             std::fs::write(to, &data)
                 .map_err(|e| other(format!("cannot write {}: {e}", to.display())))?;
@@ -256,6 +246,32 @@ async fn run(
             }]
         }
     })
+}
+
+/// Downloads `path` and compares it with the server's CRC32 of the file (not for a file
+/// [made at each open](generated_at_open)); returns the bytes and their CRC32.
+///
+/// # Errors
+/// The download's, or a mismatch (`ftp get PATH: CRC32 ... of what arrived, the server's
+/// is ...`).
+pub(crate) async fn read_checked(
+    system: &mut System,
+    path: &str,
+    progress: impl FnMut(u64, u64),
+) -> Result<(Vec<u8>, u32), anyhow::Error> {
+    let data = system.ftp_read(path, progress).await?;
+    let ours = crc32(0, &data);
+    // ArduPilot's `@` files (`@SYS/uarts.txt`, `@PARAM/param.pck`) are made anew at each
+    // open, so a CRC32 asked afterwards is of other contents: not checked.
+    if !generated_at_open(path) {
+        let theirs = system.ftp_crc32(path).await?;
+        if ours != theirs {
+            anyhow::bail!(
+                "ftp get {path}: CRC32 {ours:08x} of what arrived, the server's is {theirs:08x}"
+            );
+        }
+    }
+    Ok((data, ours))
 }
 
 /// Whether a remote file is one a server makes when it is opened, whose CRC32 cannot be

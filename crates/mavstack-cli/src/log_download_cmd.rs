@@ -8,12 +8,13 @@ use std::time::Instant;
 
 use anyhow::anyhow;
 use clap::{ArgGroup, Args, ValueEnum};
-use mavstack::services::ftp::{EntryKind, crc32};
+use mavstack::services::ftp::EntryKind;
 use mavstack::services::log_transfer::LogInfo;
 use mavstack::system::{PATIENT_RETRIES, System, SystemError};
 use mavstack_dialects::common::MavProtocolCapability;
 use serde_json::json;
 
+use crate::ftp_cmd::read_checked;
 use crate::gcs_cmd::{Remote, RemoteArgs, print_lines};
 use crate::link_cmd::runtime;
 use crate::progress::Progress;
@@ -196,23 +197,6 @@ async fn offered_files(system: &mut System, dir: &mut &'static str) -> Vec<LogIn
     files
 }
 
-/// A log's bytes over MAVFTP, checked against the server's CRC32 of the file.
-async fn by_ftp(
-    system: &mut System,
-    path: &str,
-    progress: impl FnMut(u64, u64),
-) -> Result<Vec<u8>, Failure> {
-    let data = system.ftp_read(path, progress).await.map_err(other)?;
-    let theirs = system.ftp_crc32(path).await.map_err(other)?;
-    let ours = crc32(0, &data);
-    if ours != theirs {
-        return Err(other(format!(
-            "{path}: CRC32 {ours:08x} of what arrived, the server's is {theirs:08x}"
-        )));
-    }
-    Ok(data)
-}
-
 /// Writes `data` as `dir/log_<id>.bin`, through a `.part` file renamed when complete.
 fn write_log(dir: &Path, id: u16, data: &[u8]) -> Result<PathBuf, Failure> {
     let to = dir.join(format!("log_{id}.bin"));
@@ -317,9 +301,9 @@ async fn download_all(
                     entry.size
                 )));
             }
-            let got = by_ftp(system, &ftp_path(ftp_dir, id), |done, _| bar.set(done)).await;
+            let got = read_checked(system, &ftp_path(ftp_dir, id), |done, _| bar.set(done)).await;
             bar.finish();
-            data = Some(got?);
+            data = Some(got.map_err(Failure::Other)?.0);
             via = "ftp";
         }
         let Some(data) = data else {
