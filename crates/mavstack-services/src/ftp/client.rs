@@ -1,7 +1,6 @@
 //! The FTP client role: [`FtpClient`], one operation at a time against one server.
 
 use alloc::collections::VecDeque;
-use alloc::vec;
 use alloc::vec::Vec;
 use core::time::Duration;
 
@@ -9,9 +8,11 @@ use mavstack_core::time::Instant;
 use mavstack_dialects::common::{FileTransferProtocol, MavMessage};
 
 use super::payload::{DirEntry, MAX_DATA, NakCode, Opcode, Payload, parse_entries};
-use crate::ranges::{subtract, total};
 use crate::rtt::Rtt;
 use crate::{Address, Outgoing, Service};
+use read::Read;
+
+mod read;
 
 /// [`FtpClient`] settings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -129,22 +130,6 @@ enum Phase {
     Open,
     Transfer,
     Terminate,
-}
-
-#[derive(Debug)]
-struct Read {
-    phase: Phase,
-    session: u8,
-    data: Vec<u8>,
-    /// Ranges still wanted, `[start, end)`, sorted and disjoint.
-    missing: Vec<(u32, u32)>,
-    /// The end of the furthest data received.
-    high: u32,
-    /// A burst ended with no data: use ReadFile from now on.
-    no_burst: bool,
-    /// Bytes still missing at the last request, and requests since that brought none.
-    left: u64,
-    stalls: u8,
 }
 
 #[derive(Debug)]
@@ -286,16 +271,7 @@ impl FtpClient {
     /// [`StartError`] if busy or the path is too long.
     pub fn read(&mut self, now: Instant, path: &str) -> Result<(), StartError> {
         let path = path_bytes(path)?;
-        let op = Op::Read(Read {
-            phase: Phase::Open,
-            session: 0,
-            data: Vec::new(),
-            missing: Vec::new(),
-            high: 0,
-            no_burst: !self.config.burst,
-            left: u64::MAX,
-            stalls: 0,
-        });
+        let op = Op::Read(Read::new(self.config.burst));
         self.start(now, op, Self::request(Opcode::OpenFileRO, 0, 0, &path))
     }
 
@@ -395,17 +371,22 @@ impl FtpClient {
         self.finish(Err(FtpError::Cancelled));
     }
 
-    fn send(&mut self, now: Instant, mut req: Payload) {
+    fn send(&mut self, now: Instant, req: Payload) {
+        self.pending = Some(self.pending_for(now, req));
+    }
+
+    /// Numbers and transmits `req`, and returns it as a request waiting for its reply.
+    fn pending_for(&mut self, now: Instant, mut req: Payload) -> Pending {
         self.seq = self.seq.wrapping_add(1);
         req.seq = self.seq;
         self.transmit(&req);
-        self.pending = Some(Pending {
+        Pending {
+            deadline: now + self.rtt.backoff(self.config.timeout, 1),
             req,
             sent: now,
             attempt: 1,
-            deadline: now + self.rtt.backoff(self.config.timeout, 1),
             burst_packets: 0,
-        });
+        }
     }
 
     fn transmit(&mut self, req: &Payload) {
@@ -485,10 +466,7 @@ impl FtpClient {
                 }
             },
             Op::Read(r) => match (&r.phase, nak) {
-                (Phase::Terminate, _) => {
-                    let data = core::mem::take(&mut r.data);
-                    self.finish(Ok(FtpOutput::Data(data)));
-                }
+                (Phase::Terminate, _) => self.read_done(),
                 (Phase::Open, Some(n)) => self.finish(Err(refused(n))),
                 (Phase::Open, None) => {
                     let Some(b) = reply.data.get(..4) else {
@@ -496,133 +474,18 @@ impl FtpClient {
                         return;
                     };
                     let size = u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-                    r.session = reply.session;
                     if size > self.config.max_read_size {
-                        let req = Self::request(Opcode::TerminateSession, r.session, 0, &[]);
+                        let req = Self::request(Opcode::TerminateSession, reply.session, 0, &[]);
                         self.transmit(&req);
                         self.finish(Err(FtpError::TooLarge { size }));
                         return;
                     }
-                    r.phase = Phase::Transfer;
-                    r.data = vec![0; size as usize];
-                    if size > 0 {
-                        r.missing.push((0, size));
-                    }
+                    r.opened(reply.session, size);
                     self.next_read(now);
                 }
-                (Phase::Transfer, nak) => {
-                    let burst = reply.req_opcode == Opcode::BurstReadFile;
-                    match nak {
-                        // The file ends before the size announced at open (ArduPilot
-                        // announces an estimate for `@PARAM/param.pck`): it ends there.
-                        Some((NakCode::Eof, _)) => {
-                            let end = reply.offset.max(r.high);
-                            let size = u32::try_from(r.data.len()).unwrap_or(u32::MAX);
-                            if end < size {
-                                r.data.truncate(end as usize);
-                                subtract(&mut r.missing, end, size);
-                            }
-                            self.next_read(now);
-                        }
-                        // A burst ran into the end (or failed): carry on with ReadFile if
-                        // it brought nothing.
-                        Some(_) if burst => {
-                            if self.pending.as_ref().is_some_and(|p| p.burst_packets == 0) {
-                                r.no_burst = true;
-                            }
-                            self.next_read(now);
-                        }
-                        Some(n) => self.finish(Err(refused(n))),
-                        None if burst => {
-                            self.store(reply.offset, &reply.data);
-                            if reply.burst_complete {
-                                self.next_read(now);
-                            } else if let Some(p) = self.pending.as_mut() {
-                                p.burst_packets += 1;
-                                p.deadline = now + self.rtt.backoff(self.config.timeout, 1);
-                            }
-                        }
-                        None => {
-                            // Keep only the range asked for, wherever the reply says it is.
-                            if let Some(p) = self.pending.as_ref() {
-                                let want = p.req.offset;
-                                let len = u32::try_from(p.req.data.len()).unwrap_or(0);
-                                if reply.offset <= want {
-                                    let skip = (want - reply.offset) as usize;
-                                    let bytes = reply.data.get(skip..).unwrap_or(&[]);
-                                    let bytes = &bytes[..bytes.len().min(len as usize)];
-                                    let bytes = bytes.to_vec();
-                                    self.store(want, &bytes);
-                                }
-                            }
-                            self.next_read(now);
-                        }
-                    }
-                }
+                (Phase::Transfer, _) => self.on_burst_reply(now, reply),
             },
         }
-    }
-
-    /// Keeps `bytes` at `offset` of the file being read, inside the announced size only.
-    fn store(&mut self, offset: u32, bytes: &[u8]) {
-        let Some(Op::Read(r)) = self.op.as_mut() else {
-            return;
-        };
-        let size = u32::try_from(r.data.len()).unwrap_or(u32::MAX);
-        let len = u32::try_from(bytes.len()).unwrap_or(u32::MAX);
-        let start = offset.min(size);
-        let end = offset.saturating_add(len).min(size);
-        if start >= end {
-            return;
-        }
-        let (s, e) = (start as usize, end as usize);
-        let Some(src) = bytes.get(..e - s) else {
-            return;
-        };
-        let Some(dst) = r.data.get_mut(s..e) else {
-            return;
-        };
-        dst.copy_from_slice(src);
-        subtract(&mut r.missing, start, end);
-        r.high = r.high.max(end);
-        let left: u64 = total(&r.missing);
-        let total = u64::from(size);
-        self.events.push_back(FtpEvent::Progress {
-            done: total - left,
-            total,
-        });
-    }
-
-    fn next_read(&mut self, now: Instant) {
-        let Some(Op::Read(r)) = self.op.as_mut() else {
-            return;
-        };
-        let left: u64 = total(&r.missing);
-        if left < r.left {
-            r.left = left;
-            r.stalls = 0;
-        } else {
-            r.stalls = r.stalls.saturating_add(1);
-            if r.stalls > self.config.attempts {
-                // Replies keep coming and bring nothing asked for.
-                let req = Self::request(Opcode::TerminateSession, r.session, 0, &[]);
-                self.transmit(&req);
-                self.finish(Err(FtpError::Protocol));
-                return;
-            }
-        }
-        let req = match r.missing.first() {
-            None => {
-                r.phase = Phase::Terminate;
-                Self::request(Opcode::TerminateSession, r.session, 0, &[])
-            }
-            Some(&(a, b)) if r.no_burst || a < r.high => {
-                let n = ((b - a) as usize).min(MAX_DATA);
-                Self::request(Opcode::ReadFile, r.session, a, &vec![0; n])
-            }
-            Some(&(a, _)) => Self::request(Opcode::BurstReadFile, r.session, a, &[0; MAX_DATA]),
-        };
-        self.send(now, req);
     }
 
     fn next_write(&mut self, now: Instant) {
@@ -662,6 +525,9 @@ impl Service for FtpClient {
         if !matches!(reply.opcode, Opcode::Ack | Opcode::Nak) {
             return false;
         }
+        if reply.req_opcode == Opcode::ReadFile && self.take_gap_reply(now, &reply) {
+            return true;
+        }
         let Some(p) = self.pending.as_ref() else {
             return false;
         };
@@ -683,6 +549,7 @@ impl Service for FtpClient {
     }
 
     fn handle_timeout(&mut self, now: Instant) {
+        self.gap_timeouts(now);
         let Some(p) = self.pending.as_mut() else {
             return;
         };
@@ -691,6 +558,7 @@ impl Service for FtpClient {
         }
         if p.req.opcode == Opcode::BurstReadFile && p.burst_packets > 0 {
             // The burst went quiet after some data: ask for what is missing.
+            self.pending = None;
             self.next_read(now);
             return;
         }
@@ -728,6 +596,7 @@ impl Service for FtpClient {
     }
 
     fn poll_timeout(&self) -> Option<Instant> {
-        self.pending.as_ref().map(|p| p.deadline)
+        let main = self.pending.as_ref().map(|p| p.deadline);
+        [main, self.gap_deadline()].into_iter().flatten().min()
     }
 }

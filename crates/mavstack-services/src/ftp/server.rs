@@ -1,6 +1,7 @@
 //! The FTP server role: [`FtpServer`] answers requests from a [`Backend`].
 
 use alloc::collections::VecDeque;
+use alloc::string::String;
 use alloc::vec;
 use alloc::vec::Vec;
 use core::time::Duration;
@@ -59,6 +60,8 @@ struct Session<H> {
     owner: Address,
     handle: H,
     writable: bool,
+    /// The path of a session opened with OpenFileRO.
+    read_path: Option<String>,
     last: Instant,
     burst: Option<Burst>,
 }
@@ -78,6 +81,8 @@ struct Replay {
 ///   [`ServerConfig::max_sessions`] and belong to the client that opened them: another
 ///   client's requests on them get NAK InvalidSession. ResetSessions closes only the
 ///   sender's sessions. Sessions idle for [`ServerConfig::session_timeout`] are closed.
+///   OpenFileRO of a file the same client has open for reading answers with that session
+///   (a retry whose first ACK was lost must not use up the sessions).
 /// - A request equal to the sender's previous one (a retransmission), byte for byte and
 ///   within the session timeout, is answered with the previous reply, without doing it
 ///   again. BurstReadFile is not replayed but restarted. (ArduPilot replays on a matching
@@ -107,6 +112,14 @@ fn reply(req: &Payload, opcode: Opcode, data: Vec<u8>) -> Payload {
         offset: req.offset,
         data,
     }
+}
+
+/// A file size as OpenFileRO/OpenFileWO's ACK carries it.
+fn size_bytes(size: u64) -> Vec<u8> {
+    u32::try_from(size)
+        .unwrap_or(u32::MAX)
+        .to_le_bytes()
+        .to_vec()
 }
 
 fn nak(req: &Payload, code: NakCode, errno: Option<u8>) -> Payload {
@@ -201,6 +214,21 @@ impl<B: Backend> FtpServer<B> {
             Ok(p) => p,
             Err(code) => return nak(req, code, None),
         };
+        if let Some(s) = self.sessions.iter_mut().find(|s| {
+            mode == OpenMode::Read
+                && s.owner == from
+                && s.read_path.as_deref() == Some(path.as_str())
+        }) {
+            // The same client opening the same file again: its first open's ACK was
+            // lost (MAVProxy sends a new request number each time), so it gets that
+            // session again rather than one more, until none is left.
+            s.last = now;
+            s.burst = None;
+            let size = self.backend.size(&s.handle).unwrap_or(0);
+            let mut ack = reply(req, Opcode::Ack, size_bytes(size));
+            ack.session = s.id;
+            return ack;
+        }
         let Some(id) = self.new_session_id(req.session) else {
             return nak(req, NakCode::NoSessionsAvailable, None);
         };
@@ -220,16 +248,14 @@ impl<B: Backend> FtpServer<B> {
             owner: from,
             handle,
             writable: mode != OpenMode::Read,
+            read_path: (mode == OpenMode::Read).then(|| path.clone()),
             last: now,
             burst: None,
         });
         let mut ack = reply(req, Opcode::Ack, Vec::new());
         ack.session = id;
         if mode != OpenMode::Create {
-            ack.data = u32::try_from(size)
-                .unwrap_or(u32::MAX)
-                .to_le_bytes()
-                .to_vec();
+            ack.data = size_bytes(size);
         }
         ack
     }

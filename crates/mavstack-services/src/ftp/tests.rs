@@ -386,6 +386,10 @@ fn nak_of(p: &Payload) -> Option<(NakCode, Option<u8>)> {
 #[test]
 fn a_malicious_client_gets_naks_and_touches_nothing_outside() {
     let mut r = Raw::new();
+    for i in 0..10 {
+        let name = alloc::format!("pub/n{i}.txt");
+        r.server.backend_mut().insert_file(&name, b"n");
+    }
     let before: Vec<_> = r.server.backend().paths().map(String::from).collect();
     for path in [
         &b"../x"[..],
@@ -461,8 +465,9 @@ fn a_malicious_client_gets_naks_and_touches_nothing_outside() {
     );
     assert_eq!(r.server.open_sessions(), 1);
     // Sessions never closed: bounded, then timed out.
-    for _ in 0..10 {
-        r.ask(GCS, Opcode::OpenFileRO, 0, 0, b"pub/a.txt");
+    for i in 0..10 {
+        let name = alloc::format!("pub/n{i}.txt");
+        r.ask(GCS, Opcode::OpenFileRO, 0, 0, name.as_bytes());
     }
     assert_eq!(r.server.open_sessions(), 4);
     let a = r.ask(OTHER, Opcode::OpenFileRO, 0, 0, b"pub/a.txt");
@@ -781,14 +786,159 @@ fn a_session_takes_the_number_the_client_asked_for() {
     // Number 7 is taken: another open gets the lowest free number.
     let other = r.ask(OTHER, Opcode::OpenFileRO, 7, 0, b"pub/a.txt");
     assert_eq!((other.opcode, other.session), (Opcode::Ack, 0));
-    for session in [200, 201] {
-        let p = r.ask(GCS, Opcode::OpenFileRO, session, 0, b"pub/a.txt");
+    for (session, path) in [(200, &b"pub/a.txt"[..]), (201, b"keep/secret.txt")] {
+        let p = r.ask(GCS, Opcode::OpenFileRO, session, 0, path);
         assert_eq!((p.opcode, p.session), (Opcode::Ack, session));
     }
-    let full = r.ask(GCS, Opcode::OpenFileRO, 9, 0, b"pub/a.txt");
+    r.server.backend_mut().insert_file("pub/b.txt", b"b");
+    let full = r.ask(GCS, Opcode::OpenFileRO, 9, 0, b"pub/b.txt");
     assert_eq!(
         nak_of(&full).map(|n| n.0),
         Some(NakCode::NoSessionsAvailable)
     );
     assert_eq!(r.server.open_sessions(), 4);
+}
+
+/// Decodes what the client sent.
+fn sent(c: &mut FtpClient) -> Vec<Payload> {
+    core::iter::from_fn(|| c.poll_transmit())
+        .map(|o| {
+            let MavMessage::FileTransferProtocol(m) = o.message else {
+                panic!()
+            };
+            Payload::decode(&m.payload).unwrap()
+        })
+        .collect()
+}
+
+fn deliver(c: &mut FtpClient, now: Instant, reply: &Payload) {
+    let msg = MavMessage::FileTransferProtocol(FileTransferProtocol {
+        target_network: 0,
+        target_system: GCS.system,
+        target_component: GCS.component,
+        payload: reply.encode(),
+    });
+    assert!(c.handle_message(now, VEHICLE, &msg));
+}
+
+/// The holes a burst leaves are asked for five at a time without waiting for each other's
+/// replies (a round trip per lost packet made lossy, slow links crawl), each with its own
+/// retransmission, and the file comes out whole.
+#[test]
+fn gaps_after_a_burst_are_asked_for_in_a_window() {
+    let file = pattern(239 * 16);
+    let mut c = FtpClient::new(GCS, VEHICLE, ClientConfig::default());
+    let now = Instant::from_secs(1);
+    c.read(now, "f").unwrap();
+    let open = sent(&mut c).remove(0);
+    let mut ack = Payload::request(
+        open.seq + 1,
+        3,
+        Opcode::Ack,
+        0,
+        &(file.len() as u32).to_le_bytes(),
+    );
+    ack.req_opcode = Opcode::OpenFileRO;
+    deliver(&mut c, now, &ack);
+    let burst = sent(&mut c).remove(0);
+    assert_eq!(
+        (burst.opcode, burst.offset, burst.session),
+        (Opcode::BurstReadFile, 0, 3)
+    );
+    // Every odd packet of the burst is lost: eight holes.
+    for i in (0..16).step_by(2) {
+        let at = i * 239;
+        let mut p = Payload::request(
+            burst.seq + 1 + i as u16,
+            3,
+            Opcode::Ack,
+            at as u32,
+            &file[at..at + 239],
+        );
+        p.req_opcode = Opcode::BurstReadFile;
+        deliver(&mut c, now, &p);
+    }
+    // The last packet (15) was lost too, so the burst never completes: it goes quiet.
+    let quiet = c.poll_timeout().unwrap();
+    assert!(sent(&mut c).is_empty());
+    c.handle_timeout(quiet);
+    let first = sent(&mut c);
+    let reads: Vec<u32> = first
+        .iter()
+        .filter(|p| p.opcode == Opcode::ReadFile)
+        .map(|p| p.offset)
+        .collect();
+    assert_eq!(
+        reads,
+        [239, 239 * 3, 239 * 5, 239 * 7, 239 * 9],
+        "five holes at once"
+    );
+    // And beside them a burst for what lies past the furthest data.
+    let bursts: Vec<u32> = first
+        .iter()
+        .filter(|p| p.opcode == Opcode::BurstReadFile)
+        .map(|p| p.offset)
+        .collect();
+    assert_eq!(bursts, [239 * 15]);
+    assert_eq!(first.len(), 6);
+    // No reply yet: the timeout resends the same requests, nothing more.
+    let later = c.poll_timeout().unwrap();
+    c.handle_timeout(later);
+    let again: Vec<(Opcode, u32)> = sent(&mut c).iter().map(|p| (p.opcode, p.offset)).collect();
+    let before: Vec<(Opcode, u32)> = first.iter().map(|p| (p.opcode, p.offset)).collect();
+    assert_eq!(again.len(), 6);
+    assert!(again.iter().all(|r| before.contains(r)));
+    // Each answer lets one more hole be asked for, until the file is whole.
+    let mut queue: Vec<Payload> = first;
+    while let Some(req) = (!queue.is_empty()).then(|| queue.remove(0)) {
+        if req.opcode == Opcode::TerminateSession {
+            let mut done = Payload::request(req.seq + 1, 3, Opcode::Ack, 0, &[]);
+            done.req_opcode = Opcode::TerminateSession;
+            deliver(&mut c, later, &done);
+            break;
+        }
+        let at = req.offset as usize;
+        let end = (at + req.data.len()).min(file.len());
+        let mut p = Payload::request(req.seq + 1, 3, Opcode::Ack, req.offset, &file[at..end]);
+        p.req_opcode = req.opcode;
+        p.burst_complete = req.opcode == Opcode::BurstReadFile;
+        deliver(&mut c, later, &p);
+        let next = sent(&mut c);
+        assert!(
+            next.len() <= 1,
+            "one answer, at most one new request: {next:?}"
+        );
+        queue.extend(next);
+    }
+    let finished = core::iter::from_fn(|| c.poll_event()).last();
+    assert_eq!(
+        finished,
+        Some(FtpEvent::Finished(Ok(FtpOutput::Data(file))))
+    );
+}
+
+/// A client opening the same file again (its first ACK lost; MAVProxy sends each retry
+/// with a new sequence number) gets its open session again, not one more: four retries
+/// used to leave no session for anybody.
+#[test]
+fn opening_the_same_file_again_gives_the_same_session() {
+    let mut r = Raw::new();
+    let first = r.ask(GCS, Opcode::OpenFileRO, 0, 0, b"pub/a.txt");
+    for _ in 0..6 {
+        let again = r.ask(GCS, Opcode::OpenFileRO, 0, 0, b"/pub/a.txt");
+        assert_eq!(again.opcode, Opcode::Ack);
+        assert_eq!(
+            (again.session, &again.data[..]),
+            (first.session, &3u32.to_le_bytes()[..])
+        );
+    }
+    assert_eq!(r.server.open_sessions(), 1);
+    // Another file, or another client, is another session.
+    let other_file = r.ask(GCS, Opcode::OpenFileRO, 0, 0, b"keep/secret.txt");
+    let other_client = r.ask(OTHER, Opcode::OpenFileRO, 0, 0, b"pub/a.txt");
+    assert_eq!(other_file.opcode, Opcode::Ack);
+    assert_eq!(other_client.opcode, Opcode::Ack);
+    assert_eq!(r.server.open_sessions(), 3);
+    let read = r.ask(GCS, Opcode::ReadFile, first.session, 0, &[0; 3]);
+    assert_eq!(read.data, b"abc");
 }
