@@ -33,6 +33,9 @@ pub(crate) enum LogAction {
     /// Download a vehicle's logs as `log_<ID>.bin` (LOG_REQUEST_DATA with lost chunks asked
     /// for again, or MAVFTP where the vehicle keeps them as files).
     Download(crate::log_download_cmd::DownloadArgs),
+    /// Erase every log on the vehicle (LOG_ERASE, then LOG_REQUEST_LIST to see that none is
+    /// left); needs `--yes`.
+    Erase(crate::log_download_cmd::EraseArgs),
 }
 
 /// `mavstack log summary`.
@@ -82,6 +85,7 @@ pub(crate) fn run(action: LogAction) -> Result<(), Failure> {
         LogAction::Filter(args) => filter(&args),
         LogAction::List(args) => crate::log_download_cmd::list(&args),
         LogAction::Download(args) => crate::log_download_cmd::download(&args),
+        LogAction::Erase(args) => crate::log_download_cmd::erase(&args),
     }
 }
 

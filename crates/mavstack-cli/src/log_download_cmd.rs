@@ -1,4 +1,4 @@
-//! `mavstack log list | download`: a vehicle's logs, over `mavstack::system::System`
+//! `mavstack log list | download | erase`: a vehicle's logs, over `mavstack::system::System`
 //! (`log_list`, `log_download`: LOG_REQUEST_LIST / LOG_REQUEST_DATA, gaps asked for again)
 //! or, where the vehicle keeps them as files (`APM/LOGS/00000001.BIN`, as ArduPilot), over
 //! MAVFTP (`docs/contracts/cli.md`, "Log download").
@@ -25,6 +25,16 @@ use crate::{Failure, other};
 pub(crate) struct ListArgs {
     #[command(flatten)]
     remote: RemoteArgs,
+}
+
+/// `mavstack log erase`.
+#[derive(Debug, Args)]
+pub(crate) struct EraseArgs {
+    #[command(flatten)]
+    remote: RemoteArgs,
+    /// Erase them: every log the vehicle keeps is lost (without it nothing is sent).
+    #[arg(long)]
+    yes: bool,
 }
 
 /// `mavstack log download`.
@@ -106,6 +116,29 @@ fn utc_text(secs: u32) -> Option<String> {
         t / 60 % 60,
         t % 60
     ))
+}
+
+/// Erases every log (LOG_ERASE), then lists them to see none is left.
+pub(crate) fn erase(args: &EraseArgs) -> Result<(), Failure> {
+    if !args.yes {
+        return Err(Failure::Input(anyhow!(
+            "log erase deletes every log on the vehicle: add --yes to do it"
+        )));
+    }
+    runtime()?.block_on(async {
+        let mut remote = Remote::connect(&args.remote).await?;
+        let began = remote.elapsed();
+        let result = remote.system.log_erase().await;
+        let seconds = remote.since(began);
+        remote.close().await?;
+        result.map_err(other)?;
+        if args.remote.json {
+            print_lines(&[json!({"erased": true, "seconds": seconds}).to_string()])?;
+        } else {
+            eprintln!("log erase: no logs left, {seconds:.2} s");
+        }
+        Ok(())
+    })
 }
 
 pub(crate) fn list(args: &ListArgs) -> Result<(), Failure> {

@@ -123,3 +123,19 @@ fn a_log_the_vehicle_does_not_have_and_bad_arguments_fail() {
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(text(&o.stderr).contains("--log-dir"), "{}", text(&o.stderr));
 }
+
+/// `log erase` needs `--yes`; with it every log is gone, as the list says afterwards.
+#[test]
+fn erase_needs_yes_and_leaves_no_log() {
+    let v = Vehicle::start(&[]);
+    let conn = format!("udpout:127.0.0.1:{}", v.port);
+    let refused = mavstack(&["log", "erase", &conn]);
+    assert_eq!(refused.status.code(), Some(2), "{}", text(&refused.stderr));
+    assert!(text(&refused.stderr).contains("--yes"));
+    let listed = ok(&mavstack(&["log", "list", &conn, "--json"]));
+    assert_eq!(listed.lines().count(), 2, "nothing erased without --yes");
+    let erased = ok(&mavstack(&["log", "erase", &conn, "--yes", "--json"]));
+    let line: Value = serde_json::from_str(erased.trim()).expect("one JSON line");
+    assert_eq!(line["erased"], true);
+    assert_eq!(ok(&mavstack(&["log", "list", &conn, "--json"])), "");
+}
