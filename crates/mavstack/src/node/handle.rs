@@ -188,6 +188,17 @@ impl NodeHandle {
             .await
     }
 
+    /// Like [`send_message`](Self::send_message), for a message known only by its id and
+    /// payload (a dialect loaded at run time from XML): routed by the target fields the
+    /// node's dialect ([`NodeBuilder::dialect`]) gives message `msg_id`. `payload` is the
+    /// full payload (extensions included); each link truncates or cuts it for its version.
+    /// Returns on how many links it was queued; 0 once the node has stopped.
+    pub async fn send_raw(&self, msg_id: u32, payload: &[u8]) -> usize {
+        let len = payload.len().min(MAX_PAYLOAD_LEN);
+        self.send_payload(SendTo::Target, msg_id, payload[..len].to_vec())
+            .await
+    }
+
     async fn send_payload(&self, to: SendTo, msg_id: u32, payload: Vec<u8>) -> usize {
         let (done, rx) = oneshot::channel();
         let command = Command::Send {
