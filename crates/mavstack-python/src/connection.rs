@@ -60,10 +60,8 @@ pub(crate) struct LogConnection {
     by_sysid: HashMap<(u8, usize), Found>,
     /// Latest message per message index: pymavlink's `messages`.
     latest: HashMap<usize, Found>,
-    /// The globals conditions are evaluated with (Python's `math`, as pymavlink).
-    globals: Option<Py<PyDict>>,
-    /// Compiled conditions by their text.
-    compiled: HashMap<String, Py<PyAny>>,
+    /// Conditions compiled so far and their globals.
+    conditions: Conditions,
     /// The last `type` argument of `recv_match` and the message indexes it asks for.
     last_type: Option<(Py<PyAny>, Arc<Vec<bool>>)>,
 }
@@ -85,8 +83,7 @@ impl LogConnection {
             key,
             by_sysid: HashMap::new(),
             latest: HashMap::new(),
-            globals: None,
-            compiled: HashMap::new(),
+            conditions: Conditions::default(),
             last_type: None,
         })
     }
@@ -122,7 +119,7 @@ impl LogConnection {
         Ok(Some(found))
     }
 
-    /// [`Self::wanted`], remembered for the same `type` argument as the last call's (a loop
+    /// [`wanted_mask`], remembered for the same `type` argument as the last call's (a loop
     /// calls `recv_match(type="ATTITUDE")` many times with the same string).
     fn wanted_cached(slf: &Bound<'_, Self>, ty: &Bound<'_, PyAny>) -> PyResult<Arc<Vec<bool>>> {
         if let Some((last, mask)) = &slf.borrow().last_type {
@@ -131,35 +128,8 @@ impl LogConnection {
                 return Ok(Arc::clone(mask));
             }
         }
-        let mask = Arc::new(slf.borrow().wanted(ty)?);
+        let mask = Arc::new(wanted_mask(&slf.borrow().dialect, ty)?);
         slf.borrow_mut().last_type = Some((ty.clone().unbind(), Arc::clone(&mask)));
-        Ok(mask)
-    }
-
-    /// Which message indexes `type` asks for (a name, or a list, set or tuple of names).
-    fn wanted(&self, ty: &Bound<'_, PyAny>) -> PyResult<Vec<bool>> {
-        let mut mask = vec![false; self.dialect.messages.len()];
-        let mut add = |name: &Bound<'_, PyAny>| -> PyResult<()> {
-            let name: String = name.extract()?;
-            if let Some(i) = self.dialect.index_of_name(&name) {
-                mask[i] = true;
-            }
-            Ok(())
-        };
-        if ty.is_instance_of::<PyString>() {
-            add(ty)?;
-        } else if ty.is_instance_of::<PyList>()
-            || ty.is_instance_of::<PySet>()
-            || ty.is_instance_of::<PyTuple>()
-        {
-            for name in ty.try_iter()? {
-                add(&name?)?;
-            }
-        } else {
-            return Err(PyTypeError::new_err(
-                "type: a message name or a list or set of names",
-            ));
-        }
         Ok(mask)
     }
 
@@ -171,38 +141,7 @@ impl LogConnection {
         condition: &str,
         sysid: u8,
     ) -> PyResult<bool> {
-        let (globals, code) = {
-            let mut me = slf.borrow_mut();
-            let globals = match &me.globals {
-                Some(g) => g.clone_ref(py),
-                None => {
-                    let g = PyDict::new(py);
-                    let math = py.import("math")?;
-                    for name in math.dir()? {
-                        let name: String = name.extract()?;
-                        if !name.starts_with('_') {
-                            g.set_item(&name, math.getattr(&name)?)?;
-                        }
-                    }
-                    let g = g.unbind();
-                    me.globals = Some(g.clone_ref(py));
-                    g
-                }
-            };
-            let code = match me.compiled.get(condition) {
-                Some(c) => c.clone_ref(py),
-                None => {
-                    let c = py
-                        .import("builtins")?
-                        .getattr("compile")?
-                        .call1((condition, "<condition>", "eval"))?
-                        .unbind();
-                    me.compiled.insert(condition.to_owned(), c.clone_ref(py));
-                    c
-                }
-            };
-            (globals, code)
-        };
+        let (globals, code) = slf.borrow_mut().conditions.prepare(py, condition)?;
         let locals = Bound::new(
             py,
             LatestMessages {
@@ -210,27 +149,112 @@ impl LogConnection {
                 sysid: Some(sysid),
             },
         )?;
-        let result = py
-            .import("builtins")?
-            .getattr("eval")?
-            .call1((code, globals, locals));
-        match result {
-            Ok(v) => {
-                if v.is_none() {
-                    Ok(false)
-                } else {
-                    v.is_truthy()
-                }
-            }
-            Err(e)
-                if e.is_instance_of::<PyNameError>(py)
-                    || e.is_instance_of::<PyZeroDivisionError>(py)
-                    || e.is_instance_of::<PyIndexError>(py) =>
-            {
-                Ok(false)
-            }
-            Err(e) => Err(e),
+        eval_condition(py, &globals, &code, locals.as_any())
+    }
+}
+
+/// Which message indexes `type` asks for (a name, or a list, set or tuple of names).
+pub(crate) fn wanted_mask(dialect: &Dialect, ty: &Bound<'_, PyAny>) -> PyResult<Vec<bool>> {
+    let mut mask = vec![false; dialect.messages.len()];
+    let mut add = |name: &Bound<'_, PyAny>| -> PyResult<()> {
+        let name: String = name.extract()?;
+        if let Some(i) = dialect.index_of_name(&name) {
+            mask[i] = true;
         }
+        Ok(())
+    };
+    if ty.is_instance_of::<PyString>() {
+        add(ty)?;
+    } else if ty.is_instance_of::<PyList>()
+        || ty.is_instance_of::<PySet>()
+        || ty.is_instance_of::<PyTuple>()
+    {
+        for name in ty.try_iter()? {
+            add(&name?)?;
+        }
+    } else {
+        return Err(PyTypeError::new_err(
+            "type: a message name or a list or set of names",
+        ));
+    }
+    Ok(mask)
+}
+
+/// The globals conditions are evaluated with (Python's `math`, as pymavlink) and the
+/// conditions compiled so far, by their text.
+#[derive(Default)]
+pub(crate) struct Conditions {
+    globals: Option<Py<PyDict>>,
+    compiled: HashMap<String, Py<PyAny>>,
+}
+
+impl Conditions {
+    /// The globals and the compiled code of `condition`.
+    pub(crate) fn prepare(
+        &mut self,
+        py: Python<'_>,
+        condition: &str,
+    ) -> PyResult<(Py<PyDict>, Py<PyAny>)> {
+        let globals = match &self.globals {
+            Some(g) => g.clone_ref(py),
+            None => {
+                let g = PyDict::new(py);
+                let math = py.import("math")?;
+                for name in math.dir()? {
+                    let name: String = name.extract()?;
+                    if !name.starts_with('_') {
+                        g.set_item(&name, math.getattr(&name)?)?;
+                    }
+                }
+                let g = g.unbind();
+                self.globals = Some(g.clone_ref(py));
+                g
+            }
+        };
+        let code = match self.compiled.get(condition) {
+            Some(c) => c.clone_ref(py),
+            None => {
+                let c = py
+                    .import("builtins")?
+                    .getattr("compile")?
+                    .call1((condition, "<condition>", "eval"))?
+                    .unbind();
+                self.compiled.insert(condition.to_owned(), c.clone_ref(py));
+                c
+            }
+        };
+        Ok((globals, code))
+    }
+}
+
+/// Evaluates compiled `code` with `locals` (the latest messages by name), as pymavlink's
+/// `evaluate_condition`: a NameError, ZeroDivisionError or IndexError is false.
+pub(crate) fn eval_condition(
+    py: Python<'_>,
+    globals: &Py<PyDict>,
+    code: &Py<PyAny>,
+    locals: &Bound<'_, PyAny>,
+) -> PyResult<bool> {
+    let result = py
+        .import("builtins")?
+        .getattr("eval")?
+        .call1((code, globals, locals));
+    match result {
+        Ok(v) => {
+            if v.is_none() {
+                Ok(false)
+            } else {
+                v.is_truthy()
+            }
+        }
+        Err(e)
+            if e.is_instance_of::<PyNameError>(py)
+                || e.is_instance_of::<PyZeroDivisionError>(py)
+                || e.is_instance_of::<PyIndexError>(py) =>
+        {
+            Ok(false)
+        }
+        Err(e) => Err(e),
     }
 }
 

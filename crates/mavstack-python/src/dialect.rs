@@ -22,6 +22,10 @@ pub(crate) struct FieldLayout {
     pub(crate) offset: usize,
     /// The XML's `units`, if any.
     pub(crate) units: Option<String>,
+    /// Whether it comes after `<extensions/>`.
+    pub(crate) extension: bool,
+    /// Whether its XML type is `uint8_t_mavlink_version` (HEARTBEAT's `mavlink_version`).
+    pub(crate) mavlink_version: bool,
 }
 
 impl FieldLayout {
@@ -70,6 +74,8 @@ pub(crate) struct Dialect {
     /// The stack's message-entry table of the dialect (what the frame parsers check
     /// checksums with).
     pub(crate) table: MessageTable,
+    /// Every enum entry's name and value (pymavlink's module constants).
+    pub(crate) constants: Vec<(String, u64)>,
     by_id: HashMap<u32, usize>,
     by_name: HashMap<String, usize>,
 }
@@ -106,6 +112,8 @@ impl Dialect {
                     array_len: f.ty.array_len.map(usize::from),
                     offset: f.offset,
                     units: f.units.clone(),
+                    extension: f.extension,
+                    mavlink_version: f.ty.mavlink_version,
                 })
                 .collect();
             let wire_order = m
@@ -141,6 +149,11 @@ impl Dialect {
             name: name.to_owned(),
             messages,
             table: loaded.message_table(),
+            constants: loaded
+                .enums
+                .iter()
+                .flat_map(|e| e.entries.iter().map(|x| (x.name.clone(), x.value)))
+                .collect(),
             by_id,
             by_name,
         }

@@ -178,6 +178,43 @@ impl Message {
         }
     }
 
+    /// A message received on a live link (or encoded to be sent): the whole frame in
+    /// `frame`, `timestamp` its arrival in seconds since the Unix epoch (pymavlink's
+    /// `time.time()` at receipt), `verified` whether its signature was checked with a key.
+    pub(crate) fn live(
+        ty: Arc<MessageType>,
+        frame: Vec<u8>,
+        timestamp: f64,
+        verified: bool,
+    ) -> Self {
+        let len = frame.len();
+        Self {
+            ty,
+            log: LogBytes::from_frame(frame),
+            start: 0,
+            len,
+            verified,
+            timestamp,
+            link: 0,
+        }
+    }
+
+    /// The message's type.
+    pub(crate) fn message_type(&self) -> &Arc<MessageType> {
+        &self.ty
+    }
+
+    /// The payload as received (MAVLink 2: possibly truncated).
+    pub(crate) fn payload(&self) -> &[u8] {
+        let f = self.frame();
+        let header = match f.version() {
+            Version::V1 => mavstack_core::wire::HEADER_LEN_V1,
+            Version::V2 => mavstack_core::wire::HEADER_LEN_V2,
+        };
+        let at = self.start + header;
+        &self.log[at..at + f.payload_len()]
+    }
+
     fn frame(&self) -> Frame<&[u8]> {
         Frame::new_unchecked(&self.log[self.start..self.start + self.len])
     }

@@ -1,5 +1,10 @@
-"""mavstack: MAVLink logs at native speed.
+"""mavstack: MAVLink links and logs at native speed.
 
+- ``mavstack.mavutil.mavlink_connection("udpin:0.0.0.0:14550")`` (pymavlink's live strings:
+  ``udpin:``, ``udpout:``, ``udpbcast:``, ``tcp:``, ``tcpin:``, a serial device with ``baud``)
+  offers pymavlink's live API -- ``wait_heartbeat``, ``recv_match``, ``messages``,
+  ``target_system``, ``mav.<message>_send(...)``, ``setup_signing``, ``set_mode`` -- over a
+  mavstack node.
 - ``mavstack.mavutil.mavlink_connection(path, dialect="ardupilotmega", key=None)`` reads a
   ``.tlog`` (or a raw capture) message by message with pymavlink's API: ``recv_match``,
   ``recv_msg``, iteration, ``messages``; each message has pymavlink's methods and attributes.

@@ -1,0 +1,918 @@
+//! `mavstack.mavutil.mavlink_connection("udpin:0.0.0.0:14550")`: a live link with
+//! pymavlink's receiving side (`recv_match`, `recv_msg`, `messages`, `target_system`,
+//! `flightmode`, `motors_armed`) and the sending side its `mav` object is built on
+//! (`encode`, `send_fields`, `send`, `write`).
+//!
+//! Each connection is one [`mavstack::Node`] with one link, opened from the connection
+//! string by the stack's own parser ([`LinkSpec`]): the link's version handling and signing
+//! come with it. The node runs on one tokio runtime shared by every connection of the
+//! process (one worker thread); frames reach the connection through the node's subscription,
+//! and a blocking `recv_match` waits on it with the GIL released, waking every 100 ms to let
+//! Python see a Ctrl-C.
+//!
+//! What pymavlink keeps per system (the latest message of each type, the flight mode, the
+//! armed flag) is kept the same way here, and `target_system` locks onto the first vehicle
+//! HEARTBEAT as pymavlink's does (`target_component` stays 0 until set, as in pymavlink).
+
+use core::time::Duration;
+use std::collections::HashMap;
+use std::sync::{Arc, OnceLock};
+use std::time::{Instant, SystemTime, UNIX_EPOCH};
+
+use mavstack::channel::{Authentication, SigningConfig};
+use mavstack::core::wire::{self, FrameHeader, Version};
+use mavstack::modes::{self, Flavour};
+use mavstack::router::{LinkId, LocalDelivery, RouterConfig};
+use mavstack::{Incoming, LinkSpec, Node, NodeHandle, Subscription};
+use mavstack_core::signing::SecretKey;
+use mavstack_xml::PrimitiveType;
+use pyo3::exceptions::{PyConnectionError, PyOSError, PyRuntimeError, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyDict, PyString, PyTuple};
+use tokio::runtime::Runtime;
+use tokio::sync::mpsc::error::TryRecvError;
+
+use crate::connection::{Conditions, eval_condition, wanted_mask};
+use crate::dialect::{Dialect, FieldLayout, MessageType};
+use crate::message::{Message, bytes_at};
+
+/// How long a blocking receive waits between two looks at Python's signals.
+const SIGNAL_CHECK: Duration = Duration::from_millis(100);
+
+/// HEARTBEAT `type` values pymavlink does not take for a vehicle: GCS, ONBOARD_CONTROLLER,
+/// GIMBAL, ADSB.
+const NOT_VEHICLE_TYPES: [u8; 4] = [6, 18, 26, 27];
+/// MAV_AUTOPILOT_INVALID.
+const AUTOPILOT_INVALID: u8 = 8;
+/// MAV_COMP_ID_GIMBAL.
+const COMP_GIMBAL: u8 = 154;
+/// MAV_COMP_ID_MISSIONPLANNER: the component a connection opened with pymavlink's default
+/// `source_component=0` sends from.
+const MISSION_PLANNER: u8 = 190;
+/// MAV_MODE_FLAG_SAFETY_ARMED.
+const SAFETY_ARMED: u8 = 128;
+/// MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.
+const CUSTOM_MODE_ENABLED: u8 = 1;
+
+/// The runtime every live connection's node runs on.
+fn runtime() -> PyResult<&'static Runtime> {
+    static RUNTIME: OnceLock<Result<Runtime, String>> = OnceLock::new();
+    RUNTIME
+        .get_or_init(|| {
+            tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(1)
+                .thread_name("mavstack-live")
+                .enable_all()
+                .build()
+                .map_err(|e| e.to_string())
+        })
+        .as_ref()
+        .map_err(|e| PyRuntimeError::new_err(format!("cannot start the link runtime: {e}")))
+}
+
+/// Seconds since the Unix epoch, as `time.time()`.
+fn unix_now() -> f64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+/// What pymavlink keeps per system id (its `mavfile_state`).
+struct SystemState {
+    /// The latest message of each type, by name.
+    messages: Py<PyDict>,
+    /// The flight mode's name, from the latest vehicle HEARTBEAT.
+    flightmode: String,
+    /// Whether the latest vehicle HEARTBEAT said armed.
+    armed: bool,
+    /// HEARTBEAT `type`, `autopilot` and `base_mode` of the latest vehicle HEARTBEAT.
+    mav_type: Option<u8>,
+    autopilot: Option<u8>,
+    base_mode: u8,
+}
+
+impl SystemState {
+    fn new(py: Python<'_>) -> Self {
+        Self {
+            messages: PyDict::new(py).unbind(),
+            flightmode: "UNKNOWN".to_owned(),
+            armed: false,
+            mav_type: None,
+            autopilot: None,
+            base_mode: 0,
+        }
+    }
+}
+
+/// A live MAVLink connection (pymavlink's `mavudp`, `mavtcp`, `mavserial`): one
+/// `mavstack::Node` with one link.
+#[pyclass(module = "mavstack", name = "LiveLink")]
+pub(crate) struct LiveLink {
+    /// The connection string as given (keys redacted).
+    device: String,
+    dialect: Arc<Dialect>,
+    node: Option<Node>,
+    handle: NodeHandle,
+    frames: Subscription,
+    /// The router links (peers) heard from or reported, for `write`, and when the node was
+    /// last asked for them.
+    peers: Vec<LinkId>,
+    peers_asked: Option<Instant>,
+    /// pymavlink's `sysid`: the target system (0 until the first vehicle HEARTBEAT).
+    sysid: u8,
+    target_component: u8,
+    systems: HashMap<u8, SystemState>,
+    conditions: Conditions,
+    last_type: Option<(Py<PyAny>, Arc<Vec<bool>>)>,
+    /// Sequence number of the frames `encode` builds.
+    encode_seq: u8,
+    /// Frames of message ids the dialect does not define (counted, never returned).
+    unknown_id: u64,
+    /// Messages received.
+    received: u64,
+}
+
+impl LiveLink {
+    /// Opens `text` (a connection string with optional link options) as system
+    /// `source_system`, component `source_component`, signing with `key` when given.
+    pub(crate) fn open(
+        py: Python<'_>,
+        text: &str,
+        source_system: u8,
+        source_component: u8,
+        dialect: &str,
+        key: Option<SecretKey>,
+        link_id: u8,
+    ) -> PyResult<Self> {
+        let dialect = Dialect::load(dialect)?;
+        let mut spec = LinkSpec::parse_in(text, &dialect.table)
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        if let Some(key) = key {
+            spec.config.signing = Some(SigningConfig::new(key, link_id));
+        }
+        let shown = mavstack::redacted(text);
+        if source_system == 0 {
+            return Err(PyValueError::new_err(
+                "source_system 0 is the broadcast address, never a sender",
+            ));
+        }
+        let mut router = RouterConfig::default();
+        router.system_id = source_system;
+        // pymavlink's default component 0 is MAV_COMP_ID_ALL, which the stack never sends
+        // from: a ground station's own id instead.
+        router.component_id = if source_component == 0 {
+            MISSION_PLANNER
+        } else {
+            source_component
+        };
+        router.local = LocalDelivery::All;
+        router.forward = false;
+        let table = dialect.table;
+        let rt = runtime()?;
+        let started = py.detach(|| {
+            rt.block_on(async move {
+                let node = Node::builder()
+                    .router(router)
+                    .dialect(table)
+                    .link(spec)
+                    .start()
+                    .await?;
+                let frames = node.subscribe().await;
+                Ok::<_, mavstack::NodeError>((node, frames))
+            })
+        });
+        let (node, frames) =
+            started.map_err(|e| PyOSError::new_err(format!("cannot open \"{shown}\": {e}")))?;
+        let mut systems = HashMap::new();
+        systems.insert(0, SystemState::new(py));
+        Ok(Self {
+            device: shown,
+            handle: node.handle(),
+            node: Some(node),
+            dialect,
+            frames,
+            peers: Vec::new(),
+            peers_asked: None,
+            sysid: 0,
+            target_component: 0,
+            systems,
+            conditions: Conditions::default(),
+            last_type: None,
+            encode_seq: 0,
+            unknown_id: 0,
+            received: 0,
+        })
+    }
+
+    /// The next frame from the node: at once, or (when `blocking`) waiting until `deadline`
+    /// with the GIL released. `None` when nothing came in time or the node has stopped.
+    fn next_frame(
+        &mut self,
+        py: Python<'_>,
+        blocking: bool,
+        deadline: Option<Instant>,
+    ) -> PyResult<Option<Incoming>> {
+        loop {
+            match self.frames.try_recv() {
+                Ok(i) => return Ok(Some(i)),
+                Err(TryRecvError::Disconnected) => return Ok(None),
+                Err(TryRecvError::Empty) => {}
+            }
+            if !blocking {
+                return Ok(None);
+            }
+            let wait = match deadline {
+                Some(d) => {
+                    let now = Instant::now();
+                    if d <= now {
+                        return Ok(None);
+                    }
+                    (d - now).min(SIGNAL_CHECK)
+                }
+                None => SIGNAL_CHECK,
+            };
+            let rt = runtime()?;
+            let frames = &mut self.frames;
+            let got = py
+                .detach(|| rt.block_on(async { tokio::time::timeout(wait, frames.recv()).await }));
+            match got {
+                Ok(Some(i)) => return Ok(Some(i)),
+                Ok(None) => return Ok(None),
+                Err(_) => py.check_signals()?,
+            }
+        }
+    }
+
+    /// Records a received frame as pymavlink's `post_message` does and returns it as a
+    /// message with its sender's system id and its type's index; `None` for a message id
+    /// the dialect does not define.
+    fn post(
+        &mut self,
+        py: Python<'_>,
+        incoming: &Incoming,
+    ) -> PyResult<Option<(Py<Message>, u8, usize)>> {
+        let frame = incoming.frame.frame.view();
+        let Some(index) = self.dialect.index_of_id(frame.msg_id()) else {
+            self.unknown_id += 1;
+            return Ok(None);
+        };
+        if !self.peers.contains(&incoming.link_id) {
+            self.peers.push(incoming.link_id);
+        }
+        self.received += 1;
+        let ty = Arc::clone(&self.dialect.messages[index]);
+        let verified = matches!(incoming.frame.auth, Authentication::Verified { .. });
+        let sysid = frame.sysid();
+        let compid = frame.compid();
+        let heartbeat = (ty.name == "HEARTBEAT").then(|| heartbeat_fields(&ty, frame.payload()));
+        let message = Py::new(
+            py,
+            Message::live(
+                Arc::clone(&ty),
+                frame.as_bytes().to_vec(),
+                unix_now(),
+                verified,
+            ),
+        )?;
+        let state = self
+            .systems
+            .entry(sysid)
+            .or_insert_with(|| SystemState::new(py));
+        state.messages.bind(py).set_item(&ty.name, &message)?;
+        if let Some(hb) = heartbeat
+            && probably_vehicle(compid, &hb)
+        {
+            state.flightmode = mode_string(&hb);
+            state.armed = hb.base_mode & SAFETY_ARMED != 0;
+            state.mav_type = Some(hb.mav_type);
+            state.autopilot = Some(hb.autopilot);
+            state.base_mode = hb.base_mode;
+            if self.sysid == 0 {
+                self.sysid = sysid;
+            }
+        }
+        Ok(Some((message, sysid, index)))
+    }
+
+    /// The state of the target system (pymavlink's `sysid_state[sysid]`).
+    fn target_state(&mut self, py: Python<'_>) -> &SystemState {
+        self.systems
+            .entry(self.sysid)
+            .or_insert_with(|| SystemState::new(py))
+    }
+
+    /// The type mask of a `type` argument, remembered for the same argument as last time.
+    fn wanted_cached(&mut self, ty: &Bound<'_, PyAny>) -> PyResult<Arc<Vec<bool>>> {
+        if let Some((last, mask)) = &self.last_type {
+            let last = last.bind(ty.py());
+            if last.is(ty) || (last.get_type().is(ty.get_type()) && last.eq(ty)?) {
+                return Ok(Arc::clone(mask));
+            }
+        }
+        let mask = Arc::new(wanted_mask(&self.dialect, ty)?);
+        self.last_type = Some((ty.clone().unbind(), Arc::clone(&mask)));
+        Ok(mask)
+    }
+
+    /// The message type called `name` (a message's name, any case).
+    fn message_type(&self, name: &str) -> PyResult<Arc<MessageType>> {
+        self.dialect
+            .index_of_name(&name.to_ascii_uppercase())
+            .map(|i| Arc::clone(&self.dialect.messages[i]))
+            .ok_or_else(|| {
+                PyValueError::new_err(format!(
+                    "no message {name:?} in dialect {}",
+                    self.dialect.name
+                ))
+            })
+    }
+
+    fn node_handle(&self) -> PyResult<&NodeHandle> {
+        if self.node.is_none() {
+            return Err(PyConnectionError::new_err(format!(
+                "\"{}\" is closed",
+                self.device
+            )));
+        }
+        Ok(&self.handle)
+    }
+
+    /// Queues `payload` of message `id` on the link; `ConnectionError` once it is closed.
+    fn send_payload(&self, py: Python<'_>, id: u32, payload: &[u8]) -> PyResult<usize> {
+        let handle = self.node_handle()?.clone();
+        let rt = runtime()?;
+        Ok(py.detach(|| rt.block_on(handle.send_raw(id, payload))))
+    }
+
+    /// The flavour of the target's modes, from its latest HEARTBEAT.
+    fn flavour(&mut self, py: Python<'_>) -> Option<Flavour> {
+        use mavstack::dialects::common::{MavAutopilot, MavType};
+        let s = self.target_state(py);
+        Flavour::of(MavAutopilot(s.autopilot?), MavType(s.mav_type?))
+    }
+}
+
+/// HEARTBEAT's fields pymavlink's `post_message` looks at.
+struct HeartbeatFields {
+    mav_type: u8,
+    autopilot: u8,
+    base_mode: u8,
+    custom_mode: u32,
+}
+
+fn heartbeat_fields(ty: &MessageType, payload: &[u8]) -> HeartbeatFields {
+    let byte = |name| {
+        ty.field(name)
+            .map_or(0, |f| bytes_at::<1>(payload, f.offset)[0])
+    };
+    HeartbeatFields {
+        mav_type: byte("type"),
+        autopilot: byte("autopilot"),
+        base_mode: byte("base_mode"),
+        custom_mode: ty
+            .field("custom_mode")
+            .map_or(0, |f| u32::from_le_bytes(bytes_at(payload, f.offset))),
+    }
+}
+
+/// pymavlink's `probably_vehicle_heartbeat`.
+fn probably_vehicle(compid: u8, hb: &HeartbeatFields) -> bool {
+    compid != COMP_GIMBAL
+        && !NOT_VEHICLE_TYPES.contains(&hb.mav_type)
+        && hb.autopilot != AUTOPILOT_INVALID
+}
+
+/// The flight mode's name, as pymavlink's `mode_string_v10` writes it: the mode's name
+/// where the autopilot's table has it, `Mode(N)` otherwise, `Mode(0xNN)` (the base mode)
+/// without a custom mode.
+fn mode_string(hb: &HeartbeatFields) -> String {
+    use mavstack::dialects::common::{MavAutopilot, MavType};
+    if hb.base_mode & CUSTOM_MODE_ENABLED == 0 {
+        return format!("Mode(0x{:08x})", hb.base_mode);
+    }
+    Flavour::of(MavAutopilot(hb.autopilot), MavType(hb.mav_type))
+        .and_then(|f| modes::name_of(f, hb.custom_mode))
+        .map_or_else(|| format!("Mode({})", hb.custom_mode), str::to_owned)
+}
+
+/// Writes `value` into `payload` as field `f` (pymavlink's argument of that name).
+fn put_field(f: &FieldLayout, value: &Bound<'_, PyAny>, payload: &mut [u8]) -> PyResult<()> {
+    if f.is_text() && f.array_len.is_some() {
+        let bytes: Vec<u8> = if let Ok(s) = value.cast::<PyString>() {
+            s.to_cow()?.as_bytes().to_vec()
+        } else if let Ok(b) = value.extract::<Vec<u8>>() {
+            b
+        } else {
+            return Err(PyTypeError::new_err(format!(
+                "{}: a str or bytes for char[{}]",
+                f.name,
+                f.count()
+            )));
+        };
+        let n = bytes.len().min(f.count());
+        payload[f.offset..f.offset + n].copy_from_slice(&bytes[..n]);
+        return Ok(());
+    }
+    let size = f.primitive.size();
+    match f.array_len {
+        None => put_scalar(f, value, &mut payload[f.offset..f.offset + size]),
+        Some(n) => {
+            let items: Vec<Bound<'_, PyAny>> = if let Ok(b) = value.cast::<PyBytes>() {
+                let py = value.py();
+                b.as_bytes()
+                    .iter()
+                    .map(|&x| pyo3::types::PyInt::new(py, x).into_any())
+                    .collect()
+            } else {
+                value
+                    .try_iter()
+                    .map_err(|_| {
+                        PyTypeError::new_err(format!("{}: a sequence of {n} values", f.name))
+                    })?
+                    .collect::<PyResult<_>>()?
+            };
+            if items.len() > n {
+                return Err(PyValueError::new_err(format!(
+                    "{}: {} values for an array of {n}",
+                    f.name,
+                    items.len()
+                )));
+            }
+            for (i, item) in items.iter().enumerate() {
+                let at = f.offset + i * size;
+                put_scalar(f, item, &mut payload[at..at + size])?;
+            }
+            Ok(())
+        }
+    }
+}
+
+/// Writes one element of field `f` into `out` (its size).
+fn put_scalar(f: &FieldLayout, value: &Bound<'_, PyAny>, out: &mut [u8]) -> PyResult<()> {
+    let range = |e: PyErr| {
+        PyValueError::new_err(format!(
+            "{}: {} does not fit a {:?} ({e})",
+            f.name,
+            value
+                .repr()
+                .map_or_else(|_| "?".to_owned(), |r| r.to_string()),
+            f.primitive
+        ))
+    };
+    match f.primitive {
+        PrimitiveType::F32 => {
+            let v: f64 = value.extract()?;
+            out.copy_from_slice(&(v as f32).to_le_bytes());
+        }
+        PrimitiveType::F64 => {
+            let v: f64 = value.extract()?;
+            out.copy_from_slice(&v.to_le_bytes());
+        }
+        PrimitiveType::Char => {
+            let b: u8 = if let Ok(s) = value.cast::<PyString>() {
+                s.to_cow()?.bytes().next().unwrap_or(0)
+            } else {
+                value.extract().map_err(range)?
+            };
+            out[0] = b;
+        }
+        PrimitiveType::U8 => {
+            out.copy_from_slice(&value.extract::<u8>().map_err(range)?.to_le_bytes())
+        }
+        PrimitiveType::I8 => {
+            out.copy_from_slice(&value.extract::<i8>().map_err(range)?.to_le_bytes())
+        }
+        PrimitiveType::U16 => {
+            out.copy_from_slice(&value.extract::<u16>().map_err(range)?.to_le_bytes());
+        }
+        PrimitiveType::I16 => {
+            out.copy_from_slice(&value.extract::<i16>().map_err(range)?.to_le_bytes());
+        }
+        PrimitiveType::U32 => {
+            out.copy_from_slice(&value.extract::<u32>().map_err(range)?.to_le_bytes());
+        }
+        PrimitiveType::I32 => {
+            out.copy_from_slice(&value.extract::<i32>().map_err(range)?.to_le_bytes());
+        }
+        PrimitiveType::U64 => {
+            out.copy_from_slice(&value.extract::<u64>().map_err(range)?.to_le_bytes());
+        }
+        PrimitiveType::I64 => {
+            out.copy_from_slice(&value.extract::<i64>().map_err(range)?.to_le_bytes());
+        }
+    }
+    Ok(())
+}
+
+/// The full payload of `ty` from its fields' values in XML order (pymavlink's arguments).
+fn encode_payload(ty: &MessageType, args: &Bound<'_, PyTuple>) -> PyResult<Vec<u8>> {
+    if args.len() != ty.fields.len() {
+        return Err(PyTypeError::new_err(format!(
+            "{}: {} values for {} fields",
+            ty.name,
+            args.len(),
+            ty.fields.len()
+        )));
+    }
+    let mut payload = vec![0u8; ty.max_len];
+    for (f, v) in ty.fields.iter().zip(args.iter()) {
+        put_field(f, &v, &mut payload)?;
+    }
+    Ok(payload)
+}
+
+#[pymethods]
+impl LiveLink {
+    /// The next message, or `None` when none has arrived (pymavlink's `recv_msg`: it does
+    /// not wait).
+    fn recv_msg(&mut self, py: Python<'_>) -> PyResult<Option<Py<Message>>> {
+        while let Some(i) = self.next_frame(py, false, None)? {
+            if let Some((m, _, _)) = self.post(py, &i)? {
+                return Ok(Some(m));
+            }
+        }
+        Ok(None)
+    }
+
+    /// The next message of the given type(s) for which `condition` holds (a Python
+    /// expression over the latest messages of the sender's system, as pymavlink's); with
+    /// `blocking`, waiting up to `timeout` seconds (forever without one) with the GIL
+    /// released. `None` when nothing matched in time.
+    #[pyo3(signature = (condition=None, r#type=None, blocking=false, timeout=None))]
+    fn recv_match(
+        &mut self,
+        py: Python<'_>,
+        condition: Option<&str>,
+        r#type: Option<&Bound<'_, PyAny>>,
+        blocking: bool,
+        timeout: Option<f64>,
+    ) -> PyResult<Option<Py<Message>>> {
+        let wanted = match r#type {
+            Some(t) if !t.is_none() => Some(self.wanted_cached(t)?),
+            _ => None,
+        };
+        let deadline = match timeout {
+            Some(t) if t.is_finite() => {
+                Some(Instant::now() + Duration::try_from_secs_f64(t.max(0.0)).unwrap_or_default())
+            }
+            _ => None,
+        };
+        loop {
+            if deadline.is_some_and(|d| Instant::now() >= d) {
+                return Ok(None);
+            }
+            let Some(incoming) = self.next_frame(py, blocking, deadline)? else {
+                return Ok(None);
+            };
+            let Some((message, sysid, index)) = self.post(py, &incoming)? else {
+                continue;
+            };
+            if wanted.as_ref().is_some_and(|w| !w[index]) {
+                continue;
+            }
+            if let Some(c) = condition {
+                let (globals, code) = self.conditions.prepare(py, c)?;
+                let locals = self
+                    .systems
+                    .get(&sysid)
+                    .map(|s| s.messages.clone_ref(py))
+                    .ok_or_else(|| PyRuntimeError::new_err("no state for the sender"))?;
+                if !eval_condition(py, &globals, &code, locals.bind(py).as_any())? {
+                    continue;
+                }
+            }
+            return Ok(Some(message));
+        }
+    }
+
+    /// The latest message of each type from the target system (pymavlink's `messages`, a
+    /// dict by name).
+    #[getter]
+    fn messages(&mut self, py: Python<'_>) -> Py<PyDict> {
+        self.target_state(py).messages.clone_ref(py)
+    }
+
+    /// The latest messages of each system heard: `{sysid: {name: message}}`.
+    fn messages_by_system<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        for (sysid, s) in &self.systems {
+            d.set_item(sysid, s.messages.bind(py))?;
+        }
+        Ok(d)
+    }
+
+    /// The target system: the first vehicle heard (0 until then), or what was set.
+    #[getter]
+    fn get_target_system(&self) -> u8 {
+        self.sysid
+    }
+
+    #[setter]
+    fn set_target_system(&mut self, py: Python<'_>, value: u8) {
+        self.sysid = value;
+        let _ = self.target_state(py);
+    }
+
+    /// The target component (0, every component, until set: as pymavlink).
+    #[getter]
+    fn get_target_component(&self) -> u8 {
+        self.target_component
+    }
+
+    #[setter]
+    fn set_target_component(&mut self, value: u8) {
+        self.target_component = value;
+    }
+
+    /// The target's flight mode, by name (`"GUIDED"`), from its latest HEARTBEAT.
+    #[getter]
+    fn flightmode(&mut self, py: Python<'_>) -> String {
+        self.target_state(py).flightmode.clone()
+    }
+
+    /// Whether the target's latest HEARTBEAT said armed.
+    fn motors_armed(&mut self, py: Python<'_>) -> bool {
+        self.target_state(py).armed
+    }
+
+    /// The target's HEARTBEAT `type` (None before one came).
+    #[getter]
+    fn mav_type(&mut self, py: Python<'_>) -> Option<u8> {
+        self.target_state(py).mav_type
+    }
+
+    /// The target's HEARTBEAT `autopilot` (None before one came).
+    #[getter]
+    fn mav_autopilot(&mut self, py: Python<'_>) -> Option<u8> {
+        self.target_state(py).autopilot
+    }
+
+    /// The target's HEARTBEAT `base_mode`.
+    #[getter]
+    fn base_mode(&mut self, py: Python<'_>) -> u8 {
+        self.target_state(py).base_mode
+    }
+
+    /// The target's modes, name → `custom_mode`, for its autopilot and vehicle type; `None`
+    /// before its HEARTBEAT or for an autopilot whose modes are not known.
+    fn mode_mapping<'py>(&mut self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(flavour) = self.flavour(py) else {
+            return Ok(None);
+        };
+        let d = PyDict::new(py);
+        for m in modes::modes(flavour) {
+            d.set_item(m.name, m.custom_mode)?;
+        }
+        Ok(Some(d))
+    }
+
+    /// MAV_CMD_DO_SET_MODE's param1-3 for `mode` (a name, or an ArduPilot mode number) on
+    /// the target; `None` for a name it does not have.
+    fn mode_params(
+        &mut self,
+        py: Python<'_>,
+        mode: &Bound<'_, PyAny>,
+    ) -> PyResult<Option<(f32, f32, f32)>> {
+        let flavour = self.flavour(py);
+        if let Ok(n) = mode.extract::<u32>() {
+            return Ok(Some(match flavour {
+                Some(f) => f.command_params(n),
+                None => (f32::from(CUSTOM_MODE_ENABLED), n as f32, 0.0),
+            }));
+        }
+        let name: String = mode.extract()?;
+        Ok(flavour.and_then(|f| modes::by_name(f, &name).map(|m| f.command_params(m.custom_mode))))
+    }
+
+    /// A message of `name` from its fields' values in XML order, framed (MAVLink 2) as
+    /// this connection's system and component would send it: pymavlink's `*_encode`.
+    fn encode(&mut self, name: &str, args: &Bound<'_, PyTuple>) -> PyResult<Message> {
+        let ty = self.message_type(name)?;
+        let payload = encode_payload(&ty, args)?;
+        let info = self.dialect.table.info(ty.id).ok_or_else(|| {
+            PyValueError::new_err(format!("no message id {} in the dialect", ty.id))
+        })?;
+        let (sysid, compid) = self.handle.identity();
+        let header = FrameHeader {
+            version: Version::V2,
+            seq: self.encode_seq,
+            sysid,
+            compid,
+            signed: false,
+        };
+        self.encode_seq = self.encode_seq.wrapping_add(1);
+        let mut out = [0u8; wire::MAX_FRAME_LEN];
+        let len = wire::emit(&header, info, &payload, &mut out)
+            .map_err(|e| PyValueError::new_err(format!("{}: {e}", ty.name)))?;
+        Ok(Message::live(ty, out[..len].to_vec(), unix_now(), false))
+    }
+
+    /// Sends message `name` from its fields' values in XML order: pymavlink's `*_send`.
+    /// The link frames it in its version (and signs it when it signs).
+    fn send_fields(&self, py: Python<'_>, name: &str, args: &Bound<'_, PyTuple>) -> PyResult<()> {
+        let ty = self.message_type(name)?;
+        let payload = encode_payload(&ty, args)?;
+        self.send_payload(py, ty.id, &payload)?;
+        Ok(())
+    }
+
+    /// Sends `message` (one received or encoded) as this connection's own: pymavlink's
+    /// `mav.send`.
+    fn send(&self, py: Python<'_>, message: PyRef<'_, Message>) -> PyResult<()> {
+        let id = message.message_type().id;
+        let payload = message.payload().to_vec();
+        drop(message);
+        self.send_payload(py, id, &payload)?;
+        Ok(())
+    }
+
+    /// Writes `data` (whole frames) to every peer of the link as they are: pymavlink's
+    /// `write`, what a forwarder does with `get_msgbuf()`.
+    fn write(&mut self, py: Python<'_>, data: &[u8]) -> PyResult<()> {
+        let handle = self.node_handle()?.clone();
+        let rt = runtime()?;
+        let stale = self
+            .peers_asked
+            .is_none_or(|t| t.elapsed() > Duration::from_secs(1));
+        if stale {
+            let report = py.detach(|| rt.block_on(handle.report()));
+            if let Some(report) = report {
+                for link in report.links.iter().filter_map(|l| l.link_id) {
+                    if !self.peers.contains(&link) {
+                        self.peers.push(link);
+                    }
+                }
+            }
+            self.peers_asked = Some(Instant::now());
+        }
+        let peers = self.peers.clone();
+        let kept: Vec<LinkId> = py.detach(|| {
+            rt.block_on(async {
+                let mut kept = Vec::new();
+                for link in peers {
+                    if handle.send_bytes(link, data).await {
+                        kept.push(link);
+                    }
+                }
+                kept
+            })
+        });
+        self.peers = kept;
+        Ok(())
+    }
+
+    /// Signs every frame sent from now on with `key` (32 bytes) and accepts only signed
+    /// frames, but the message ids in `allow_unsigned` (at most 8); `link_id` goes into the
+    /// signatures, `initial_timestamp` (10 µs units since 2015) is the least one issued.
+    #[pyo3(signature = (key, link_id=0, initial_timestamp=0, allow_unsigned=Vec::new()))]
+    fn setup_signing(
+        &mut self,
+        py: Python<'_>,
+        key: &[u8],
+        link_id: u8,
+        initial_timestamp: u64,
+        allow_unsigned: Vec<u32>,
+    ) -> PyResult<()> {
+        let key: [u8; 32] = key.try_into().map_err(|_| {
+            PyValueError::new_err(format!(
+                "secret_key: {} bytes, a signing key is 32 bytes",
+                key.len()
+            ))
+        })?;
+        let mut config = SigningConfig::new(SecretKey::new(key), link_id);
+        config.initial_timestamp = initial_timestamp;
+        if !allow_unsigned.is_empty() {
+            config.clear_allowed_unsigned();
+            for id in allow_unsigned {
+                config
+                    .allow_unsigned(id)
+                    .map_err(|e| PyValueError::new_err(format!("allow_unsigned_callback: {e}")))?;
+            }
+        }
+        self.apply_signing(py, Some(config))
+    }
+
+    /// Stops signing (pymavlink's `disable_signing`).
+    fn disable_signing(&mut self, py: Python<'_>) -> PyResult<()> {
+        self.apply_signing(py, None)
+    }
+
+    /// Closes the link: queued frames go out, the socket or port closes.
+    fn close(&mut self, py: Python<'_>) -> PyResult<()> {
+        let Some(node) = self.node.take() else {
+            return Ok(());
+        };
+        let rt = runtime()?;
+        let res = py.detach(|| rt.block_on(node.shutdown()));
+        match res {
+            Ok(_) => Ok(()),
+            Err(e) => Err(PyOSError::new_err(format!("{}: {e}", self.device))),
+        }
+    }
+
+    /// This connection's own system id (pymavlink's `mav.srcSystem`).
+    #[getter]
+    fn src_system(&self) -> u8 {
+        self.handle.identity().0
+    }
+
+    /// This connection's own component id (pymavlink's `mav.srcComponent`).
+    #[getter]
+    fn src_component(&self) -> u8 {
+        self.handle.identity().1
+    }
+
+    /// The dialect's name.
+    #[getter]
+    fn dialect(&self) -> &str {
+        &self.dialect.name
+    }
+
+    /// The connection string (keys redacted).
+    #[getter]
+    fn address(&self) -> &str {
+        &self.device
+    }
+
+    /// For each message of the dialect: its name, and its fields in XML order (pymavlink's
+    /// arguments), each with its default (`None`: a required argument; else the value of an
+    /// optional one -- 0 for an extension, 3 for HEARTBEAT's `mavlink_version` -- and, for an
+    /// array extension, its length: pymavlink's default is that many zeros, `b""` for text,
+    /// whose length is given as 0).
+    #[allow(clippy::type_complexity)]
+    fn message_signatures(&self) -> Vec<(String, Vec<(String, Option<u8>, Option<usize>)>)> {
+        self.dialect
+            .messages
+            .iter()
+            .map(|m| {
+                let fields = m
+                    .fields
+                    .iter()
+                    .map(|f| {
+                        let default = if f.mavlink_version {
+                            Some(3)
+                        } else if f.extension {
+                            Some(0)
+                        } else {
+                            None
+                        };
+                        // A text extension's array length is reported as 0: its default is b"".
+                        let array = f
+                            .array_len
+                            .filter(|_| f.extension)
+                            .map(|n| if f.is_text() { 0 } else { n });
+                        (f.name.clone(), default, array)
+                    })
+                    .collect();
+                (m.name.clone(), fields)
+            })
+            .collect()
+    }
+
+    /// The node's report (links, peers, counters), as text: for diagnosing a link.
+    fn report(&self, py: Python<'_>) -> PyResult<String> {
+        let handle = self.node_handle()?.clone();
+        let rt = runtime()?;
+        let finished = self.node.as_ref().is_some_and(Node::is_finished);
+        let report = py.detach(|| rt.block_on(handle.report()));
+        Ok(format!("finished: {finished}; {report:#?}"))
+    }
+
+    /// The ids of the dialect's messages.
+    fn message_ids(&self) -> Vec<u32> {
+        self.dialect.messages.iter().map(|m| m.id).collect()
+    }
+
+    /// Counts: `received` (messages returned or recorded), `unknown_id`.
+    fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        d.set_item("received", self.received)?;
+        d.set_item("unknown_id", self.unknown_id)?;
+        Ok(d)
+    }
+}
+
+impl LiveLink {
+    /// Sets `signing` on every peer of the link.
+    fn apply_signing(&mut self, py: Python<'_>, signing: Option<SigningConfig>) -> PyResult<()> {
+        let handle = self.node_handle()?.clone();
+        let rt = runtime()?;
+        let res: Result<(), String> = py.detach(|| {
+            rt.block_on(async {
+                let report = handle.report().await.ok_or("the node has stopped")?;
+                let links: Vec<LinkId> = report.links.iter().filter_map(|l| l.link_id).collect();
+                if links.is_empty() {
+                    return Err("no peer on the link yet (wait for a message first)".to_owned());
+                }
+                for link in links {
+                    handle
+                        .set_signing(link, signing.clone())
+                        .await
+                        .map_err(|e| e.to_string())?;
+                }
+                Ok(())
+            })
+        });
+        res.map_err(|e| PyValueError::new_err(format!("setup_signing on \"{}\": {e}", self.device)))
+    }
+}

@@ -1,0 +1,191 @@
+"""Scripts written for pymavlink only (tests/pymavlink_scripts/), each run first with pymavlink
+against the simulated vehicle (`mavstack vehicle`), then unchanged with mavstack's mavutil in
+pymavlink's place (run_with_mavstack.py): the same lines printed.
+
+The vehicle is the `mavstack` binary of the workspace (target/debug, else target/release;
+$MAVSTACK_BIN overrides): missing, the tests fail."""
+
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
+SCRIPTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "pymavlink_scripts")
+SHIM = os.path.join(SCRIPTS, "run_with_mavstack.py")
+
+
+def vehicle_binary():
+    env = os.environ.get("MAVSTACK_BIN")
+    if env:
+        return env
+    for profile in ("debug", "release"):
+        path = os.path.join(ROOT, "target", profile, "mavstack")
+        if os.access(path, os.X_OK):
+            return path
+    pytest.fail("no mavstack binary in target/debug or target/release (cargo build -p mavstack-cli), "
+                "nor $MAVSTACK_BIN: the simulated vehicle is needed")
+
+
+def free_port(kind=socket.SOCK_DGRAM):
+    s = socket.socket(socket.AF_INET, kind)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+class Vehicle:
+    """`mavstack vehicle LINK ARGS...`, stopped on exit."""
+
+    def __init__(self, link, *args):
+        self.proc = subprocess.Popen([vehicle_binary(), "vehicle", link, *args],
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.proc.terminate()
+        try:
+            self.proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self.proc.stderr.close()
+
+
+def run(script, args, with_mavstack):
+    cmd = [sys.executable]
+    if with_mavstack:
+        cmd.append(SHIM)
+    cmd += [os.path.join(SCRIPTS, script), *args]
+    env = dict(os.environ, MAVLINK20="1", MAVLINK_DIALECT="ardupilotmega")
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=90, env=env)
+    who = "mavstack" if with_mavstack else "pymavlink"
+    assert p.returncode == 0, "%s with %s failed (%d):\n%s%s" % (script, who, p.returncode, p.stdout, p.stderr)
+    return p.stdout
+
+
+def udp_session(script, vehicle_args=(), with_mavstack=False):
+    """The vehicle sends to the script's `udpin` port (as gcs_pymavlink.py runs it)."""
+    port = free_port()
+    with Vehicle("udpout:127.0.0.1:%d" % port, *vehicle_args):
+        return run(script, ["udpin:127.0.0.1:%d" % port], with_mavstack)
+
+
+def both(script, session=udp_session, **kw):
+    theirs = session(script, with_mavstack=False, **kw)
+    ours = session(script, with_mavstack=True, **kw)
+    assert theirs.strip(), "pymavlink printed nothing"
+    assert ours == theirs, "%s:\npymavlink:\n%s\nmavstack:\n%s" % (script, theirs, ours)
+    return ours
+
+
+def test_heartbeat():
+    out = both("heartbeat.py")
+    assert "heartbeat from 1/1" in out and "target 1/0" in out
+
+
+def test_heartbeat_over_tcp():
+    def tcp_session(script, with_mavstack):
+        port = free_port(socket.SOCK_STREAM)
+        with Vehicle("tcpin:127.0.0.1:%d" % port):
+            time.sleep(0.5)
+            return run(script, ["tcp:127.0.0.1:%d" % port], with_mavstack)
+    out = both("heartbeat.py", session=tcp_session)
+    assert "heartbeat from 1/1" in out
+
+
+def test_attitude_stream():
+    out = both("attitude.py")
+    assert "ATTITUDE x20" in out and "finite True" in out
+
+
+def test_params_fetch_all_and_set():
+    out = both("params.py")
+    assert "set RTL_ALT -> 3000.0" in out and "read back RTL_ALT = 3000.0" in out
+
+
+def test_mission_upload_and_read_back():
+    out = both("mission.py")
+    assert "upload ack 0" in out and "count 6" in out
+
+
+def test_arm_disarm_and_modes():
+    out = both("arm_mode.py")
+    assert "mode GUIDED" in out and "armed True" in out and "mode LOITER" in out
+
+
+def test_message_interval():
+    out = both("interval.py")
+    assert "ack 511 result 0" in out and "about 10 Hz True" in out
+
+
+def test_signing_setup():
+    out = both("signing.py", vehicle_args=("--secure",))
+    assert "heartbeat signed True" in out and "signed True" in out
+
+
+def test_two_link_forwarder():
+    """vehicle -> forwarder (argv[1]) -> a pymavlink ground station (argv[2]), and back."""
+    from pymavlink import mavutil as pm
+
+    def forward_session(script, with_mavstack):
+        vport, gport = free_port(), free_port()
+        gcs = pm.mavlink_connection("udpin:127.0.0.1:%d" % gport, source_system=250)
+        stop = threading.Event()
+
+        def ask():
+            while not stop.is_set():
+                gcs.mav.param_request_read_send(1, 1, b"RTL_ALT", -1)
+                while gcs.recv_msg() is not None:
+                    pass
+                time.sleep(0.2)
+        try:
+            with Vehicle("udpout:127.0.0.1:%d" % vport):
+                # The ground station speaks first: the forwarder's udpout learns nothing else.
+                t = threading.Thread(target=ask, daemon=True)
+                t.start()
+                return run(script, ["udpin:127.0.0.1:%d" % vport, "udpout:127.0.0.1:%d" % gport],
+                           with_mavstack)
+        finally:
+            stop.set()
+            t.join()
+            gcs.close()
+    out = both("forwarder.py", session=forward_session)
+    assert "answer forwarded True" in out
+
+
+def test_mav_signatures_match_pymavlink():
+    """Every `<message>_send` and `_encode` of ardupilotmega: pymavlink's parameter names,
+    order and defaults."""
+    import inspect
+    from pymavlink.dialects.v20 import ardupilotmega as apm
+    from mavstack import mavutil
+    port = free_port()
+    conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % port)
+    try:
+        ours = conn.mav
+        theirs = apm.MAVLink(None)
+        names = [n for n in dir(theirs) if n.endswith(("_send", "_encode")) and n != "send"]
+        assert len(names) > 500
+        for n in names:
+            sig_t = inspect.signature(getattr(theirs, n))
+            sig_o = inspect.signature(getattr(ours, n))
+            t = [(p.name, p.default) for p in sig_t.parameters.values()]
+            o = [(p.name, p.default) for p in sig_o.parameters.values()]
+            assert o == t, n
+        assert set(names) <= set(dir(ours))
+    finally:
+        conn.close()
+
+
+def test_bad_connection_string_is_named():
+    from mavstack import mavutil
+    with pytest.raises(ValueError, match="udpin:nohost"):
+        mavutil.mavlink_connection("udpin:nohost")
