@@ -24,6 +24,7 @@ bin="${MAVSTACK:-$root/target/release/mavstack}"
 if [ ! -x "$bin" ]; then
     cargo build --release --locked -q -p mavstack-cli
 fi
+bin="$(realpath "$bin")"
 flight="${FLIGHT:-$root/target/release/examples/flight}"
 if [ ! -x "$flight" ]; then
     cargo build --release --locked -q -p mavstack --features services --example flight
@@ -35,12 +36,35 @@ only=()
 if [ -n "${ONLY:-}" ]; then
     only=(--only "$ONLY")
 fi
-pids=()
+# Each target runs from DIR/start.sh (made by make_starter): it ends the instance before (the
+# session whose leader's pid is in DIR/pid) and starts the target in a session of its own, under
+# a shell that waits for it (ArduPilot SITL exits when its parent does). The restart scenario
+# runs it again while a ground station is connected.
+starters=()
+make_starter() {
+    local dir="$1"
+    shift
+    {
+        echo '#!/usr/bin/env bash'
+        echo "dir=$(printf %q "$dir")"
+        echo 'if [ -s "$dir/pid" ]; then kill -- "-$(cat "$dir/pid")" 2>/dev/null || true; sleep 2; fi'
+        echo 'cd "$dir"'
+        printf 'setsid bash -c %q wrapper' '"$@"; exit $?'
+        printf ' %q' "$@"
+        echo ' </dev/null >>"$dir/run.log" 2>&1 &'
+        echo 'echo $! >"$dir/pid"'
+    } >"$dir/start.sh"
+    chmod +x "$dir/start.sh"
+    starters+=("$dir")
+}
 stop_all() {
-    for p in "${pids[@]}"; do
-        kill "$p" 2>/dev/null || true
+    for d in "${starters[@]}"; do
+        if [ -s "$d/pid" ]; then
+            kill -- "-$(cat "$d/pid")" 2>/dev/null || true
+            rm -f "$d/pid"
+        fi
     done
-    pids=()
+    starters=()
 }
 trap stop_all EXIT
 
@@ -56,10 +80,10 @@ PY
 }
 
 scenarios() {
-    local name="$1" conn="$2"
+    local name="$1" conn="$2" dir="$3"
     [ "${ONLY:-}" = none ] && return 0
     "$py" tests-interop/flight_stacks.py --mavstack "$bin" --flight "$flight" --name "$name" \
-        --conn "$conn" --out "$out/$name.json" "${only[@]}" || true
+        --conn "$conn" --restart "$dir/start.sh" --out "$out/$name.json" "${only[@]}" || true
 }
 
 # The bench against a vehicle sending UDP to 127.0.0.1:PORT (BENCH=1).
@@ -74,15 +98,14 @@ bench() {
 if [ -n "${ARDUPILOT_SITL:-}" ]; then
     dir="$out/ardupilot-run"
     mkdir -p "$dir"
-    # SITL exits when its parent does: a shell that waits for it stays its parent. SERIAL0 on
-    # TCP 5760, listening at once (--serial0 tcp:0 does not wait for a client).
-    setsid bash -c 'cd "$1"; shift; exec "$@"' wrapper "$dir" "$ARDUPILOT_SITL" --model quad \
+    # SERIAL0 on TCP 5760, listening at once (--serial0 tcp:0 does not wait for a client).
+    make_starter "$dir" "$ARDUPILOT_SITL" --model quad \
         --defaults "${ARDUPILOT_DEFAULTS:?ARDUPILOT_DEFAULTS: the copter defaults file}" \
-        --serial0 tcp:0 --serial1 udpclient:127.0.0.1:14561 -I0 --home -35.363261,149.165230,584,353 </dev/null >"$dir/sitl.log" 2>&1 &
-    pids+=($!)
+        --serial0 tcp:0 --serial1 udpclient:127.0.0.1:14561 -I0 --home -35.363261,149.165230,584,353
+    "$dir/start.sh"
     for _ in $(seq 100); do (exec 3<>/dev/tcp/127.0.0.1/5760) 2>/dev/null && break; sleep 0.2; done
     wait_heartbeat tcp:127.0.0.1:5760
-    scenarios ardupilot tcp:127.0.0.1:5760
+    scenarios ardupilot tcp:127.0.0.1:5760 "$dir"
     bench ardupilot 14561
     stop_all
     sleep 1
@@ -93,14 +116,11 @@ fi
 if [ -n "${PX4_SITL_DIR:-}" ]; then
     dir="$out/px4-run"
     mkdir -p "$dir"
-    # exec: the background job is px4 itself (setsid does not fork outside a job-controlled
-    # shell), so stop_all ends this instance by its pid and no other PX4 on the machine.
-    (cd "$dir" && PX4_SIMULATOR=sihsim PX4_SIM_MODEL=sihsim_quadx PX4_SYS_AUTOSTART=10040 \
-        exec setsid "$PX4_SITL_DIR/bin/px4" -d -i 0 -w "$dir" "$PX4_SITL_DIR/etc" \
-        </dev/null >"$dir/px4.log" 2>&1) &
-    pids+=($!)
+    make_starter "$dir" env PX4_SIMULATOR=sihsim PX4_SIM_MODEL=sihsim_quadx PX4_SYS_AUTOSTART=10040 \
+        "$PX4_SITL_DIR/bin/px4" -d -i 0 -w "$dir" "$PX4_SITL_DIR/etc"
+    "$dir/start.sh"
     wait_heartbeat udpin:127.0.0.1:14550
-    scenarios px4 udpin:127.0.0.1:14550
+    scenarios px4 udpin:127.0.0.1:14550 "$dir"
     bench px4 14550
     stop_all
     sleep 1
@@ -109,16 +129,19 @@ else
 fi
 
 for flavour in ardupilot px4; do
-    # The simulator as each flavour, refusing PROTOCOL_VERSION as ArduPilot does for that
-    # flavour, with an estimator that settles for 5 s as the flight stacks' do.
+    # The simulator as each flavour, refusing PROTOCOL_VERSION and streaming nothing unasked
+    # as ArduPilot does for that flavour, with an estimator that settles for 5 s as the flight
+    # stacks' do.
     extra=()
     if [ "$flavour" = ardupilot ]; then
-        extra=(--protocol-version refuse --start-mavlink2)
+        extra=(--protocol-version refuse --start-mavlink2 --streams-on-request)
     fi
-    "$bin" vehicle udpout:127.0.0.1:14550 --autopilot "$flavour" --estimator-settle 5 --secure \
-        "${extra[@]}" >"$out/sim-$flavour.log" 2>&1 &
-    pids+=($!)
-    scenarios "sim-$flavour" udpin:127.0.0.1:14550
+    dir="$out/sim-$flavour-run"
+    mkdir -p "$dir"
+    make_starter "$dir" "$bin" vehicle udpout:127.0.0.1:14550 --autopilot "$flavour" \
+        --estimator-settle 5 --secure "${extra[@]}"
+    "$dir/start.sh"
+    scenarios "sim-$flavour" udpin:127.0.0.1:14550 "$dir"
     bench "sim-$flavour" 14550
     stop_all
 done

@@ -36,6 +36,11 @@ Scenarios (in this order, each independent of the ones before but the flight, la
                requested rates (ATTITUDE 10 Hz, GLOBAL_POSITION_INT 5 Hz, within 20 % over 5 s),
                then arm (refusals waited out), take off, a 4-item mission flown to its end
                (MISSION_ITEM_REACHED for every item), RTL, landed and disarmed
+  restart      (with --restart CMD, a command that kills the vehicle and starts it again; last)
+               `mavstack listen CONN --rate ATTITUDE:4` running while the vehicle is restarted:
+               it keeps running (a TCP link reconnects), hears the new instance's HEARTBEAT
+               and, since ArduPilot streams nothing unasked, its ATTITUDE again (the rate asked
+               anew); then `mavstack param get` answers from the new instance
 """
 import argparse
 import asyncio
@@ -67,8 +72,9 @@ def run(argv, timeout=120):
 
 
 class Runner:
-    def __init__(self, bin_, name, conn, flight=None):
+    def __init__(self, bin_, name, conn, flight=None, restart=None):
         self.bin, self.name, self.conn, self.flight_bin = bin_, name, conn, flight
+        self.restart_cmd = restart
         self.results = []
 
     def mavstack(self, *args, timeout=120):
@@ -305,6 +311,69 @@ class Runner:
                                   summary.get("versions", {}).get("2"), summary.get("versions", {}).get("1"),
                                   sum(theirs.values()), bad,
                                   "; counts agree per type" if not differ else "; differ: %s" % differ[:6]))
+
+    def restart(self):
+        """The vehicle restarted under a running `mavstack listen` (see the docstring)."""
+        if not self.restart_cmd:
+            return self.report("restart", "n/a", 0.0, "no --restart command")
+        t0 = time.monotonic()
+        p = subprocess.Popen([self.bin, "listen", self.conn, "--filter", "HEARTBEAT,ATTITUDE",
+                              "--rate", "ATTITUDE:4"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True)
+        heard = []  # (monotonic time, message name)
+
+        def read():
+            for line in p.stdout:
+                try:
+                    heard.append((time.monotonic(), json.loads(line)["name"]))
+                except (ValueError, KeyError, TypeError):
+                    pass
+        reader = threading.Thread(target=read, daemon=True)
+        reader.start()
+
+        def seen(name, since, timeout):
+            deadline = time.monotonic() + timeout
+            while time.monotonic() < deadline:
+                if any(t >= since and n == name for t, n in heard):
+                    return True
+                time.sleep(0.1)
+            return False
+        try:
+            before = seen("ATTITUDE", t0, 30)
+            if not before:
+                return self.report("restart", "fail", time.monotonic() - t0,
+                                   "no ATTITUDE before the restart (%d frames)" % len(heard))
+            rc = subprocess.run(self.restart_cmd, shell=True, timeout=120).returncode
+            restarted = time.monotonic()
+            if rc != 0:
+                return self.report("restart", "fail", restarted - t0, "the restart command failed (%d)" % rc)
+            hb = seen("HEARTBEAT", restarted, 90)
+            att = hb and seen("ATTITUDE", restarted, 30)
+            alive = p.poll() is None
+            gap = [t for t, n in heard if t >= restarted and n == "ATTITUDE"]
+            back = (gap[0] - restarted) if gap else None
+        finally:
+            p.terminate()
+            try:
+                _, err = p.communicate(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                _, err = p.communicate()
+        # The system id parameter by the names of ArduPilot 4.7 (and the simulator), earlier
+        # ArduPilot, PX4.
+        table = getattr(self, "table", None) or {}
+        names = [n for n in ("MAV_SYSID", "SYSID_THISMAV", "MAV_SYS_ID") if not table or n in table]
+        for name in names:
+            rc2, out2, err2, _ = self.mavstack("param", "get", self.conn, name, "--json", timeout=60)
+            if rc2 == 0:
+                break
+        ok = alive and hb and att and rc2 == 0
+        self.report("restart", "pass" if ok else "fail", time.monotonic() - t0,
+                    "listen %s; HEARTBEAT after restart %s, ATTITUDE %s%s; param get %s%s" % (
+                        "kept running" if alive else "exited: %s" % err.strip()[-200:],
+                        "yes" if hb else "no", "yes" if att else "no",
+                        " (%.1f s after the restart command)" % back if back is not None else "",
+                        "ok" if rc2 == 0 else "failed", "" if rc2 == 0 else ": " + err2.strip()[-200:]))
 
 
 def pymavlink_tlog_counts(path):
@@ -590,7 +659,7 @@ def compare_plans(sent, got):
 
 
 SCENARIOS = ["probe", "conform", "params", "param_set", "mission", "arm_refused", "signing", "router", "record",
-             "flight"]
+             "flight", "restart"]
 
 
 def main():
@@ -601,8 +670,9 @@ def main():
     ap.add_argument("--out")
     ap.add_argument("--only")
     ap.add_argument("--flight", help="the flight example's binary")
+    ap.add_argument("--restart", help="a shell command that kills the vehicle and starts it again")
     a = ap.parse_args()
-    r = Runner(a.mavstack, a.name, a.conn, a.flight)
+    r = Runner(a.mavstack, a.name, a.conn, a.flight, a.restart)
     chosen = a.only.split(",") if a.only else SCENARIOS
     # arm_refused needs the vehicle fresh: it goes first when asked for.
     order = (["arm_refused"] if "arm_refused" in chosen else []) + [s for s in chosen if s != "arm_refused"]

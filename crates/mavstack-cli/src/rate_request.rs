@@ -7,6 +7,10 @@
 //! where the vehicle refuses it, or accepts it and the message still does not come within
 //! three of its intervals (at least 1.5 s), REQUEST_DATA_STREAM is sent once for the group
 //! that carries it (ArduPilot before 4.0 and some links), as `System::request_rate` does.
+//!
+//! A vehicle that restarts forgets the rates it was asked for (ArduPilot then streams nothing
+//! again): a message that came and then stays away for five of its intervals (at least 3 s)
+//! while the vehicle's HEARTBEAT still comes is asked for anew, the same way.
 
 use core::time::Duration;
 use std::time::Instant;
@@ -32,6 +36,23 @@ struct Wanted {
     acked: Option<bool>,
     arrived: bool,
     fell_back: bool,
+    /// When it last came.
+    last: Option<Instant>,
+}
+
+impl Wanted {
+    const fn new(id: u32, hz: f32) -> Self {
+        Self {
+            id,
+            hz,
+            asked: None,
+            sends: 0,
+            acked: None,
+            arrived: false,
+            fell_back: false,
+            last: None,
+        }
+    }
 }
 
 /// The rates asked for, and what became of them.
@@ -39,6 +60,8 @@ struct Wanted {
 pub(crate) struct RateRequests {
     wanted: Vec<Wanted>,
     target: Option<(u8, u8)>,
+    /// The target's last HEARTBEAT.
+    target_heard: Option<Instant>,
     seq: u8,
 }
 
@@ -46,19 +69,9 @@ impl RateRequests {
     /// Rates to ask for: (message id, Hz).
     pub(crate) fn new(rates: &[(u32, f32)]) -> Self {
         Self {
-            wanted: rates
-                .iter()
-                .map(|&(id, hz)| Wanted {
-                    id,
-                    hz,
-                    asked: None,
-                    sends: 0,
-                    acked: None,
-                    arrived: false,
-                    fell_back: false,
-                })
-                .collect(),
+            wanted: rates.iter().map(|&(id, hz)| Wanted::new(id, hz)).collect(),
             target: None,
+            target_heard: None,
             seq: 0,
         }
     }
@@ -88,6 +101,9 @@ impl RateRequests {
         if sysid != target.0 {
             return Vec::new();
         }
+        if msg_id == Heartbeat::ID && compid == target.1 {
+            self.target_heard = Some(now);
+        }
         if msg_id == CommandAck::ID {
             let ack = CommandAck::decode(payload);
             if ack.command == MavCmd::SET_MESSAGE_INTERVAL {
@@ -104,6 +120,7 @@ impl RateRequests {
         for w in &mut self.wanted {
             if w.id == msg_id && w.asked.is_some() {
                 w.arrived = true;
+                w.last = Some(now);
             }
         }
         Vec::new()
@@ -116,8 +133,17 @@ impl RateRequests {
         };
         let mut out = Vec::new();
         let mut seq = self.seq;
+        let heard = self.target_heard;
         for w in &mut self.wanted {
             let interval = Duration::from_secs_f32(1.0 / w.hz);
+            // It came, then stopped while the vehicle lives on (restarted): ask anew.
+            if let Some(last) = w.last {
+                let silent = now.saturating_duration_since(last)
+                    >= (interval * 5).max(Duration::from_secs(3));
+                if silent && heard.is_some_and(|h| h > last) {
+                    *w = Wanted::new(w.id, w.hz);
+                }
+            }
             let resend_due = w.asked.is_none_or(|t| {
                 w.sends < 2 && w.acked.is_none() && now >= t + Duration::from_millis(500)
             });
@@ -233,5 +259,35 @@ mod tests {
         assert!(r.on_frame(t0, 1, 1, CommandAck::ID, &ack[..n]).is_empty());
         assert!(r.on_frame(t0, 1, 1, Attitude::ID, &[0; 28]).is_empty());
         assert!(r.on_tick(t0 + Duration::from_secs(5)).is_empty());
+    }
+
+    /// A vehicle that restarts forgets the rate: the message stops while its HEARTBEAT goes
+    /// on, and it is asked for again (once per silence, not at every tick).
+    #[test]
+    fn a_rate_forgotten_by_a_restart_is_asked_for_again() {
+        let t0 = Instant::now();
+        let s = Duration::from_secs;
+        let mut r = RateRequests::new(&[(Attitude::ID, 10.0)]);
+        assert_eq!(
+            ids(&r.on_frame(t0, 1, 1, Heartbeat::ID, &heartbeat())),
+            [CommandLong::ID]
+        );
+        assert!(r.on_frame(t0, 1, 1, Attitude::ID, &[0; 28]).is_empty());
+        // Only heartbeats from now on; within 3 s nothing is asked.
+        for i in 1..=2 {
+            let _ = r.on_frame(t0 + s(i), 1, 1, Heartbeat::ID, &heartbeat());
+            assert!(r.on_tick(t0 + s(i)).is_empty());
+        }
+        let _ = r.on_frame(t0 + s(3), 1, 1, Heartbeat::ID, &heartbeat());
+        assert_eq!(ids(&r.on_tick(t0 + s(3))), [CommandLong::ID]);
+        assert!(r.on_tick(t0 + s(3)).is_empty(), "asked once");
+        // It comes again: nothing more.
+        assert!(
+            r.on_frame(t0 + s(4), 1, 1, Attitude::ID, &[0; 28])
+                .is_empty()
+        );
+        assert!(r.on_tick(t0 + s(5)).is_empty());
+        // A vehicle gone quiet altogether (no HEARTBEAT) is not asked.
+        assert!(r.on_tick(t0 + s(60)).is_empty());
     }
 }

@@ -84,6 +84,10 @@ pub(crate) struct VehicleArgs {
     /// a flight stack's estimator settles (ArduPilot SITL: about 40 s). Default 0.
     #[arg(long, value_name = "S", default_value_t = 0.0, value_parser = settle_seconds)]
     estimator_settle: f64,
+    /// Stream only HEARTBEAT until rates are asked for (SET_MESSAGE_INTERVAL or
+    /// REQUEST_DATA_STREAM), as ArduPilot does on SITL's SERIAL0 and after a restart.
+    #[arg(long)]
+    streams_on_request: bool,
     /// Serve this directory over MAVFTP beside `@PARAM/param.pck` (the vehicle always
     /// serves that and advertises MAV_PROTOCOL_CAPABILITY_FTP); read-only unless
     /// --ftp-writable; no path, `..` or symlink leaves it.
@@ -239,6 +243,7 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
         params,
         estimator_settle: Duration::from_secs_f64(args.estimator_settle),
         data_streams_only: false,
+        streams_on_request: args.streams_on_request,
         ftp: true,
         ftp_files: files,
         log_dir,

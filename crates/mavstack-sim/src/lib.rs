@@ -98,6 +98,10 @@ pub struct SimConfig {
     /// Refuse SET_MESSAGE_INTERVAL (MAV_RESULT_UNSUPPORTED) and take rates only through
     /// REQUEST_DATA_STREAM, as ArduPilot before 4.0 did.
     pub data_streams_only: bool,
+    /// Stream only HEARTBEAT until a rate is asked for (SET_MESSAGE_INTERVAL or
+    /// REQUEST_DATA_STREAM), as ArduPilot does on a link whose stream rates are 0 (SITL's
+    /// SERIAL0, and again after every restart); `false`: the default streams.
+    pub streams_on_request: bool,
     /// Serve MAVFTP as the vehicle's own component, and advertise
     /// MAV_PROTOCOL_CAPABILITY_FTP: ArduPilot's packed parameter file `@PARAM/param.pck`
     /// (made from the parameter table when a client opens it; defaults: the table the
@@ -609,7 +613,8 @@ impl Vehicle {
         });
         let mut streams = StreamScheduler::new();
         for &(id, interval) in STREAMS {
-            streams.support(id, interval);
+            let unasked = config.streams_on_request && id != Heartbeat::ID;
+            streams.support(id, interval.filter(|_| !unasked));
         }
         let craft = Craft {
             autopilot: config.autopilot,

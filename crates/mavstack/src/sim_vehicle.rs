@@ -118,6 +118,7 @@ impl SimVehicle {
             params,
             estimator_settle: core::time::Duration::ZERO,
             data_streams_only: false,
+            streams_on_request: false,
             ftp: true,
             ftp_files: None,
             log_dir: None,

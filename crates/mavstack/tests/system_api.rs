@@ -415,3 +415,26 @@ async fn a_rate_is_asked_with_set_message_interval_and_else_with_request_data_st
         vehicle.shutdown().await.expect("stops");
     }
 }
+
+/// `streams_on_request`: the vehicle sends HEARTBEAT and nothing else of its streams until a
+/// rate is asked for, as ArduPilot does on SITL's SERIAL0; then the message comes.
+#[tokio::test]
+async fn a_vehicle_streaming_on_request_sends_only_what_is_asked() {
+    use mavstack::dialects::common::Attitude;
+    let mut config =
+        SimVehicle::config(Autopilot::Ardupilot, params::defaults(Autopilot::Ardupilot));
+    config.streams_on_request = true;
+    let (vehicle, gcs) = vehicle_and_gcs(ProtocolVersionSupport::Answer, config).await;
+    let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
+        .await
+        .expect("the vehicle is found");
+    let mut attitude = v.subscribe::<Attitude>().await;
+    let unasked = tokio::time::timeout(Duration::from_millis(1500), attitude.recv()).await;
+    assert!(unasked.is_err(), "ATTITUDE came unasked: {unasked:?}");
+    let rate = v.request_rate(Attitude::ID, 10.0).await.expect("asked");
+    assert!(rate.arrived, "{rate:?}");
+    let asked = tokio::time::timeout(Duration::from_secs(2), attitude.recv()).await;
+    assert!(matches!(asked, Ok(Some(_))), "{asked:?}");
+    gcs.shutdown().await.expect("stops");
+    vehicle.shutdown().await.expect("stops");
+}
