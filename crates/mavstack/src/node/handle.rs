@@ -199,6 +199,23 @@ impl NodeHandle {
             .await
     }
 
+    /// Like [`send_raw`](Self::send_raw) without waiting for the node: queues the message
+    /// behind the requests already made and returns at once, from any thread, in or out of
+    /// the runtime. `false` if the node's request queue is full or the node has stopped (then
+    /// nothing was queued: [`send_raw`](Self::send_raw) waits for room, in order).
+    #[must_use]
+    pub fn queue_raw(&self, msg_id: u32, payload: &[u8]) -> bool {
+        let len = payload.len().min(MAX_PAYLOAD_LEN);
+        let (done, _) = oneshot::channel();
+        let command = Command::Send {
+            to: SendTo::Target,
+            msg_id,
+            payload: payload[..len].to_vec(),
+            done,
+        };
+        self.commands.try_send(command).is_ok()
+    }
+
     async fn send_payload(&self, to: SendTo, msg_id: u32, payload: Vec<u8>) -> usize {
         let (done, rx) = oneshot::channel();
         let command = Command::Send {
