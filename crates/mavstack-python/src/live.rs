@@ -337,11 +337,17 @@ impl LiveLink {
         Ok(&self.handle)
     }
 
-    /// Queues `payload` of message `id` on the link; `ConnectionError` once it is closed.
-    fn send_payload(&self, py: Python<'_>, id: u32, payload: &[u8]) -> PyResult<usize> {
-        let handle = self.node_handle()?.clone();
+    /// Queues `payload` of message `id` on the link, in order; `ConnectionError` once it is
+    /// closed. Returns without waiting for the node unless its request queue is full.
+    fn send_payload(&self, py: Python<'_>, id: u32, payload: &[u8]) -> PyResult<()> {
+        let handle = self.node_handle()?;
+        if handle.queue_raw(id, payload) {
+            return Ok(());
+        }
+        let handle = handle.clone();
         let rt = runtime()?;
-        Ok(py.detach(|| rt.block_on(handle.send_raw(id, payload))))
+        py.detach(|| rt.block_on(handle.send_raw(id, payload)));
+        Ok(())
     }
 
     /// The flavour of the target's modes, from its latest HEARTBEAT.

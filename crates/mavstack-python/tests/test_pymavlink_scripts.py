@@ -184,8 +184,3 @@ def test_mav_signatures_match_pymavlink():
     finally:
         conn.close()
 
-
-def test_bad_connection_string_is_named():
-    from mavstack import mavutil
-    with pytest.raises(ValueError, match="udpin:nohost"):
-        mavutil.mavlink_connection("udpin:nohost")

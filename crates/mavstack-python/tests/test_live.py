@@ -1,0 +1,145 @@
+"""mavstack.mavutil's live links without the vehicle: serial ports (a pseudo-terminal, with
+pymavlink at the other end), the GIL released while a receive waits, Ctrl-C during a wait,
+errors that name the connection string, sending and encoding against pymavlink's decoder."""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+import tty
+
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink.dialects.v20 import ardupilotmega as apm  # noqa: E402
+
+from mavstack import mavutil  # noqa: E402
+
+
+def free_udp_port():
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def test_serial_device_with_baud_both_ways():
+    master, slave = os.openpty()
+    tty.setraw(master)
+    tty.setraw(slave)
+    conn = mavutil.mavlink_connection(os.ttyname(slave), baud=115200)
+    try:
+        peer = apm.MAVLink(None, srcSystem=1, srcComponent=1)
+        os.write(master, peer.heartbeat_encode(2, 3, 81, 4, 4).pack(peer))
+        hb = conn.wait_heartbeat(timeout=5)
+        assert hb is not None and hb.custom_mode == 4 and conn.target_system == 1
+        conn.mav.param_request_read_send(1, 1, b"RTL_ALT", -1)
+        deadline, got = time.time() + 5, []
+        while not got and time.time() < deadline:
+            time.sleep(0.05)
+            got = [m for m in peer.parse_buffer(os.read(master, 4096)) or []]
+        assert [m.get_type() for m in got] == ["PARAM_REQUEST_READ"]
+        assert (got[0].param_id, got[0].param_index, got[0].get_srcSystem()) == ("RTL_ALT", -1, 255)
+    finally:
+        conn.close()
+        os.close(master)
+        os.close(slave)
+
+
+def test_missing_serial_device_is_an_error_naming_it():
+    with pytest.raises(OSError, match="/dev/ttyNOPE"):
+        mavutil.mavlink_connection("/dev/ttyNOPE", baud=57600)
+
+
+def test_bad_connection_strings_are_named():
+    with pytest.raises(ValueError, match="udpin:nohost"):
+        mavutil.mavlink_connection("udpin:nohost")
+    with pytest.raises(ValueError, match="tcp:127.0.0.1:99999"):
+        mavutil.mavlink_connection("tcp:127.0.0.1:99999")
+
+
+def test_a_blocking_receive_releases_the_gil():
+    conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % free_udp_port())
+    ticks = [0]
+    stop = threading.Event()
+
+    def count():
+        while not stop.is_set():
+            ticks[0] += 1
+    t = threading.Thread(target=count)
+    t.start()
+    try:
+        before = ticks[0]
+        start = time.time()
+        assert conn.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5) is None
+        assert 0.45 <= time.time() - start < 2.0
+        assert ticks[0] - before > 1000
+    finally:
+        stop.set()
+        t.join()
+        conn.close()
+
+
+def test_ctrl_c_interrupts_a_wait_without_timeout():
+    code = textwrap.dedent("""
+        import sys
+        from mavstack import mavutil
+        conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d")
+        print("waiting", flush=True)
+        try:
+            conn.wait_heartbeat()
+        except KeyboardInterrupt:
+            print("interrupted", flush=True)
+    """ % free_udp_port())
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    assert p.stdout.readline().strip() == "waiting"
+    time.sleep(0.3)
+    p.send_signal(signal.SIGINT)
+    out, _ = p.communicate(timeout=10)
+    assert out.strip() == "interrupted"
+
+
+def test_sent_and_encoded_messages_decode_in_pymavlink():
+    port = free_udp_port()
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", port))
+    rx.settimeout(5)
+    conn = mavutil.mavlink_connection("udpout:127.0.0.1:%d" % port, source_system=42, source_component=7)
+    try:
+        peer = apm.MAVLink(None)
+        conn.mav.statustext_send(4, b"hello")
+        conn.mav.mission_item_int_send(1, 1, 3, 6, 16, 0, 1, 0.5, 0, 0, float("nan"), -353632610, 1491652300, 30.0)
+        msg = conn.mav.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
+        assert msg.get_type() == "COMMAND_LONG" and msg.command == 400 and msg.param1 == 1.0
+        conn.mav.send(msg)
+        got = []
+        while len(got) < 3:
+            got += peer.parse_buffer(rx.recv(1024)) or []
+        assert [m.get_type() for m in got] == ["STATUSTEXT", "MISSION_ITEM_INT", "COMMAND_LONG"]
+        assert all((m.get_srcSystem(), m.get_srcComponent()) == (42, 7) for m in got)
+        assert got[0].text == "hello" and got[0].severity == 4
+        it = got[1]
+        assert (it.seq, it.frame, it.command, it.x, it.y, it.z, it.mission_type) == (3, 6, 16, -353632610, 1491652300, 30.0, 0)
+        assert got[2].command == 400 and got[2].param1 == 1.0
+        with pytest.raises(ValueError, match="seq"):
+            conn.mav.mission_item_int_send(1, 1, 70000, 6, 16, 0, 1, 0, 0, 0, 0, 0, 0, 0)
+        with pytest.raises(TypeError):
+            conn.mav.heartbeat_send(1, 2)
+        assert conn.mav.srcSystem == 42 and conn.mav.srcComponent == 7
+    finally:
+        conn.close()
+        rx.close()
+
+
+def test_files_still_open_as_logs(tmp_path):
+    path = tmp_path / "x.tlog"
+    path.write_bytes(b"")
+    log = mavutil.mavlink_connection(str(path))
+    assert isinstance(log, mavutil.mavlogfile) and log.recv_msg() is None
+    with pytest.raises(OSError):
+        mavutil.mavlink_connection(str(tmp_path / "missing.tlog"))
