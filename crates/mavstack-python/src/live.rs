@@ -174,6 +174,7 @@ impl LiveLink {
                 let node = Node::builder()
                     .router(router)
                     .dialect(table)
+                    .own_thread(true)
                     .link(spec)
                     .start()
                     .await?;
