@@ -143,3 +143,39 @@ def test_files_still_open_as_logs(tmp_path):
     assert isinstance(log, mavutil.mavlogfile) and log.recv_msg() is None
     with pytest.raises(OSError):
         mavutil.mavlink_connection(str(tmp_path / "missing.tlog"))
+
+
+def test_tcpin_serves_a_pymavlink_client():
+    from pymavlink import mavutil as pm
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    conn = mavutil.mavlink_connection("tcpin:127.0.0.1:%d" % port)
+    client = pm.mavlink_connection("tcp:127.0.0.1:%d" % port, source_system=1, source_component=1)
+    try:
+        client.mav.heartbeat_send(2, 3, 81, 5, 4)
+        hb = conn.wait_heartbeat(timeout=5)
+        assert hb is not None and hb.custom_mode == 5 and conn.flightmode == "LOITER"
+        conn.mav.param_request_read_send(1, 1, b"RTL_ALT", -1)
+        m = client.recv_match(type="PARAM_REQUEST_READ", blocking=True, timeout=5)
+        assert m is not None and m.param_id == "RTL_ALT" and m.get_srcSystem() == 255
+    finally:
+        client.close()
+        conn.close()
+
+
+def test_udpbcast_sends_to_the_broadcast_address():
+    from pymavlink import mavutil as pm
+    port = free_udp_port()
+    listener = pm.mavlink_connection("udpin:0.0.0.0:%d" % port)
+    conn = mavutil.mavlink_connection("udpbcast:127.255.255.255:%d" % port, source_system=7, source_component=1)
+    try:
+        deadline, m = time.time() + 5, None
+        while m is None and time.time() < deadline:
+            conn.mav.heartbeat_send(6, 8, 0, 0, 4)
+            m = listener.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5)
+        assert m is not None and m.get_srcSystem() == 7
+    finally:
+        listener.close()
+        conn.close()
