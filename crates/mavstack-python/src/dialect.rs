@@ -74,7 +74,8 @@ pub(crate) struct Dialect {
     /// The stack's message-entry table of the dialect (what the frame parsers check
     /// checksums with).
     pub(crate) table: MessageTable,
-    /// Every enum entry's name and value (pymavlink's module constants).
+    /// Every enum entry's name and value, and `MAVLINK_MSG_ID_<NAME>` of every message
+    /// (pymavlink's module constants).
     pub(crate) constants: Vec<(String, u64)>,
     by_id: HashMap<u32, usize>,
     by_name: HashMap<String, usize>,
@@ -153,6 +154,12 @@ impl Dialect {
                 .enums
                 .iter()
                 .flat_map(|e| e.entries.iter().map(|x| (x.name.clone(), x.value)))
+                .chain(
+                    loaded
+                        .messages
+                        .iter()
+                        .map(|m| (format!("MAVLINK_MSG_ID_{}", m.name), u64::from(m.id))),
+                )
                 .collect(),
             by_id,
             by_name,

@@ -66,8 +66,8 @@ fn open_live(
     )
 }
 
-/// Every enum entry of `dialect` as (name, value): pymavlink's module constants
-/// (`MAV_CMD_COMPONENT_ARM_DISARM`, ...).
+/// Every enum entry of `dialect` as (name, value), and every message's
+/// `MAVLINK_MSG_ID_<NAME>`: pymavlink's module constants (`MAV_CMD_COMPONENT_ARM_DISARM`, ...).
 #[pyfunction]
 #[pyo3(signature = (dialect="ardupilotmega"))]
 fn dialect_constants(dialect: &str) -> PyResult<Vec<(String, u64)>> {

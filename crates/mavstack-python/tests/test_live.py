@@ -179,3 +179,31 @@ def test_udpbcast_sends_to_the_broadcast_address():
     finally:
         listener.close()
         conn.close()
+
+
+def test_pymavlink_constants():
+    from pymavlink.dialects.v20 import ardupilotmega as apm_mod
+    ours = mavutil.mavlink
+    names = [n for n in dir(apm_mod) if n.startswith(("MAV_", "MAVLINK_MSG_ID_", "MAVLINK_TYPE_", "COPTER_MODE_"))
+             and isinstance(getattr(apm_mod, n), int) and not n.endswith("_ENUM_END")]
+    assert len(names) > 1000
+    missing = [n for n in names if not hasattr(ours, n)]
+    differ = [n for n in names if hasattr(ours, n) and getattr(ours, n) != getattr(apm_mod, n)]
+    assert not differ, differ[:10]
+    assert len(missing) < len(names) // 50, missing[:20]
+
+
+def test_udp_with_input_false_sends():
+    port = free_udp_port()
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", port))
+    rx.settimeout(5)
+    conn = mavutil.mavlink_connection("udp:127.0.0.1:%d" % port, input=False)
+    try:
+        assert conn.address.startswith("udpout:")
+        conn.mav.heartbeat_send(6, 8, 0, 0, 4)
+        got = apm.MAVLink(None).parse_buffer(rx.recv(1024))
+        assert [m.get_type() for m in got] == ["HEARTBEAT"]
+    finally:
+        conn.close()
+        rx.close()

@@ -23,7 +23,8 @@ __all__ = ["mavlink_connection", "mavlogfile", "mavlive", "MAVLink", "mavlink"]
 class _Constants:
     """pymavlink's ``mavutil.mavlink`` module as far as scripts use it for numbers: every enum
     entry of the dialect (``$MAVLINK_DIALECT``, else ardupilotmega) by name, read when first
-    used, and the ``MAVLINK_TYPE_*`` codes of PARAM_SET."""
+    used, ``MAVLINK_MSG_ID_<NAME>`` of every message, and the ``MAVLINK_TYPE_*`` codes of
+    PARAM_SET."""
 
     def __init__(self):
         self._values = None
@@ -73,9 +74,13 @@ _ARM_DISARM = 400
 _PARAM_FLOAT = 9
 
 
-def _live_string(device, baud):
-    """The connection string for the stack's parser, or None for a file."""
+def _live_string(device, baud, listen=True):
+    """The connection string for the stack's parser, or None for a file. ``udp:HOST:PORT`` and
+    ``HOST:PORT`` listen unless ``listen`` is false (pymavlink's ``input=False``): then they
+    send to HOST:PORT."""
     low = device.lower()
+    if low.startswith("udp:") and not listen:
+        return "udpout:" + device[4:]
     if low.startswith(_LIVE_SCHEMES) or "://" in device:
         return device
     if os.path.isfile(device):
@@ -85,8 +90,8 @@ def _live_string(device, baud):
     if "," in device and not os.path.exists(device):
         return device
     if _HOST_PORT.match(device):
-        # pymavlink reads HOST:PORT as a UDP port to listen on.
-        return "udpin:" + device
+        # pymavlink reads HOST:PORT as a UDP port to listen on (to send to, with input=False).
+        return ("udpin:" if listen else "udpout:") + device
     return None
 
 
@@ -106,7 +111,7 @@ def mavlink_connection(device, baud=57600, source_system=255, source_component=0
     if dialect is None:
         dialect = os.environ.get("MAVLINK_DIALECT", "ardupilotmega")
     device = os.fspath(device)
-    live = _live_string(device, baud)
+    live = _live_string(device, baud, listen=kwargs.get("input", True))
     if live is not None:
         unknown = sorted(set(kwargs) - _IGNORED_LIVE)
         if unknown:
