@@ -5,18 +5,21 @@
 //!
 //! Each connection is one [`mavstack::Node`] with one link, opened from the connection
 //! string by the stack's own parser ([`LinkSpec`]): the link's version handling and signing
-//! come with it. The node runs on one tokio runtime shared by every connection of the
-//! process (one worker thread); frames reach the connection through the node's subscription,
-//! and a blocking `recv_match` waits on it with the GIL released, waking every 100 ms to let
-//! Python see a Ctrl-C.
+//! come with it. The nodes run on one tokio runtime shared by every connection of the
+//! process (one worker thread; a UDP link's node on a thread of its own, with its own
+//! `epoll`); frames reach the connection through the node's subscription, and a blocking
+//! `recv_match` waits on it with the GIL released, waking every 100 ms to let Python see a
+//! Ctrl-C. Sends are queued to the node without waiting for it. One thread may receive while
+//! others send and read the connection's state (see [`LiveLink`]).
 //!
 //! What pymavlink keeps per system (the latest message of each type, the flight mode, the
 //! armed flag) is kept the same way here, and `target_system` locks onto the first vehicle
 //! HEARTBEAT as pymavlink's does (`target_component` stays 0 until set, as in pymavlink).
 
+use core::sync::atomic::{AtomicBool, AtomicU8, Ordering};
 use core::time::Duration;
 use std::collections::HashMap;
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
 use mavstack::channel::{Authentication, SigningConfig};
@@ -28,6 +31,7 @@ use mavstack_core::signing::SecretKey;
 use mavstack_xml::PrimitiveType;
 use pyo3::exceptions::{PyConnectionError, PyOSError, PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::sync::MutexExt as _;
 use pyo3::types::{PyBytes, PyDict, PyString, PyTuple};
 use tokio::runtime::Runtime;
 use tokio::sync::mpsc::error::TryRecvError;
@@ -106,30 +110,66 @@ impl SystemState {
 
 /// A live MAVLink connection (pymavlink's `mavudp`, `mavtcp`, `mavserial`): one
 /// `mavstack::Node` with one link.
-#[pyclass(module = "mavstack", name = "LiveLink")]
+///
+/// One thread may wait in `recv_match` while others send or read `messages` and
+/// `target_system`: the object is shared (`frozen`), its parts behind their own locks, each
+/// taken without holding the GIL while it waits (`lock_py_attached`), and no lock but the
+/// receiving thread's hold on the frames is kept while Python code runs.
+#[pyclass(module = "mavstack", name = "LiveLink", frozen)]
 pub(crate) struct LiveLink {
     /// The connection string as given (keys redacted).
     device: String,
     dialect: Arc<Dialect>,
-    node: Option<Node>,
+    /// The node, until `close`.
+    node: Mutex<Option<Node>>,
+    closed: AtomicBool,
     handle: NodeHandle,
-    frames: Subscription,
+    /// The node's frames: held by the thread that receives.
+    frames: Mutex<Subscription>,
+    /// What the received frames built up.
+    state: Mutex<State>,
     /// The router links (peers) heard from or reported, for `write`, and when the node was
     /// last asked for them.
-    peers: Vec<LinkId>,
-    peers_asked: Option<Instant>,
+    peers: Mutex<(Vec<LinkId>, Option<Instant>)>,
+    /// Sequence number of the frames `encode` builds.
+    encode_seq: AtomicU8,
+}
+
+/// What a connection keeps of the frames it received (pymavlink's per-system state).
+struct State {
     /// pymavlink's `sysid`: the target system (0 until the first vehicle HEARTBEAT).
     sysid: u8,
     target_component: u8,
     systems: HashMap<u8, SystemState>,
     conditions: Conditions,
     last_type: Option<(Py<PyAny>, Arc<Vec<bool>>)>,
-    /// Sequence number of the frames `encode` builds.
-    encode_seq: u8,
     /// Frames of message ids the dialect does not define (counted, never returned).
     unknown_id: u64,
     /// Messages received.
     received: u64,
+}
+
+impl State {
+    /// The state of the target system (pymavlink's `sysid_state[sysid]`).
+    fn target(&mut self, py: Python<'_>) -> &SystemState {
+        self.systems
+            .entry(self.sysid)
+            .or_insert_with(|| SystemState::new(py))
+    }
+
+    /// The flavour of the target's modes, from its latest HEARTBEAT.
+    fn flavour(&mut self, py: Python<'_>) -> Option<Flavour> {
+        use mavstack::dialects::common::{MavAutopilot, MavType};
+        let s = self.target(py);
+        Flavour::of(MavAutopilot(s.autopilot?), MavType(s.mav_type?))
+    }
+}
+
+/// `lock_py_attached`; a lock poisoned by a panic is taken as it is (what it guards stays
+/// consistent: every update is a single assignment or insertion).
+fn lock<'a, T>(py: Python<'_>, m: &'a Mutex<T>) -> MutexGuard<'a, T> {
+    m.lock_py_attached(py)
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 impl LiveLink {
@@ -189,32 +229,34 @@ impl LiveLink {
         Ok(Self {
             device: shown,
             handle: node.handle(),
-            node: Some(node),
+            node: Mutex::new(Some(node)),
+            closed: AtomicBool::new(false),
             dialect,
-            frames,
-            peers: Vec::new(),
-            peers_asked: None,
-            sysid: 0,
-            target_component: 0,
-            systems,
-            conditions: Conditions::default(),
-            last_type: None,
-            encode_seq: 0,
-            unknown_id: 0,
-            received: 0,
+            frames: Mutex::new(frames),
+            state: Mutex::new(State {
+                sysid: 0,
+                target_component: 0,
+                systems,
+                conditions: Conditions::default(),
+                last_type: None,
+                unknown_id: 0,
+                received: 0,
+            }),
+            peers: Mutex::new((Vec::new(), None)),
+            encode_seq: AtomicU8::new(0),
         })
     }
 
     /// The next frame from the node: at once, or (when `blocking`) waiting until `deadline`
     /// with the GIL released. `None` when nothing came in time or the node has stopped.
     fn next_frame(
-        &mut self,
         py: Python<'_>,
+        frames: &mut Subscription,
         blocking: bool,
         deadline: Option<Instant>,
     ) -> PyResult<Option<Incoming>> {
         loop {
-            match self.frames.try_recv() {
+            match frames.try_recv() {
                 Ok(i) => return Ok(Some(i)),
                 Err(TryRecvError::Disconnected) => return Ok(None),
                 Err(TryRecvError::Empty) => {}
@@ -233,7 +275,7 @@ impl LiveLink {
                 None => SIGNAL_CHECK,
             };
             let rt = runtime()?;
-            let frames = &mut self.frames;
+            let frames = &mut *frames;
             let got = py
                 .detach(|| rt.block_on(async { tokio::time::timeout(wait, frames.recv()).await }));
             match got {
@@ -248,19 +290,21 @@ impl LiveLink {
     /// message with its sender's system id and its type's index; `None` for a message id
     /// the dialect does not define.
     fn post(
-        &mut self,
+        &self,
         py: Python<'_>,
         incoming: &Incoming,
     ) -> PyResult<Option<(Py<Message>, u8, usize)>> {
         let frame = incoming.frame.frame.view();
         let Some(index) = self.dialect.index_of_id(frame.msg_id()) else {
-            self.unknown_id += 1;
+            lock(py, &self.state).unknown_id += 1;
             return Ok(None);
         };
-        if !self.peers.contains(&incoming.link_id) {
-            self.peers.push(incoming.link_id);
+        {
+            let mut peers = lock(py, &self.peers);
+            if !peers.0.contains(&incoming.link_id) {
+                peers.0.push(incoming.link_id);
+            }
         }
-        self.received += 1;
         let ty = Arc::clone(&self.dialect.messages[index]);
         let verified = matches!(incoming.frame.auth, Authentication::Verified { .. });
         let sysid = frame.sysid();
@@ -275,43 +319,50 @@ impl LiveLink {
                 verified,
             ),
         )?;
-        let state = self
-            .systems
-            .entry(sysid)
-            .or_insert_with(|| SystemState::new(py));
-        state.messages.bind(py).set_item(&ty.name, &message)?;
-        if let Some(hb) = heartbeat
-            && probably_vehicle(compid, &hb)
-        {
-            state.flightmode = mode_string(&hb);
-            state.armed = hb.base_mode & SAFETY_ARMED != 0;
-            state.mav_type = Some(hb.mav_type);
-            state.autopilot = Some(hb.autopilot);
-            state.base_mode = hb.base_mode;
-            if self.sysid == 0 {
-                self.sysid = sysid;
+        let messages = {
+            let mut st = lock(py, &self.state);
+            st.received += 1;
+            let target_unset = st.sysid == 0;
+            let system = st
+                .systems
+                .entry(sysid)
+                .or_insert_with(|| SystemState::new(py));
+            if let Some(hb) = heartbeat
+                && probably_vehicle(compid, &hb)
+            {
+                system.flightmode = mode_string(&hb);
+                system.armed = hb.base_mode & SAFETY_ARMED != 0;
+                system.mav_type = Some(hb.mav_type);
+                system.autopilot = Some(hb.autopilot);
+                system.base_mode = hb.base_mode;
+                if target_unset {
+                    st.sysid = sysid;
+                }
             }
-        }
+            st.systems
+                .get(&sysid)
+                .map(|s| s.messages.clone_ref(py))
+                .ok_or_else(|| PyRuntimeError::new_err("no state for the sender"))?
+        };
+        messages.bind(py).set_item(&ty.name, &message)?;
         Ok(Some((message, sysid, index)))
     }
 
-    /// The state of the target system (pymavlink's `sysid_state[sysid]`).
-    fn target_state(&mut self, py: Python<'_>) -> &SystemState {
-        self.systems
-            .entry(self.sysid)
-            .or_insert_with(|| SystemState::new(py))
-    }
-
     /// The type mask of a `type` argument, remembered for the same argument as last time.
-    fn wanted_cached(&mut self, ty: &Bound<'_, PyAny>) -> PyResult<Arc<Vec<bool>>> {
-        if let Some((last, mask)) = &self.last_type {
-            let last = last.bind(ty.py());
+    fn wanted_cached(&self, ty: &Bound<'_, PyAny>) -> PyResult<Arc<Vec<bool>>> {
+        let py = ty.py();
+        let last = lock(py, &self.state)
+            .last_type
+            .as_ref()
+            .map(|(t, m)| (t.clone_ref(py), Arc::clone(m)));
+        if let Some((last, mask)) = last {
+            let last = last.bind(py);
             if last.is(ty) || (last.get_type().is(ty.get_type()) && last.eq(ty)?) {
-                return Ok(Arc::clone(mask));
+                return Ok(mask);
             }
         }
         let mask = Arc::new(wanted_mask(&self.dialect, ty)?);
-        self.last_type = Some((ty.clone().unbind(), Arc::clone(&mask)));
+        lock(py, &self.state).last_type = Some((ty.clone().unbind(), Arc::clone(&mask)));
         Ok(mask)
     }
 
@@ -329,7 +380,7 @@ impl LiveLink {
     }
 
     fn node_handle(&self) -> PyResult<&NodeHandle> {
-        if self.node.is_none() {
+        if self.closed.load(Ordering::Acquire) {
             return Err(PyConnectionError::new_err(format!(
                 "\"{}\" is closed",
                 self.device
@@ -351,11 +402,27 @@ impl LiveLink {
         Ok(())
     }
 
-    /// The flavour of the target's modes, from its latest HEARTBEAT.
-    fn flavour(&mut self, py: Python<'_>) -> Option<Flavour> {
-        use mavstack::dialects::common::{MavAutopilot, MavType};
-        let s = self.target_state(py);
-        Flavour::of(MavAutopilot(s.autopilot?), MavType(s.mav_type?))
+    /// Sets `signing` on every peer of the link.
+    fn apply_signing(&self, py: Python<'_>, signing: Option<SigningConfig>) -> PyResult<()> {
+        let handle = self.node_handle()?.clone();
+        let rt = runtime()?;
+        let res: Result<(), String> = py.detach(|| {
+            rt.block_on(async {
+                let report = handle.report().await.ok_or("the node has stopped")?;
+                let links: Vec<LinkId> = report.links.iter().filter_map(|l| l.link_id).collect();
+                if links.is_empty() {
+                    return Err("no peer on the link yet (wait for a message first)".to_owned());
+                }
+                for link in links {
+                    handle
+                        .set_signing(link, signing.clone())
+                        .await
+                        .map_err(|e| e.to_string())?;
+                }
+                Ok(())
+            })
+        });
+        res.map_err(|e| PyValueError::new_err(format!("setup_signing on \"{}\": {e}", self.device)))
     }
 }
 
@@ -532,8 +599,9 @@ fn encode_payload(ty: &MessageType, args: &Bound<'_, PyTuple>) -> PyResult<Vec<u
 impl LiveLink {
     /// The next message, or `None` when none has arrived (pymavlink's `recv_msg`: it does
     /// not wait).
-    fn recv_msg(&mut self, py: Python<'_>) -> PyResult<Option<Py<Message>>> {
-        while let Some(i) = self.next_frame(py, false, None)? {
+    fn recv_msg(&self, py: Python<'_>) -> PyResult<Option<Py<Message>>> {
+        let mut frames = lock(py, &self.frames);
+        while let Some(i) = Self::next_frame(py, &mut frames, false, None)? {
             if let Some((m, _, _)) = self.post(py, &i)? {
                 return Ok(Some(m));
             }
@@ -547,7 +615,7 @@ impl LiveLink {
     /// released. `None` when nothing matched in time.
     #[pyo3(signature = (condition=None, r#type=None, blocking=false, timeout=None))]
     fn recv_match(
-        &mut self,
+        &self,
         py: Python<'_>,
         condition: Option<&str>,
         r#type: Option<&Bound<'_, PyAny>>,
@@ -564,11 +632,12 @@ impl LiveLink {
             }
             _ => None,
         };
+        let mut frames = lock(py, &self.frames);
         loop {
             if deadline.is_some_and(|d| Instant::now() >= d) {
                 return Ok(None);
             }
-            let Some(incoming) = self.next_frame(py, blocking, deadline)? else {
+            let Some(incoming) = Self::next_frame(py, &mut frames, blocking, deadline)? else {
                 return Ok(None);
             };
             let Some((message, sysid, index)) = self.post(py, &incoming)? else {
@@ -578,12 +647,16 @@ impl LiveLink {
                 continue;
             }
             if let Some(c) = condition {
-                let (globals, code) = self.conditions.prepare(py, c)?;
-                let locals = self
-                    .systems
-                    .get(&sysid)
-                    .map(|s| s.messages.clone_ref(py))
-                    .ok_or_else(|| PyRuntimeError::new_err("no state for the sender"))?;
+                let (globals, code, locals) = {
+                    let mut st = lock(py, &self.state);
+                    let (globals, code) = st.conditions.prepare(py, c)?;
+                    let locals = st
+                        .systems
+                        .get(&sysid)
+                        .map(|s| s.messages.clone_ref(py))
+                        .ok_or_else(|| PyRuntimeError::new_err("no state for the sender"))?;
+                    (globals, code, locals)
+                };
                 if !eval_condition(py, &globals, &code, locals.bind(py).as_any())? {
                     continue;
                 }
@@ -595,75 +668,81 @@ impl LiveLink {
     /// The latest message of each type from the target system (pymavlink's `messages`, a
     /// dict by name).
     #[getter]
-    fn messages(&mut self, py: Python<'_>) -> Py<PyDict> {
-        self.target_state(py).messages.clone_ref(py)
+    fn messages(&self, py: Python<'_>) -> Py<PyDict> {
+        lock(py, &self.state).target(py).messages.clone_ref(py)
     }
 
     /// The latest messages of each system heard: `{sysid: {name: message}}`.
     fn messages_by_system<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let all: Vec<(u8, Py<PyDict>)> = lock(py, &self.state)
+            .systems
+            .iter()
+            .map(|(k, s)| (*k, s.messages.clone_ref(py)))
+            .collect();
         let d = PyDict::new(py);
-        for (sysid, s) in &self.systems {
-            d.set_item(sysid, s.messages.bind(py))?;
+        for (sysid, m) in all {
+            d.set_item(sysid, m)?;
         }
         Ok(d)
     }
 
     /// The target system: the first vehicle heard (0 until then), or what was set.
     #[getter]
-    fn get_target_system(&self) -> u8 {
-        self.sysid
+    fn get_target_system(&self, py: Python<'_>) -> u8 {
+        lock(py, &self.state).sysid
     }
 
     #[setter]
-    fn set_target_system(&mut self, py: Python<'_>, value: u8) {
-        self.sysid = value;
-        let _ = self.target_state(py);
+    fn set_target_system(&self, py: Python<'_>, value: u8) {
+        let mut st = lock(py, &self.state);
+        st.sysid = value;
+        let _ = st.target(py);
     }
 
     /// The target component (0, every component, until set: as pymavlink).
     #[getter]
-    fn get_target_component(&self) -> u8 {
-        self.target_component
+    fn get_target_component(&self, py: Python<'_>) -> u8 {
+        lock(py, &self.state).target_component
     }
 
     #[setter]
-    fn set_target_component(&mut self, value: u8) {
-        self.target_component = value;
+    fn set_target_component(&self, py: Python<'_>, value: u8) {
+        lock(py, &self.state).target_component = value;
     }
 
     /// The target's flight mode, by name (`"GUIDED"`), from its latest HEARTBEAT.
     #[getter]
-    fn flightmode(&mut self, py: Python<'_>) -> String {
-        self.target_state(py).flightmode.clone()
+    fn flightmode(&self, py: Python<'_>) -> String {
+        lock(py, &self.state).target(py).flightmode.clone()
     }
 
     /// Whether the target's latest HEARTBEAT said armed.
-    fn motors_armed(&mut self, py: Python<'_>) -> bool {
-        self.target_state(py).armed
+    fn motors_armed(&self, py: Python<'_>) -> bool {
+        lock(py, &self.state).target(py).armed
     }
 
     /// The target's HEARTBEAT `type` (None before one came).
     #[getter]
-    fn mav_type(&mut self, py: Python<'_>) -> Option<u8> {
-        self.target_state(py).mav_type
+    fn mav_type(&self, py: Python<'_>) -> Option<u8> {
+        lock(py, &self.state).target(py).mav_type
     }
 
     /// The target's HEARTBEAT `autopilot` (None before one came).
     #[getter]
-    fn mav_autopilot(&mut self, py: Python<'_>) -> Option<u8> {
-        self.target_state(py).autopilot
+    fn mav_autopilot(&self, py: Python<'_>) -> Option<u8> {
+        lock(py, &self.state).target(py).autopilot
     }
 
     /// The target's HEARTBEAT `base_mode`.
     #[getter]
-    fn base_mode(&mut self, py: Python<'_>) -> u8 {
-        self.target_state(py).base_mode
+    fn base_mode(&self, py: Python<'_>) -> u8 {
+        lock(py, &self.state).target(py).base_mode
     }
 
     /// The target's modes, name → `custom_mode`, for its autopilot and vehicle type; `None`
     /// before its HEARTBEAT or for an autopilot whose modes are not known.
-    fn mode_mapping<'py>(&mut self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        let Some(flavour) = self.flavour(py) else {
+    fn mode_mapping<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(flavour) = lock(py, &self.state).flavour(py) else {
             return Ok(None);
         };
         let d = PyDict::new(py);
@@ -676,11 +755,11 @@ impl LiveLink {
     /// MAV_CMD_DO_SET_MODE's param1-3 for `mode` (a name, or an ArduPilot mode number) on
     /// the target; `None` for a name it does not have.
     fn mode_params(
-        &mut self,
+        &self,
         py: Python<'_>,
         mode: &Bound<'_, PyAny>,
     ) -> PyResult<Option<(f32, f32, f32)>> {
-        let flavour = self.flavour(py);
+        let flavour = lock(py, &self.state).flavour(py);
         if let Ok(n) = mode.extract::<u32>() {
             return Ok(Some(match flavour {
                 Some(f) => f.command_params(n),
@@ -693,7 +772,7 @@ impl LiveLink {
 
     /// A message of `name` from its fields' values in XML order, framed (MAVLink 2) as
     /// this connection's system and component would send it: pymavlink's `*_encode`.
-    fn encode(&mut self, name: &str, args: &Bound<'_, PyTuple>) -> PyResult<Message> {
+    fn encode(&self, name: &str, args: &Bound<'_, PyTuple>) -> PyResult<Message> {
         let ty = self.message_type(name)?;
         let payload = encode_payload(&ty, args)?;
         let info = self.dialect.table.info(ty.id).ok_or_else(|| {
@@ -702,12 +781,11 @@ impl LiveLink {
         let (sysid, compid) = self.handle.identity();
         let header = FrameHeader {
             version: Version::V2,
-            seq: self.encode_seq,
+            seq: self.encode_seq.fetch_add(1, Ordering::Relaxed),
             sysid,
             compid,
             signed: false,
         };
-        self.encode_seq = self.encode_seq.wrapping_add(1);
         let mut out = [0u8; wire::MAX_FRAME_LEN];
         let len = wire::emit(&header, info, &payload, &mut out)
             .map_err(|e| PyValueError::new_err(format!("{}: {e}", ty.name)))?;
@@ -735,24 +813,25 @@ impl LiveLink {
 
     /// Writes `data` (whole frames) to every peer of the link as they are: pymavlink's
     /// `write`, what a forwarder does with `get_msgbuf()`.
-    fn write(&mut self, py: Python<'_>, data: &[u8]) -> PyResult<()> {
+    fn write(&self, py: Python<'_>, data: &[u8]) -> PyResult<()> {
         let handle = self.node_handle()?.clone();
         let rt = runtime()?;
-        let stale = self
-            .peers_asked
+        let stale = lock(py, &self.peers)
+            .1
             .is_none_or(|t| t.elapsed() > Duration::from_secs(1));
         if stale {
             let report = py.detach(|| rt.block_on(handle.report()));
+            let mut peers = lock(py, &self.peers);
             if let Some(report) = report {
                 for link in report.links.iter().filter_map(|l| l.link_id) {
-                    if !self.peers.contains(&link) {
-                        self.peers.push(link);
+                    if !peers.0.contains(&link) {
+                        peers.0.push(link);
                     }
                 }
             }
-            self.peers_asked = Some(Instant::now());
+            peers.1 = Some(Instant::now());
         }
-        let peers = self.peers.clone();
+        let peers = lock(py, &self.peers).0.clone();
         let kept: Vec<LinkId> = py.detach(|| {
             rt.block_on(async {
                 let mut kept = Vec::new();
@@ -764,7 +843,7 @@ impl LiveLink {
                 kept
             })
         });
-        self.peers = kept;
+        lock(py, &self.peers).0.retain(|l| kept.contains(l));
         Ok(())
     }
 
@@ -773,7 +852,7 @@ impl LiveLink {
     /// signatures, `initial_timestamp` (10 µs units since 2015) is the least one issued.
     #[pyo3(signature = (key, link_id=0, initial_timestamp=0, allow_unsigned=Vec::new()))]
     fn setup_signing(
-        &mut self,
+        &self,
         py: Python<'_>,
         key: &[u8],
         link_id: u8,
@@ -800,13 +879,14 @@ impl LiveLink {
     }
 
     /// Stops signing (pymavlink's `disable_signing`).
-    fn disable_signing(&mut self, py: Python<'_>) -> PyResult<()> {
+    fn disable_signing(&self, py: Python<'_>) -> PyResult<()> {
         self.apply_signing(py, None)
     }
 
     /// Closes the link: queued frames go out, the socket or port closes.
-    fn close(&mut self, py: Python<'_>) -> PyResult<()> {
-        let Some(node) = self.node.take() else {
+    fn close(&self, py: Python<'_>) -> PyResult<()> {
+        self.closed.store(true, Ordering::Release);
+        let Some(node) = lock(py, &self.node).take() else {
             return Ok(());
         };
         let rt = runtime()?;
@@ -880,7 +960,7 @@ impl LiveLink {
     fn report(&self, py: Python<'_>) -> PyResult<String> {
         let handle = self.node_handle()?.clone();
         let rt = runtime()?;
-        let finished = self.node.as_ref().is_some_and(Node::is_finished);
+        let finished = lock(py, &self.node).as_ref().is_some_and(Node::is_finished);
         let report = py.detach(|| rt.block_on(handle.report()));
         Ok(format!("finished: {finished}; {report:#?}"))
     }
@@ -892,34 +972,13 @@ impl LiveLink {
 
     /// Counts: `received` (messages returned or recorded), `unknown_id`.
     fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let (received, unknown_id) = {
+            let st = lock(py, &self.state);
+            (st.received, st.unknown_id)
+        };
         let d = PyDict::new(py);
-        d.set_item("received", self.received)?;
-        d.set_item("unknown_id", self.unknown_id)?;
+        d.set_item("received", received)?;
+        d.set_item("unknown_id", unknown_id)?;
         Ok(d)
-    }
-}
-
-impl LiveLink {
-    /// Sets `signing` on every peer of the link.
-    fn apply_signing(&mut self, py: Python<'_>, signing: Option<SigningConfig>) -> PyResult<()> {
-        let handle = self.node_handle()?.clone();
-        let rt = runtime()?;
-        let res: Result<(), String> = py.detach(|| {
-            rt.block_on(async {
-                let report = handle.report().await.ok_or("the node has stopped")?;
-                let links: Vec<LinkId> = report.links.iter().filter_map(|l| l.link_id).collect();
-                if links.is_empty() {
-                    return Err("no peer on the link yet (wait for a message first)".to_owned());
-                }
-                for link in links {
-                    handle
-                        .set_signing(link, signing.clone())
-                        .await
-                        .map_err(|e| e.to_string())?;
-                }
-                Ok(())
-            })
-        });
-        res.map_err(|e| PyValueError::new_err(format!("setup_signing on \"{}\": {e}", self.device)))
     }
 }

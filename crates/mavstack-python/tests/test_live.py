@@ -207,3 +207,52 @@ def test_udp_with_input_false_sends():
     finally:
         conn.close()
         rx.close()
+
+
+def test_one_thread_receives_while_another_sends():
+    """pymavlink's common pattern: a receiving thread, the main thread sending and reading
+    the connection's state at the same time."""
+    port = free_udp_port()
+    peer_port = free_udp_port()
+    peer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    peer.bind(("127.0.0.1", peer_port))
+    peer.settimeout(5)
+    conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % port)
+    enc = apm.MAVLink(None, srcSystem=1, srcComponent=1)
+    got, stop = [], threading.Event()
+
+    def receive():
+        while not stop.is_set():
+            m = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2)
+            if m is not None:
+                got.append(m)
+    t = threading.Thread(target=receive)
+    t.start()
+    try:
+        # The peer is known to the link (udpin answers whoever spoke) before it is sent to.
+        peer.sendto(enc.heartbeat_encode(2, 3, 81, 100, 4).pack(enc), ("127.0.0.1", port))
+        deadline = time.time() + 5
+        while conn.target_system != 1 and time.time() < deadline:
+            time.sleep(0.01)
+        for i in range(20):
+            peer.sendto(enc.heartbeat_encode(2, 3, 81, i, 4).pack(enc), ("127.0.0.1", port))
+            conn.mav.heartbeat_send(6, 8, 0, 0, 4)
+            _ = conn.target_system, conn.messages, conn.flightmode
+            time.sleep(0.01)
+        deadline = time.time() + 5
+        while len(got) < 21 and time.time() < deadline:
+            time.sleep(0.05)
+        assert [m.custom_mode for m in got] == [100] + list(range(20))
+        assert conn.target_system == 1 and conn.messages["HEARTBEAT"].custom_mode == 19
+        back = 0
+        try:
+            while back < 20:
+                peer.recv(300)
+                back += 1
+        except socket.timeout:
+            pass
+        assert back == 20
+    finally:
+        stop.set()
+        t.join()
+        conn.close()
