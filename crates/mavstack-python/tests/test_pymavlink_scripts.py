@@ -78,6 +78,20 @@ def udp_session(script, vehicle_args=(), with_mavstack=False):
         return run(script, ["udpin:127.0.0.1:%d" % port], with_mavstack)
 
 
+def lossy_session(script, vehicle_args=(), with_mavstack=False, loss=0.2):
+    """The same through 20 % loss each way (tests-interop/lossy_relay.py, seeded)."""
+    sys.path.insert(0, os.path.join(ROOT, "tests-interop"))
+    from lossy_relay import LossyRelay
+    port = free_port()
+    relay = LossyRelay(("127.0.0.1", 0), ("127.0.0.1", port), loss=loss, seed=3)
+    relay.start()
+    try:
+        with Vehicle("udpout:127.0.0.1:%d" % relay.listen_port, *vehicle_args):
+            return run(script, ["udpin:127.0.0.1:%d" % port], with_mavstack)
+    finally:
+        relay.stop()
+
+
 def both(script, session=udp_session, **kw):
     theirs = session(script, with_mavstack=False, **kw)
     ours = session(script, with_mavstack=True, **kw)
@@ -104,6 +118,14 @@ def test_heartbeat_over_tcp():
 def test_attitude_stream():
     out = both("attitude.py")
     assert "ATTITUDE x20" in out and "finite True" in out
+
+
+@pytest.mark.parametrize("script", ["heartbeat.py", "attitude.py", "params.py"])
+def test_through_20_percent_loss(script):
+    """The scripts that ask again for what is lost (not the mission, command and signing ones,
+    written as most pymavlink scripts are, without retries) through 20 % loss each way."""
+    out = both(script, session=lossy_session)
+    assert "None" not in out.replace("of None", "")
 
 
 def test_params_fetch_all_and_set():
