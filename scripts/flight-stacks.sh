@@ -81,9 +81,10 @@ PY
 
 scenarios() {
     local name="$1" conn="$2" dir="$3"
+    shift 3
     [ "${ONLY:-}" = none ] && return 0
     "$py" tests-interop/flight_stacks.py --mavstack "$bin" --flight "$flight" --name "$name" \
-        --conn "$conn" --restart "$dir/start.sh" --out "$out/$name.json" "${only[@]}" || true
+        --conn "$conn" --restart "$dir/start.sh" --out "$out/$name.json" "${only[@]}" "$@" || true
 }
 
 # The bench against a vehicle sending UDP to 127.0.0.1:PORT (BENCH=1).
@@ -105,7 +106,8 @@ if [ -n "${ARDUPILOT_SITL:-}" ]; then
     "$dir/start.sh"
     for _ in $(seq 100); do (exec 3<>/dev/tcp/127.0.0.1/5760) 2>/dev/null && break; sleep 0.2; done
     wait_heartbeat tcp:127.0.0.1:5760
-    scenarios ardupilot tcp:127.0.0.1:5760 "$dir"
+    # SERIAL1 (UDP to 14561) is the second link of the signed_router scenario.
+    scenarios ardupilot tcp:127.0.0.1:5760 "$dir" --signed-link udpin:127.0.0.1:14561
     bench ardupilot 14561
     stop_all
     sleep 1
@@ -133,15 +135,18 @@ for flavour in ardupilot px4; do
     # as ArduPilot does for that flavour, with an estimator that settles for 5 s as the flight
     # stacks' do.
     extra=()
+    second=()
     if [ "$flavour" = ardupilot ]; then
-        extra=(--protocol-version refuse --start-mavlink2 --streams-on-request)
+        # A second link as ArduPilot's SERIAL1, for signed_router.
+        extra=(udpout:127.0.0.1:14562 --protocol-version refuse --start-mavlink2 --streams-on-request)
+        second=(--signed-link udpin:127.0.0.1:14562)
     fi
     dir="$out/sim-$flavour-run"
     mkdir -p "$dir"
     make_starter "$dir" "$bin" vehicle udpout:127.0.0.1:14550 --autopilot "$flavour" \
         --estimator-settle 5 --secure "${extra[@]}"
     "$dir/start.sh"
-    scenarios "sim-$flavour" udpin:127.0.0.1:14550 "$dir"
+    scenarios "sim-$flavour" udpin:127.0.0.1:14550 "$dir" "${second[@]}"
     bench "sim-$flavour" 14550
     stop_all
 done

@@ -36,6 +36,12 @@ Scenarios (in this order, each independent of the ones before but the flight, la
                requested rates (ATTITUDE 10 Hz, GLOBAL_POSITION_INT 5 Hz, within 20 % over 5 s),
                then arm (refusals waited out), take off, a 4-item mission flown to its end
                (MISSION_ITEM_REACHED for every item), RTL, landed and disarmed
+  signed_router (with --signed-link CONN2, a second link of the vehicle's, ArduPilot's SERIAL1;
+               n/a without) signing set up on CONN, then: an unsigned PARAM_REQUEST_READ straight
+               on CONN2 goes unanswered (ArduPilot takes unsigned frames on its USB port only),
+               and through `mavstack router 'CONN2?key=K&link_id=2' 'udpout:...?trusted=true'`
+               `mavstack param get` from an unsigned ground link is answered; the router's
+               vehicle link counts signed frames in and out; signing removed at the end
   restart      (with --restart CMD, a command that kills the vehicle and starts it again; last)
                `mavstack listen CONN --rate ATTITUDE:4` running while the vehicle is restarted:
                it keeps running (a TCP link reconnects), hears the new instance's HEARTBEAT
@@ -72,9 +78,10 @@ def run(argv, timeout=120):
 
 
 class Runner:
-    def __init__(self, bin_, name, conn, flight=None, restart=None):
+    def __init__(self, bin_, name, conn, flight=None, restart=None, signed_link=None):
         self.bin, self.name, self.conn, self.flight_bin = bin_, name, conn, flight
         self.restart_cmd = restart
+        self.signed_link = signed_link
         self.results = []
 
     def mavstack(self, *args, timeout=120):
@@ -311,6 +318,82 @@ class Runner:
                                   summary.get("versions", {}).get("2"), summary.get("versions", {}).get("1"),
                                   sum(theirs.values()), bad,
                                   "; counts agree per type" if not differ else "; differ: %s" % differ[:6]))
+
+    def unsigned_param_read(self, conn, name, wait=4.0):
+        """pymavlink, unsigned, on CONN: whether a PARAM_REQUEST_READ of NAME is answered."""
+        m = mavutil.mavlink_connection(conn, source_system=254, source_component=190,
+                                       dialect="ardupilotmega")
+        try:
+            hb = m.wait_heartbeat(timeout=15)
+            if hb is None:
+                return None
+            deadline = time.monotonic() + wait
+            m.mav.param_request_read_send(hb.get_srcSystem(), hb.get_srcComponent(), name.encode(), -1)
+            while time.monotonic() < deadline:
+                msg = m.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.5)
+                if msg is not None and msg.param_id == name:
+                    return True
+            return False
+        finally:
+            m.close()
+
+    def signed_router(self):
+        """A signed link between `mavstack router` and the vehicle (see the docstring)."""
+        if not self.signed_link:
+            return self.report("signed_router", "n/a", 0.0, "no --signed-link (a second vehicle link)")
+        t0 = time.monotonic()
+        name = "RTL_ALT"
+        rc, out, err, _ = self.mavstack("signing", "setup", self.conn, "--key", KEY, "--link-id", "1", timeout=60)
+        if rc != 0:
+            return self.report("signed_router", "fail", time.monotonic() - t0,
+                               "setup: %s %s" % (out.strip(), err.strip()[-300:]))
+        parts, ok = ["signing set up on %s" % self.conn], True
+        try:
+            direct = self.unsigned_param_read(self.signed_link, name)
+            ok &= direct is False
+            parts.append("unsigned PARAM_REQUEST_READ on %s: %s" % (
+                self.signed_link, {None: "no HEARTBEAT", True: "answered (should not be)",
+                                   False: "unanswered"}[direct]))
+            port = free_udp()
+            link = self.signed_link
+            with tempfile.TemporaryDirectory(prefix="fs-signed-") as work:
+                from gcs_common import Router, link_stats
+                router = Router(self.bin, ["%s?key=%s&link_id=2&name=vehicle" % (link, KEY),
+                                           "udpout:127.0.0.1:%d?trusted=true&name=gcs" % port], work)
+                stats = None
+                try:
+                    rc, out, err, s = self.mavstack("param", "get", "udpin:127.0.0.1:%d" % port, name,
+                                                    "--json", timeout=90)
+                    got = json.loads(out.splitlines()[0])["value"] if rc == 0 and out else None
+                    ok &= got is not None
+                    parts.append("through the router, unsigned ground link: param get %s = %s in %.1f s%s" % (
+                        name, got, s, "" if rc == 0 else " (exit %s: %s)" % (rc, err.strip()[-200:])))
+                finally:
+                    try:
+                        stats = router.stop()
+                    except Exception as e:
+                        router.kill()
+                        ok = False
+                        parts.append("router stop: %s" % str(e)[-200:])
+                if stats:
+                    veh = link_stats(stats, "vehicle")
+                    version = sorted({str(e.get("version")) for e in veh})
+                    verified = sum(int(e.get("rx_frames") or 0) for e in veh)
+                    signed_out = sum(int((e.get("conversions") or {}).get("signed") or 0) for e in veh)
+                    dropped = {}
+                    for e in veh:
+                        for k, v in (e.get("dropped") or {}).items():
+                            dropped[k] = dropped.get(k, 0) + int(v)
+                    ok &= version == ["signed"] and verified > 0 and signed_out > 0
+                    parts.append("router vehicle link %s: %d frames in (each verified), %d of the ground "
+                                 "link's signed onto it; dropped %s" % ("/".join(version), verified,
+                                                                        signed_out, dropped or "none"))
+        finally:
+            rc2, out2, err2, _ = self.mavstack("signing", "remove", self.conn, "--key", KEY, "--link-id", "1",
+                                               timeout=60)
+            ok &= rc2 == 0
+            parts.append("signing removed" if rc2 == 0 else "remove failed: %s" % (out2.strip() or err2.strip()[-200:]))
+        self.report("signed_router", "pass" if ok else "fail", time.monotonic() - t0, "; ".join(parts))
 
     def restart(self):
         """The vehicle restarted under a running `mavstack listen` (see the docstring)."""
@@ -659,7 +742,7 @@ def compare_plans(sent, got):
 
 
 SCENARIOS = ["probe", "conform", "params", "param_set", "mission", "arm_refused", "signing", "router", "record",
-             "flight", "restart"]
+             "signed_router", "flight", "restart"]
 
 
 def main():
@@ -671,8 +754,9 @@ def main():
     ap.add_argument("--only")
     ap.add_argument("--flight", help="the flight example's binary")
     ap.add_argument("--restart", help="a shell command that kills the vehicle and starts it again")
+    ap.add_argument("--signed-link", help="a second link of the vehicle's (ArduPilot's SERIAL1), for signed_router")
     a = ap.parse_args()
-    r = Runner(a.mavstack, a.name, a.conn, a.flight, a.restart)
+    r = Runner(a.mavstack, a.name, a.conn, a.flight, a.restart, a.signed_link)
     chosen = a.only.split(",") if a.only else SCENARIOS
     # arm_refused needs the vehicle fresh: it goes first when asked for.
     order = (["arm_refused"] if "arm_refused" in chosen else []) + [s for s in chosen if s != "arm_refused"]

@@ -344,6 +344,43 @@ fn signing_setup_is_proven_by_a_signed_answer_and_remove_by_an_unsigned_one() {
     assert_eq!(missing.status.code(), Some(2));
 }
 
+/// The vehicle has one key, as ArduPilot: SETUP_SIGNING on one link signs its other links
+/// too (ArduPilot's SERIAL1 then refuses unsigned frames), and removing it there unsigns them.
+#[test]
+fn signing_set_up_on_one_link_signs_the_others() {
+    let (first, second) = (free_port(), free_port());
+    let _vehicle = SecureVehicle(
+        Command::new(env!("CARGO_BIN_EXE_mavstack"))
+            .args([
+                "vehicle",
+                &format!("udpout:127.0.0.1:{first}?secure=true"),
+                &format!("udpout:127.0.0.1:{second}"),
+            ])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("vehicle starts"),
+    );
+    let (first, second) = (
+        format!("udpin:127.0.0.1:{first}"),
+        format!("udpin:127.0.0.1:{second}"),
+    );
+    let request = ["command", "MAV_CMD_REQUEST_MESSAGE", "148"];
+    ok(&gcs_on(&second, 1, &request));
+    ok(&gcs_on(&first, 2, &["signing", "setup", "--key", KEY]));
+    let unsigned = gcs_on(&second, 1, &request);
+    assert_eq!(
+        unsigned.status.code(),
+        Some(1),
+        "unsigned on the other link"
+    );
+    let mut signed = request.to_vec();
+    signed.extend(["--key", KEY]);
+    ok(&gcs_on(&second, 1, &signed));
+    ok(&gcs_on(&first, 2, &["signing", "remove", "--key", KEY]));
+    ok(&gcs_on(&second, 1, &request));
+}
+
 #[test]
 fn listen_asks_the_vehicle_for_the_rates_given() {
     // The simulator streams ATTITUDE at 4 Hz unasked; 20 Hz only comes when asked for.

@@ -17,11 +17,11 @@
 //! # Ok(()) }
 //! ```
 
-use mavstack_channel::SigningSetup;
+use mavstack_channel::{SigningConfig, SigningSetup};
 use mavstack_core::Message as _;
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::{AutopilotVersion, CommandLong, MavCmd, MavMessage};
-use mavstack_router::{LinkRole, ProtocolVersionSupport};
+use mavstack_router::{LinkId, LinkRole, ProtocolVersionSupport};
 use mavstack_services::param::{Name, Value};
 use mavstack_services::{Address, Outgoing, Service};
 use mavstack_sim::{Autopilot, SimConfig, Vehicle};
@@ -206,6 +206,41 @@ fn say(log: &Option<LogLines>, line: impl FnOnce() -> String) {
     }
 }
 
+/// A vehicle has one key, as ArduPilot does: SETUP_SIGNING accepted on one link signs (or
+/// stops signing) every other link too, and those then refuse unsigned frames (ArduPilot
+/// takes them only on its USB port). `version=1` links cannot sign and are left as they are.
+/// Returns how many links changed.
+async fn sign_other_links(node: &NodeHandle, from: LinkId, setup: &SigningSetup) -> usize {
+    let Some(report) = node.report().await else {
+        return 0;
+    };
+    let mut others: Vec<LinkId> = Vec::new();
+    for id in report.links.iter().filter_map(|l| l.link_id) {
+        // A server link's clients each have an entry under the link's id.
+        if id != from && !others.contains(&id) {
+            others.push(id);
+        }
+    }
+    let mut changed = 0;
+    for id in others {
+        let signing = match setup {
+            SigningSetup::Enabled {
+                key,
+                initial_timestamp,
+            } => {
+                let mut config = SigningConfig::new(key.clone(), 0);
+                config.initial_timestamp = *initial_timestamp;
+                Some(config)
+            }
+            SigningSetup::Disabled => None,
+        };
+        if node.set_signing(id, signing).await.is_ok() {
+            changed += 1;
+        }
+    }
+    changed
+}
+
 /// What the vehicle does about its links' events: greets a new peer, says the rest.
 async fn link_events(
     node: NodeHandle,
@@ -239,14 +274,19 @@ async fn link_events(
                     r.reason
                 )
             }),
-            LinkEvent::SigningSetup { setup, .. } => say(&log, || match setup {
-                SigningSetup::Enabled { .. } => {
-                    format!("vehicle: SETUP_SIGNING accepted, link signed from now on [{link}]")
-                }
-                SigningSetup::Disabled => {
-                    format!("vehicle: SETUP_SIGNING turned signing off [{link}]")
-                }
-            }),
+            LinkEvent::SigningSetup { setup, .. } => {
+                let signed = sign_other_links(&node, event.link_id, &setup).await;
+                say(&log, || match setup {
+                    SigningSetup::Enabled { .. } => format!(
+                        "vehicle: SETUP_SIGNING accepted, link signed from now on, and {signed} \
+                         other link(s) [{link}]"
+                    ),
+                    SigningSetup::Disabled => format!(
+                        "vehicle: SETUP_SIGNING turned signing off, here and on {signed} other \
+                         link(s) [{link}]"
+                    ),
+                });
+            }
             _ => {}
         }
     }
