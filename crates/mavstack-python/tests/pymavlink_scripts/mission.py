@@ -1,4 +1,5 @@
-"""Upload a mission with MISSION_ITEM_INT and read it back."""
+"""Upload a mission with MISSION_ITEM_INT and read it back (what is lost is asked for again:
+the script runs through a lossy link too)."""
 import sys
 
 from pymavlink import mavutil
@@ -21,21 +22,36 @@ def item(seq):
                                            0, 1, p1, 0, 0, 0, x, y, z)
 
 
-conn.mav.mission_count_send(ts, tc, len(plan))
-while True:
-    m = conn.recv_match(type=["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], blocking=True, timeout=5)
-    if m is None:
-        sys.exit("upload stalled")
-    if m.get_type() == "MISSION_ACK":
-        print("upload ack %d" % m.type)
+for attempt in range(10):
+    conn.mav.mission_count_send(ts, tc, len(plan))
+    ack = None
+    while ack is None:
+        m = conn.recv_match(type=["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], blocking=True, timeout=2)
+        if m is None:
+            break
+        if m.get_type() == "MISSION_ACK":
+            ack = m
+        else:
+            conn.mav.send(item(m.seq))
+    if ack is not None and ack.type == M.MAV_MISSION_ACCEPTED:
         break
-    conn.mav.send(item(m.seq))
-conn.mav.mission_request_list_send(ts, tc)
-m = conn.recv_match(type="MISSION_COUNT", blocking=True, timeout=5)
-print("count %d" % m.count)
-for seq in range(m.count):
-    conn.mav.mission_request_int_send(ts, tc, seq)
-    it = conn.recv_match(type="MISSION_ITEM_INT", blocking=True, timeout=5)
+print("upload ack %s" % (ack.type if ack else None))
+
+
+def ask(send, mtype, cond=None):
+    for _ in range(10):
+        send()
+        m = conn.recv_match(type=mtype, condition=cond, blocking=True, timeout=1)
+        if m is not None:
+            return m
+    sys.exit("no %s" % mtype)
+
+
+count = ask(lambda: conn.mav.mission_request_list_send(ts, tc), "MISSION_COUNT").count
+print("count %d" % count)
+for seq in range(count):
+    it = ask(lambda: conn.mav.mission_request_int_send(ts, tc, seq), "MISSION_ITEM_INT",
+             "MISSION_ITEM_INT.seq == %d" % seq)
     print("item %d cmd %d frame %d p1 %r x %d y %d z %r" % (it.seq, it.command, it.frame, it.param1, it.x, it.y, it.z))
 conn.mav.mission_ack_send(ts, tc, M.MAV_MISSION_ACCEPTED)
 conn.close()
