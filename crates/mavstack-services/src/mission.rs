@@ -50,6 +50,21 @@ pub struct MissionConfig {
     pub item_timeout: Duration,
     /// Resends before giving up (default 5).
     pub retries: u8,
+    /// How the server answers an item it did not ask for during an upload.
+    pub out_of_sequence: OutOfSequence,
+}
+
+/// How a [`MissionServer`] answers an item other than the one it asked for.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum OutOfSequence {
+    /// Drop it and ask for the wanted item at once (a copy of the previous item means the
+    /// client missed our request).
+    #[default]
+    Reask,
+    /// MISSION_ACK MAV_MISSION_INVALID_SEQUENCE, the upload left open: the wanted item is
+    /// asked for again when the item timeout comes, as ArduPilot does (it answers a client's
+    /// resend after a lost MISSION_REQUEST so, and asks again about a second later).
+    AckInvalidSequence,
 }
 
 impl Default for MissionConfig {
@@ -58,6 +73,7 @@ impl Default for MissionConfig {
             timeout: Duration::from_millis(1500),
             item_timeout: Duration::from_millis(250),
             retries: 5,
+            out_of_sequence: OutOfSequence::Reask,
         }
     }
 }
@@ -1102,7 +1118,10 @@ impl MissionServer {
             // the only way forward; after a copy of the previous item it is the client
             // resending because our request was lost (a copy the link made gets a second
             // request, whose answer we drop in turn).
-            if item.seq > expected || item.seq.saturating_add(1) == expected {
+            if self.config.out_of_sequence == OutOfSequence::AckInvalidSequence {
+                let invalid = MavMissionResult::MAV_MISSION_INVALID_SEQUENCE;
+                self.send(from, ack(from, ty, invalid));
+            } else if item.seq > expected || item.seq.saturating_add(1) == expected {
                 (r.sent, r.resent) = (now, true);
                 self.send(from, request_int(from, ty, expected));
             }

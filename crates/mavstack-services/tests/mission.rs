@@ -117,6 +117,42 @@ fn upload_then_download(knobs: Knobs, seed: u64, n: usize, ty: MavMissionType) {
     );
 }
 
+/// Against a server answering as ArduPilot does (MISSION_ACK INVALID_SEQUENCE for an item
+/// it did not ask for, the upload left open, the wanted item asked for again later), uploads
+/// through loss, duplication and reordering still complete, every item in place.
+#[test]
+fn sim_uploads_complete_against_a_server_that_acks_invalid_sequence() {
+    use mavstack_services::mission::OutOfSequence;
+    for seed in [1, 2, 3, 4] {
+        let knobs = Knobs::hostile();
+        let server_config = MissionConfig {
+            out_of_sequence: OutOfSequence::AckInvalidSequence,
+            ..config(knobs)
+        };
+        let mut p = Pair::new(
+            MissionClient::new(GCS, config(knobs)),
+            GCS,
+            MissionServer::new(VEHICLE, server_config),
+            VEHICLE,
+            knobs,
+            seed,
+        );
+        let plan = items(200);
+        p.a.upload(p.now, VEHICLE, MavMissionType::MISSION, plan.clone())
+            .unwrap();
+        let (e, _, _) = wait(&mut p);
+        assert_eq!(
+            e,
+            MissionEvent::Uploaded {
+                mission_type: MavMissionType::MISSION,
+                result: Ok(())
+            },
+            "seed {seed}"
+        );
+        same_items(p.b.plan(MavMissionType::MISSION), &plan);
+    }
+}
+
 #[test]
 fn sim_500_item_mission_clean_and_under_loss() {
     upload_then_download(Knobs::clean(), 1, 500, MavMissionType::MISSION);

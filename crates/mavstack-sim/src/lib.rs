@@ -65,7 +65,7 @@ use mavstack_services::command::{Command, CommandHandler, CommandServer, Request
 use mavstack_services::ftp::param_pck::TableFile;
 use mavstack_services::ftp::{DirBackend, FtpServer, Overlay, ServerConfig};
 use mavstack_services::log_transfer::{LogServer, LogServerEvent};
-use mavstack_services::mission::{MissionServer, MissionServerEvent};
+use mavstack_services::mission::{MissionConfig, MissionServer, MissionServerEvent, OutOfSequence};
 use mavstack_services::param::{Encoding, Name, ParamServer, ParamServerEvent, Value};
 use mavstack_services::stream::{self, Interval, StreamScheduler, request_message};
 use mavstack_services::timesync::{Timesync, TimesyncConfig};
@@ -130,6 +130,19 @@ const STREAMS: &[(u32, Option<Duration>)] = &[
     (HomePosition::ID, Some(Duration::from_secs(5))),
     (ExtendedSysState::ID, Some(Duration::from_secs(1))),
 ];
+
+/// The mission server's answers: an item not asked for gets ArduPilot's MISSION_ACK
+/// INVALID_SEQUENCE from the ArduPilot flavour (the upload stays open).
+fn mission_config(autopilot: Autopilot) -> MissionConfig {
+    let out_of_sequence = match autopilot {
+        Autopilot::Ardupilot => OutOfSequence::AckInvalidSequence,
+        Autopilot::Px4 => OutOfSequence::Reask,
+    };
+    MissionConfig {
+        out_of_sequence,
+        ..MissionConfig::default()
+    }
+}
 
 /// A plan's name in the log: "mission", "fence" or "rally".
 fn plan_name(mission_type: MavMissionType) -> &'static str {
@@ -632,7 +645,7 @@ impl Vehicle {
             params,
             files,
             logs: LogServer::new(config.own, Default::default(), logs),
-            missions: MissionServer::new(config.own, Default::default()),
+            missions: MissionServer::new(config.own, mission_config(config.autopilot)),
             timesync: Timesync::new(TimesyncConfig {
                 interval: None,
                 ..TimesyncConfig::default()
