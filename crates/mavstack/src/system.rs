@@ -175,9 +175,9 @@ pub enum SystemError {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum ParamsVia {
     /// MAVFTP (`@PARAM/param.pck`) when the system's AUTOPILOT_VERSION advertises
-    /// MAV_PROTOCOL_CAPABILITY_FTP (asked for [`CAPABILITIES_WAIT`] at most), with
-    /// [`AUTO_FTP_RETRIES`] per request; PARAM_REQUEST_LIST when it does not, or when the
-    /// download fails.
+    /// MAV_PROTOCOL_CAPABILITY_FTP (asked for [`CAPABILITIES_WAIT`] at most), the file's
+    /// open tried [`AUTO_FTP_RETRIES`] times more and the transfer once it answered with the
+    /// usual retries; PARAM_REQUEST_LIST when it does not, or when the download fails.
     Auto,
     /// MAVFTP only.
     Ftp,
@@ -188,7 +188,9 @@ pub enum ParamsVia {
 /// How long [`ParamsVia::Auto`] waits for AUTOPILOT_VERSION.
 pub const CAPABILITIES_WAIT: Duration = Duration::from_secs(2);
 
-/// Retries per MAVFTP request while [`ParamsVia::Auto`] can still fall back.
+/// Retries of the first MAVFTP request (the open) of [`ParamsVia::Auto`], which can still
+/// fall back. (Applied to every request, a transfer through 20 % loss each way gave up
+/// half-way about every other time, and the fallback cost three times as long.)
 pub const AUTO_FTP_RETRIES: u8 = 3;
 
 /// The MAVFTP operations on one path that return nothing ([`System::ftp_simple`]).
@@ -293,6 +295,8 @@ pub struct System {
     /// The capabilities of its AUTOPILOT_VERSION, once seen.
     capabilities: Option<MavProtocolCapability>,
     retries: u8,
+    /// Retries of each MAVFTP operation's first request, when fewer than `retries`.
+    ftp_probe_retries: Option<u8>,
     /// STATUSTEXT chunks put together.
     lines: Lines,
     /// STATUSTEXT lines of the target since the current command started.
@@ -370,6 +374,7 @@ impl System {
             home: None,
             capabilities: None,
             retries: PATIENT_RETRIES,
+            ftp_probe_retries: None,
             lines: Lines::default(),
             said: Vec::new(),
             logs: None,
@@ -713,16 +718,15 @@ impl System {
                 .is_some_and(|c| c.contains(MavProtocolCapability::FTP)),
         };
         if ftp {
-            let retries = self.retries;
             if via == ParamsVia::Auto {
-                self.retries = AUTO_FTP_RETRIES;
+                self.ftp_probe_retries = Some(AUTO_FTP_RETRIES);
             }
             let got = self
                 .params_via_ftp_with_progress(|done, total| {
                     progress(ParamsVia::Ftp, done, total);
                 })
                 .await;
-            self.retries = retries;
+            self.ftp_probe_retries = None;
             match got {
                 Ok(table) => return Ok((table, ParamsVia::Ftp)),
                 Err(e) if via == ParamsVia::Ftp || matches!(e, SystemError::Stopped) => {
@@ -1329,6 +1333,7 @@ impl System {
     ) -> Result<FtpOutput, SystemError> {
         let config = FtpConfig {
             attempts: self.retries.saturating_add(1),
+            first_attempts: self.ftp_probe_retries.map_or(0, |r| r.saturating_add(1)),
             ..FtpConfig::default()
         };
         let mut client = FtpClient::new(self.own, self.target, config).starting_after(self.ftp_seq);

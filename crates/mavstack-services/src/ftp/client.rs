@@ -22,6 +22,11 @@ pub struct ClientConfig {
     pub timeout: Duration,
     /// Sends of one request before the operation fails.
     pub attempts: u8,
+    /// Sends of an operation's first request (the one that shows whether a server is there
+    /// at all) before the operation fails; 0: as [`attempts`](Self::attempts). A caller that
+    /// can fall back to another way sets it low and keeps `attempts` for a transfer under
+    /// way.
+    pub first_attempts: u8,
     /// The largest file [`FtpClient::read`] accepts: a larger announced size fails with
     /// [`FtpError::TooLarge`] before anything is allocated.
     pub max_read_size: u32,
@@ -37,6 +42,7 @@ impl Default for ClientConfig {
         Self {
             timeout: Duration::from_millis(500),
             attempts: 5,
+            first_attempts: 0,
             max_read_size: 16 << 20,
             burst: true,
             max_entries: 65_536,
@@ -123,6 +129,8 @@ struct Pending {
     deadline: Instant,
     /// Burst packets received for this request.
     burst_packets: u32,
+    /// The operation's first request ([`ClientConfig::first_attempts`]).
+    first: bool,
 }
 
 #[derive(Debug, PartialEq, Eq)]
@@ -238,6 +246,9 @@ impl FtpClient {
         }
         self.op = Some(op);
         self.send(now, req);
+        if let Some(p) = self.pending.as_mut() {
+            p.first = true;
+        }
         Ok(())
     }
 
@@ -386,6 +397,7 @@ impl FtpClient {
             sent: now,
             attempt: 1,
             burst_packets: 0,
+            first: false,
         }
     }
 
@@ -572,7 +584,11 @@ impl Service for FtpClient {
                 ..
             }))
         );
-        if p.attempt >= self.config.attempts {
+        let limit = match self.config.first_attempts {
+            n if p.first && n > 0 => n,
+            _ => self.config.attempts,
+        };
+        if p.attempt >= limit {
             let attempts = p.attempt;
             if terminating {
                 // Everything is transferred; only closing the session went unanswered

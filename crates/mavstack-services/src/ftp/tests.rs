@@ -319,6 +319,60 @@ fn a_dead_server_times_out() {
     assert!(!c.is_busy());
 }
 
+/// `first_attempts` bounds only the operation's first request: a dead server is given up
+/// after two sends, while a transfer under way keeps every attempt (a request answered only
+/// at its fourth send still completes the read).
+#[test]
+fn first_attempts_bound_only_the_first_request() {
+    let config = ClientConfig {
+        first_attempts: 2,
+        burst: false,
+        ..ClientConfig::default()
+    };
+    let mut c = FtpClient::new(GCS, VEHICLE, config);
+    let mut now = Instant::from_secs(1);
+    c.read(now, "x").unwrap();
+    let mut sends = 0;
+    let result = loop {
+        sends += sent(&mut c).len();
+        if let Some(FtpEvent::Finished(r)) = c.poll_event() {
+            break r;
+        }
+        now = c.poll_timeout().unwrap();
+        c.handle_timeout(now);
+    };
+    assert_eq!(result, Err(FtpError::TimedOut { attempts: 2 }));
+    assert_eq!(sends, 2);
+
+    let file = pattern(100);
+    let mut c = FtpClient::new(GCS, VEHICLE, config);
+    c.read(now, "x").unwrap();
+    let open = sent(&mut c).remove(0);
+    let mut ack = Payload::request(open.seq + 1, 1, Opcode::Ack, 0, &100u32.to_le_bytes());
+    ack.req_opcode = Opcode::OpenFileRO;
+    deliver(&mut c, now, &ack);
+    let mut read = sent(&mut c).remove(0);
+    for _ in 0..3 {
+        // Lost: the read is sent again, past first_attempts.
+        now = c.poll_timeout().unwrap();
+        c.handle_timeout(now);
+        read = sent(&mut c).remove(0);
+        assert_eq!(read.opcode, Opcode::ReadFile);
+    }
+    let mut data = Payload::request(read.seq + 1, 1, Opcode::Ack, 0, &file);
+    data.req_opcode = Opcode::ReadFile;
+    deliver(&mut c, now, &data);
+    let end = sent(&mut c).remove(0);
+    let mut done = Payload::request(end.seq + 1, 1, Opcode::Ack, 0, &[]);
+    done.req_opcode = Opcode::TerminateSession;
+    deliver(&mut c, now, &done);
+    let finished = core::iter::from_fn(|| c.poll_event()).last();
+    assert_eq!(
+        finished,
+        Some(FtpEvent::Finished(Ok(FtpOutput::Data(file))))
+    );
+}
+
 // ---- a malicious client, talking raw payloads ----
 
 struct Raw {
