@@ -133,6 +133,9 @@ pub(crate) struct LiveLink {
     peers: Mutex<(Vec<LinkId>, Option<Instant>)>,
     /// Sequence number of the frames `encode` builds.
     encode_seq: AtomicU8,
+    /// The messages' names as Python strings (interned), by message index: the keys of
+    /// `messages`, made once rather than for every frame.
+    names: Vec<Py<PyString>>,
 }
 
 /// What a connection keeps of the frames it received (pymavlink's per-system state).
@@ -208,6 +211,11 @@ impl LiveLink {
         router.local = LocalDelivery::All;
         router.forward = false;
         let table = dialect.table;
+        let names = dialect
+            .messages
+            .iter()
+            .map(|m| PyString::intern(py, &m.name).unbind())
+            .collect();
         let rt = runtime()?;
         let started = py.detach(|| {
             rt.block_on(async move {
@@ -244,6 +252,7 @@ impl LiveLink {
             }),
             peers: Mutex::new((Vec::new(), None)),
             encode_seq: AtomicU8::new(0),
+            names,
         })
     }
 
@@ -344,7 +353,9 @@ impl LiveLink {
                 .map(|s| s.messages.clone_ref(py))
                 .ok_or_else(|| PyRuntimeError::new_err("no state for the sender"))?
         };
-        messages.bind(py).set_item(&ty.name, &message)?;
+        messages
+            .bind(py)
+            .set_item(self.names[index].bind(py), &message)?;
         Ok(Some((message, sysid, index)))
     }
 
@@ -456,17 +467,104 @@ fn probably_vehicle(compid: u8, hb: &HeartbeatFields) -> bool {
         && hb.autopilot != AUTOPILOT_INVALID
 }
 
-/// The flight mode's name, as pymavlink's `mode_string_v10` writes it: the mode's name
-/// where the autopilot's table has it, `Mode(N)` otherwise, `Mode(0xNN)` (the base mode)
-/// without a custom mode.
+/// Where pymavlink names an ArduPilot mode otherwise than the dialect's enums (COPTER_MODE,
+/// PLANE_MODE, ...): by flavour and number, its name there (`None`: pymavlink does not name
+/// it). Scripts compare `flightmode` with these names and pass them to `set_mode`.
+const PYMAVLINK_NAMES: &[(Flavour, u32, Option<&str>)] = &[
+    (Flavour::ArduCopter, 8, Some("POSITION")),
+    (Flavour::ArduCopter, 10, Some("OF_LOITER")),
+    (Flavour::ArduCopter, 29, Some("RATE_ACRO")),
+    (Flavour::ArduPlane, 5, Some("FBWA")),
+    (Flavour::ArduPlane, 6, Some("FBWB")),
+    (Flavour::ArduPlane, 16, Some("INITIALISING")),
+    (Flavour::ArduPlane, 25, Some("LOITERALTQLAND")),
+    (Flavour::ArduRover, 2, Some("LEARNING")),
+    (Flavour::ArduRover, 16, Some("INITIALISING")),
+    (Flavour::ArduSub, 20, None),
+    (Flavour::ArduSub, 21, None),
+];
+
+/// The modes of an ArduPilot flavour by pymavlink's names (the dialect's, but where
+/// [`PYMAVLINK_NAMES`] says otherwise), in number order; PX4's as the stack names them.
+fn ardupilot_modes(flavour: Flavour) -> Vec<(&'static str, u32)> {
+    let mut out: Vec<(&'static str, u32)> = modes::modes(flavour)
+        .into_iter()
+        .filter_map(|m| match pymavlink_alias(flavour, m.custom_mode) {
+            Some(alias) => alias.map(|a| (a, m.custom_mode)),
+            None => Some((m.name, m.custom_mode)),
+        })
+        .collect();
+    for &(f, number, name) in PYMAVLINK_NAMES {
+        if f == flavour
+            && let Some(name) = name
+            && !out.iter().any(|(_, n)| *n == number)
+        {
+            out.push((name, number));
+        }
+    }
+    out.sort_by_key(|(_, n)| *n);
+    out
+}
+
+/// pymavlink's name of mode `number` where it differs from the dialect's.
+fn pymavlink_alias(flavour: Flavour, number: u32) -> Option<Option<&'static str>> {
+    PYMAVLINK_NAMES
+        .iter()
+        .find(|(f, n, _)| *f == flavour && *n == number)
+        .map(|(_, _, name)| *name)
+}
+
+/// The flight mode's name, as pymavlink's `mode_string_v10` writes it. PX4: its name from
+/// the main mode (and AUTO's sub mode), as pymavlink names them (`MISSION`, `POSCTL`,
+/// `FOLLOWME`; `UNKNOWN` for the rest). Any other autopilot: `Mode(0xNN)` (the base mode)
+/// without MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, else the mode's name in ArduPilot's table for the
+/// vehicle type, else `Mode(N)`.
 fn mode_string(hb: &HeartbeatFields) -> String {
     use mavstack::dialects::common::{MavAutopilot, MavType};
+    if MavAutopilot(hb.autopilot) == MavAutopilot::PX4 {
+        return px4_mode_string(hb.custom_mode);
+    }
     if hb.base_mode & CUSTOM_MODE_ENABLED == 0 {
         return format!("Mode(0x{:08x})", hb.base_mode);
     }
-    Flavour::of(MavAutopilot(hb.autopilot), MavType(hb.mav_type))
-        .and_then(|f| modes::name_of(f, hb.custom_mode))
-        .map_or_else(|| format!("Mode({})", hb.custom_mode), str::to_owned)
+    Flavour::of(MavAutopilot::ARDUPILOTMEGA, MavType(hb.mav_type))
+        .and_then(|f| {
+            ardupilot_modes(f)
+                .into_iter()
+                .find(|(_, n)| *n == hb.custom_mode)
+        })
+        .map_or_else(
+            || format!("Mode({})", hb.custom_mode),
+            |(name, _)| name.to_owned(),
+        )
+}
+
+/// PX4's mode as pymavlink names it: by the main mode alone, but AUTO by its sub mode
+/// without the `AUTO.` prefix (AUTO.FOLLOW_TARGET is `FOLLOWME`), and `UNKNOWN` for what
+/// pymavlink does not name (AUTO.READY, AUTO.PRECLAND, AUTO.VTOL_TAKEOFF, unknown modes);
+/// AUTO's sub mode 7 is `RTGS`.
+fn px4_mode_string(custom_mode: u32) -> String {
+    const MAIN_AUTO: u32 = 4;
+    const MAIN_RATTITUDE: u32 = 8;
+    const AUTO_RTGS: u32 = 7;
+    const AUTO_NAMED: core::ops::RangeInclusive<u32> = 2..=8;
+    let main = (custom_mode >> 16) & 0xff;
+    let sub = (custom_mode >> 24) & 0xff;
+    let name = match main {
+        MAIN_AUTO if sub == AUTO_RTGS => Some("RTGS"),
+        MAIN_AUTO if AUTO_NAMED.contains(&sub) => {
+            modes::name_of(Flavour::Px4, custom_mode & 0xffff_0000).map(|n| {
+                match n.strip_prefix("AUTO.").unwrap_or(n) {
+                    "FOLLOW_TARGET" => "FOLLOWME",
+                    short => short,
+                }
+            })
+        }
+        MAIN_AUTO => None,
+        MAIN_RATTITUDE => Some("RATTITUDE"),
+        m => modes::name_of(Flavour::Px4, m << 16),
+    };
+    name.unwrap_or("UNKNOWN").to_owned()
 }
 
 /// Writes `value` into `payload` as field `f` (pymavlink's argument of that name).
@@ -739,15 +837,16 @@ impl LiveLink {
         lock(py, &self.state).target(py).base_mode
     }
 
-    /// The target's modes, name → `custom_mode`, for its autopilot and vehicle type; `None`
-    /// before its HEARTBEAT or for an autopilot whose modes are not known.
+    /// The target's modes, name → `custom_mode`, for its autopilot and vehicle type (ArduPilot's
+    /// by pymavlink's names); `None` before its HEARTBEAT or for an autopilot whose modes are
+    /// not known.
     fn mode_mapping<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         let Some(flavour) = lock(py, &self.state).flavour(py) else {
             return Ok(None);
         };
         let d = PyDict::new(py);
-        for m in modes::modes(flavour) {
-            d.set_item(m.name, m.custom_mode)?;
+        for (name, number) in ardupilot_modes(flavour) {
+            d.set_item(name, number)?;
         }
         Ok(Some(d))
     }
@@ -767,7 +866,15 @@ impl LiveLink {
             }));
         }
         let name: String = mode.extract()?;
-        Ok(flavour.and_then(|f| modes::by_name(f, &name).map(|m| f.command_params(m.custom_mode))))
+        Ok(flavour.and_then(|f| {
+            let pymavlink = ardupilot_modes(f)
+                .into_iter()
+                .find(|(n, _)| *n == name)
+                .map(|(_, number)| number);
+            pymavlink
+                .or_else(|| modes::by_name(f, &name).map(|m| m.custom_mode))
+                .map(|number| f.command_params(number))
+        }))
     }
 
     /// A message of `name` from its fields' values in XML order, framed (MAVLink 2) as

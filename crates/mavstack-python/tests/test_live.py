@@ -256,3 +256,57 @@ def test_one_thread_receives_while_another_sends():
         stop.set()
         t.join()
         conn.close()
+
+
+def test_flightmode_as_pymavlink_names_it():
+    """`flightmode` from HEARTBEATs of ArduPilot's vehicles and PX4, beside pymavlink's
+    mode_string_v10 of the same HEARTBEAT."""
+    from pymavlink import mavutil as pm
+    port = free_udp_port()
+    conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % port)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    enc = apm.MAVLink(None, srcSystem=1, srcComponent=1)
+    cases = []
+    for mav_type in (2, 1, 10, 12, 13, 20):  # quadrotor, fixed wing, ground rover, submarine, hexa, VTOL
+        for custom in range(0, 30):
+            cases.append((3, mav_type, 1 | 128, custom))
+    cases.append((3, 2, 0, 4))  # no custom mode
+    for main in range(0, 10):
+        for sub in range(0, 11):
+            cases.append((12, 2, 1, (main << 16) | (sub << 24)))
+    try:
+        mismatches = []
+        for autopilot, mav_type, base, custom in cases:
+            msg = enc.heartbeat_encode(mav_type, autopilot, base, custom, 4)
+            tx.sendto(msg.pack(enc), ("127.0.0.1", port))
+            hb = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=5)
+            assert hb is not None and hb.custom_mode == custom
+            want = pm.mode_string_v10(msg)
+            if conn.flightmode != want:
+                mismatches.append((autopilot, mav_type, base, custom, conn.flightmode, want))
+        assert not mismatches, mismatches
+    finally:
+        tx.close()
+        conn.close()
+
+
+def test_mode_mapping_as_pymavlink():
+    """ArduPilot's modes by pymavlink's names (mode_mapping_byname), and set_mode by them."""
+    from pymavlink import mavutil as pm
+    port, peer_port = free_udp_port(), free_udp_port()
+    conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % port)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    tx.bind(("127.0.0.1", peer_port))
+    tx.settimeout(5)
+    enc = apm.MAVLink(None, srcSystem=1, srcComponent=1)
+    try:
+        for mav_type in (2, 1, 10, 12, 13, 20):
+            tx.sendto(enc.heartbeat_encode(mav_type, 3, 129, 0, 4).pack(enc), ("127.0.0.1", port))
+            assert conn.recv_match(type="HEARTBEAT", blocking=True, timeout=5) is not None
+            assert conn.mode_mapping() == pm.mode_mapping_byname(mav_type), mav_type
+        conn.set_mode("FBWA")  # the last HEARTBEAT said a VTOL: Plane's modes
+        got = apm.MAVLink(None).parse_buffer(tx.recv(1024))
+        assert [(m.command, m.param1, m.param2) for m in got] == [(176, 1.0, 5.0)]
+    finally:
+        tx.close()
+        conn.close()
