@@ -50,21 +50,23 @@ pub struct MissionConfig {
     pub item_timeout: Duration,
     /// Resends before giving up (default 5).
     pub retries: u8,
-    /// How the server answers an item it did not ask for during an upload.
-    pub out_of_sequence: OutOfSequence,
+    /// How the server answers an item it did not ask for.
+    pub stray_items: StrayItems,
 }
 
-/// How a [`MissionServer`] answers an item other than the one it asked for.
+/// How a [`MissionServer`] answers an item it did not ask for.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum OutOfSequence {
-    /// Drop it and ask for the wanted item at once (a copy of the previous item means the
-    /// client missed our request).
+pub enum StrayItems {
+    /// During an upload, drop it and ask for the wanted item at once (a copy of the previous
+    /// item means the client missed our request); after one, the last item sent again (its
+    /// ACK was lost) is acknowledged again.
     #[default]
     Reask,
-    /// MISSION_ACK MAV_MISSION_INVALID_SEQUENCE, the upload left open: the wanted item is
-    /// asked for again when the item timeout comes, as ArduPilot does (it answers a client's
-    /// resend after a lost MISSION_REQUEST so, and asks again about a second later).
-    AckInvalidSequence,
+    /// As ArduPilot: during an upload, MISSION_ACK MAV_MISSION_INVALID_SEQUENCE with the
+    /// upload left open (the wanted item is asked for again when the item timeout comes;
+    /// ArduPilot asks about a second later); outside one, MISSION_ACK MAV_MISSION_ERROR, also
+    /// to the last item of an upload that ended and whose ACK was lost.
+    ArduPilot,
 }
 
 impl Default for MissionConfig {
@@ -73,7 +75,7 @@ impl Default for MissionConfig {
             timeout: Duration::from_millis(1500),
             item_timeout: Duration::from_millis(250),
             retries: 5,
-            out_of_sequence: OutOfSequence::Reask,
+            stray_items: StrayItems::Reask,
         }
     }
 }
@@ -97,6 +99,16 @@ pub enum MissionError {
     /// Cancelled with [`MissionClient::cancel`].
     #[error("cancelled")]
     Cancelled,
+    /// Every item was sent, the final MISSION_ACK did not come, and the vehicle refused the
+    /// last item sent again with this result: ArduPilot answers MAV_MISSION_ERROR to an item
+    /// when no upload is open, which is also what it does once the upload has ended and its
+    /// ACCEPTED was lost. Whether the plan was stored is unknown: read it back to tell
+    /// (`System::upload_mission` does).
+    #[error("the final MISSION_ACK was lost and the resent last item got {result:?}")]
+    Unconfirmed {
+        /// The result the resent item got.
+        result: MavMissionResult,
+    },
 }
 
 /// Why a transfer was not started.
@@ -567,13 +579,26 @@ impl MissionClient {
                 && a.r#type == MavMissionResult::MAV_MISSION_INVALID_SEQUENCE
             {
                 // ArduPilot's answer to an item it did not ask for (our resend after its
-                // request was lost); the upload goes on, and it asks again for the item it
-                // wants. Retries and the timeout still bound the upload.
+                // request was lost); the upload goes on. Retries and the timeout still bound
+                // it. When it answers so to our resend of item k, it took k and wants k + 1
+                // (it accepts only the item after the last it took, and asked for k): send
+                // k + 1 now rather than wait for its next request, a second away.
+                if let Op::Upload(Upload::AwaitingRequest(s)) = &r.op
+                    && s.attempts > 1
+                    && let Some(k) = s.last
+                    && usize::from(k) + 1 < s.items.len()
+                {
+                    let wanted = request_int(self.own, ty, k + 1);
+                    return self.step(now, r, &wanted);
+                }
                 return (Some(r), true);
             }
             let done_upload = matches!(r.op, Op::Upload(Upload::AwaitingAck(_)))
                 || matches!(&r.op, Op::Upload(Upload::AwaitingRequest(s)) if s.items.is_empty());
-            let result = if a.r#type != MavMissionResult::MAV_MISSION_ACCEPTED {
+            let resent_last = matches!(&r.op, Op::Upload(Upload::AwaitingAck(s)) if s.attempts > 1);
+            let result = if a.r#type != MavMissionResult::MAV_MISSION_ACCEPTED && resent_last {
+                Err(MissionError::Unconfirmed { result: a.r#type })
+            } else if a.r#type != MavMissionResult::MAV_MISSION_ACCEPTED {
                 Err(MissionError::Rejected { result: a.r#type })
             } else if matches!(r.op, Op::Clear { .. }) || done_upload {
                 Ok(Vec::new())
@@ -1106,6 +1131,10 @@ impl MissionServer {
             .as_mut()
             .filter(|r| r.peer == from && r.mission_type == ty)
         else {
+            if self.config.stray_items == StrayItems::ArduPilot {
+                self.send(from, ack(from, ty, MavMissionResult::MAV_MISSION_ERROR));
+                return;
+            }
             // The last item resent after a lost final ACK: ACK again.
             if self.last_upload == Some((from, ty, item.seq.saturating_add(1))) {
                 self.send(from, ack(from, ty, MavMissionResult::MAV_MISSION_ACCEPTED));
@@ -1118,7 +1147,7 @@ impl MissionServer {
             // the only way forward; after a copy of the previous item it is the client
             // resending because our request was lost (a copy the link made gets a second
             // request, whose answer we drop in turn).
-            if self.config.out_of_sequence == OutOfSequence::AckInvalidSequence {
+            if self.config.stray_items == StrayItems::ArduPilot {
                 let invalid = MavMissionResult::MAV_MISSION_INVALID_SEQUENCE;
                 self.send(from, ack(from, ty, invalid));
             } else if item.seq > expected || item.seq.saturating_add(1) == expected {

@@ -65,7 +65,7 @@ use mavstack_services::command::{Command, CommandHandler, CommandServer, Request
 use mavstack_services::ftp::param_pck::TableFile;
 use mavstack_services::ftp::{DirBackend, FtpServer, Overlay, ServerConfig};
 use mavstack_services::log_transfer::{LogServer, LogServerEvent};
-use mavstack_services::mission::{MissionConfig, MissionServer, MissionServerEvent, OutOfSequence};
+use mavstack_services::mission::{MissionConfig, MissionServer, MissionServerEvent, StrayItems};
 use mavstack_services::param::{Encoding, Name, ParamServer, ParamServerEvent, Value};
 use mavstack_services::stream::{self, Interval, StreamScheduler, request_message};
 use mavstack_services::timesync::{Timesync, TimesyncConfig};
@@ -131,15 +131,15 @@ const STREAMS: &[(u32, Option<Duration>)] = &[
     (ExtendedSysState::ID, Some(Duration::from_secs(1))),
 ];
 
-/// The mission server's answers: an item not asked for gets ArduPilot's MISSION_ACK
-/// INVALID_SEQUENCE from the ArduPilot flavour (the upload stays open).
+/// The mission server's answers to items it did not ask for: the ArduPilot flavour's are
+/// ArduPilot's (INVALID_SEQUENCE during an upload, ERROR outside one).
 fn mission_config(autopilot: Autopilot) -> MissionConfig {
-    let out_of_sequence = match autopilot {
-        Autopilot::Ardupilot => OutOfSequence::AckInvalidSequence,
-        Autopilot::Px4 => OutOfSequence::Reask,
+    let stray_items = match autopilot {
+        Autopilot::Ardupilot => StrayItems::ArduPilot,
+        Autopilot::Px4 => StrayItems::Reask,
     };
     MissionConfig {
-        out_of_sequence,
+        stray_items,
         ..MissionConfig::default()
     }
 }

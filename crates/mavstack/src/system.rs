@@ -815,6 +815,7 @@ impl System {
         mut progress: impl FnMut(usize, usize),
     ) -> Result<(), SystemError> {
         let mut client = self.mission_client();
+        let sent = items.clone();
         client
             .upload(clock::now(), self.target, kind, items)
             .map_err(|e| SystemError::Busy(e.to_string()))?;
@@ -834,6 +835,26 @@ impl System {
             })
             .await?;
         match event {
+            MissionEvent::Uploaded {
+                result: Err(MissionError::Unconfirmed { result }),
+                ..
+            } => {
+                // The final ACK was lost; what the vehicle holds tells whether it took the
+                // plan.
+                tracing::info!(
+                    "mission upload: the final MISSION_ACK was lost ({result:?} to the last \
+                     item sent again): reading the plan back"
+                );
+                let back = self.download_mission(kind).await?;
+                if mavstack_services::plan::same(&sent, &back) {
+                    Ok(())
+                } else {
+                    Err(SystemError::Mission {
+                        what: "upload",
+                        source: MissionError::Rejected { result },
+                    })
+                }
+            }
             MissionEvent::Uploaded { result, .. } => {
                 result.map_err(|source| SystemError::Mission {
                     what: "upload",
