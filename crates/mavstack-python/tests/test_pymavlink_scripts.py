@@ -100,6 +100,13 @@ def both(script, session=udp_session, **kw):
     return ours
 
 
+@pytest.mark.parametrize("script", ["heartbeat.py", "attitude.py", "mission.py", "interval.py", "params.py"])
+def test_px4_flavour(script):
+    """The scripts that are not ArduPilot's alone, against the vehicle as PX4."""
+    out = both(script, vehicle_args=("--autopilot", "px4"))
+    assert "None" not in out and "False" not in out.replace("armed False", "")
+
+
 def test_heartbeat():
     out = both("heartbeat.py")
     assert "heartbeat from 1/1" in out and "target 1/0" in out
@@ -155,33 +162,44 @@ def test_signing_setup():
     assert "heartbeat signed True" in out and "signed True" in out
 
 
-def test_two_link_forwarder():
-    """vehicle -> forwarder (argv[1]) -> a pymavlink ground station (argv[2]), and back."""
+def forward_session(script, with_mavstack, loss=0.0):
+    """vehicle -> forwarder (argv[1]) -> a pymavlink ground station (argv[2]), and back; with
+    `loss`, the vehicle's link goes through lossy_relay.py."""
     from pymavlink import mavutil as pm
+    sys.path.insert(0, os.path.join(ROOT, "tests-interop"))
+    from lossy_relay import LossyRelay
+    vport, gport = free_port(), free_port()
+    gcs = pm.mavlink_connection("udpin:127.0.0.1:%d" % gport, source_system=250)
+    stop = threading.Event()
 
-    def forward_session(script, with_mavstack):
-        vport, gport = free_port(), free_port()
-        gcs = pm.mavlink_connection("udpin:127.0.0.1:%d" % gport, source_system=250)
-        stop = threading.Event()
-
-        def ask():
-            while not stop.is_set():
-                gcs.mav.param_request_read_send(1, 1, b"RTL_ALT", -1)
-                while gcs.recv_msg() is not None:
-                    pass
-                time.sleep(0.2)
-        try:
-            with Vehicle("udpout:127.0.0.1:%d" % vport):
-                # The ground station speaks first: the forwarder's udpout learns nothing else.
-                t = threading.Thread(target=ask, daemon=True)
-                t.start()
-                return run(script, ["udpin:127.0.0.1:%d" % vport, "udpout:127.0.0.1:%d" % gport],
-                           with_mavstack)
-        finally:
-            stop.set()
+    def ask():
+        while not stop.is_set():
+            gcs.mav.param_request_read_send(1, 1, b"RTL_ALT", -1)
+            while gcs.recv_msg() is not None:
+                pass
+            time.sleep(0.2)
+    # The ground station speaks first: the forwarder's udpout learns nothing else.
+    t = threading.Thread(target=ask, daemon=True)
+    relay = LossyRelay(("127.0.0.1", 0), ("127.0.0.1", vport), loss=loss, seed=5)
+    relay.start()
+    try:
+        with Vehicle("udpout:127.0.0.1:%d" % relay.listen_port):
+            t.start()
+            return run(script, ["udpin:127.0.0.1:%d" % vport, "udpout:127.0.0.1:%d" % gport],
+                       with_mavstack)
+    finally:
+        stop.set()
+        if t.is_alive():
             t.join()
-            gcs.close()
-    out = both("forwarder.py", session=forward_session)
+        relay.stop()
+        gcs.close()
+
+
+@pytest.mark.parametrize("loss", [0.0, 0.2])
+def test_two_link_forwarder(loss):
+    """A forwarder between the vehicle and a pymavlink ground station: its HEARTBEATs one
+    way, a parameter request the other, the answer back; clean and through 20 % loss."""
+    out = both("forwarder.py", session=lambda script, with_mavstack: forward_session(script, with_mavstack, loss))
     assert "answer forwarded True" in out
 
 

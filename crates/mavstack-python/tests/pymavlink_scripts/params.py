@@ -25,7 +25,7 @@ while time.time() < deadline and (count is None or len(params) < count):
                     conn.mav.param_request_read_send(conn.target_system, conn.target_component, b"", i)
         continue
     count = m.param_count
-    params[m.param_id] = (m.param_value, m.param_index)
+    params[m.param_id] = (m.param_value, m.param_index, m.param_type)
 print("parameters %d of %s" % (len(params), count))
 table = "".join("%s=%r\n" % (k, params[k][0]) for k in sorted(params))
 print("table sha1 %s" % hashlib.sha1(table.encode()).hexdigest())
@@ -33,16 +33,24 @@ name = sorted(params)[0]
 print("first %s = %r" % (name, params[name][0]))
 
 
-def until_rtl_alt(send, value):
+# ArduPilot's RTL_ALT, else the first REAL32 parameter (PX4), one more than it was.
+if "RTL_ALT" in params:
+    target, value = "RTL_ALT", 3000.0
+else:
+    target = sorted(k for k in params if params[k][2] == mavutil.mavlink.MAV_PARAM_TYPE_REAL32)[0]
+    value = params[target][0] + 1
+
+
+def until(send):
     for _ in range(10):
         send()
         m = conn.recv_match(type="PARAM_VALUE", blocking=True, timeout=1,
-                            condition='PARAM_VALUE.param_id == "RTL_ALT" and PARAM_VALUE.param_value == %r' % value)
+                            condition='PARAM_VALUE.param_id == %r and PARAM_VALUE.param_value == %r' % (target, value))
         if m is not None:
             return m.param_value
     return None
 
 
-print("set RTL_ALT -> %r" % until_rtl_alt(lambda: conn.param_set_send("RTL_ALT", 3000), 3000.0))
-print("read back RTL_ALT = %r" % until_rtl_alt(lambda: conn.param_fetch_one("RTL_ALT"), 3000.0))
+print("set %s -> %r" % (target, until(lambda: conn.param_set_send(target, value))))
+print("read back %s = %r" % (target, until(lambda: conn.param_fetch_one(target))))
 conn.close()
