@@ -398,6 +398,26 @@ fn out_of_sequence_items_are_dropped_and_the_expected_one_requested() {
     );
 }
 
+/// MISSION_REQUEST_INT for item `seq` of the mission, from the vehicle to us.
+fn request_to_gcs(seq: u16) -> MavMessage {
+    MavMessage::MissionRequestInt(MissionRequestInt {
+        target_system: GCS.system,
+        target_component: GCS.component,
+        seq,
+        mission_type: MavMissionType::MISSION,
+    })
+}
+
+/// MISSION_ACK of the mission with `result`, from the vehicle to us.
+fn ack_to_gcs(result: MavMissionResult) -> MavMessage {
+    MavMessage::MissionAck(mavstack_dialects::common::MissionAck {
+        target_system: GCS.system,
+        target_component: GCS.component,
+        r#type: result,
+        mission_type: MavMissionType::MISSION,
+    })
+}
+
 /// ArduPilot 4.7, its MISSION_REQUEST for item 1 lost: our resend of item 0 gets
 /// MISSION_ACK INVALID_SEQUENCE, then it asks for item 1 again. The upload goes on.
 #[test]
@@ -406,22 +426,7 @@ fn an_invalid_sequence_ack_mid_upload_does_not_end_it() {
     c.upload(T0, VEHICLE, MavMissionType::MISSION, items(2))
         .unwrap();
     let _count = c.poll_transmit();
-    let request = |seq| {
-        MavMessage::MissionRequestInt(MissionRequestInt {
-            target_system: GCS.system,
-            target_component: GCS.component,
-            seq,
-            mission_type: MavMissionType::MISSION,
-        })
-    };
-    let ack = |r#type| {
-        MavMessage::MissionAck(mavstack_dialects::common::MissionAck {
-            target_system: GCS.system,
-            target_component: GCS.component,
-            r#type,
-            mission_type: MavMissionType::MISSION,
-        })
-    };
+    let (request, ack) = (request_to_gcs, ack_to_gcs);
     c.handle_message(T0, VEHICLE, &request(0));
     assert!(matches!(
         c.poll_transmit().unwrap().message,
@@ -465,18 +470,8 @@ fn an_invalid_sequence_ack_mid_upload_does_not_end_it() {
 /// same ERROR to the first send of the last item is a refusal.
 #[test]
 fn an_error_to_the_resent_last_item_is_unconfirmed() {
-    let request = MavMessage::MissionRequestInt(MissionRequestInt {
-        target_system: GCS.system,
-        target_component: GCS.component,
-        seq: 0,
-        mission_type: MavMissionType::MISSION,
-    });
-    let error = MavMessage::MissionAck(mavstack_dialects::common::MissionAck {
-        target_system: GCS.system,
-        target_component: GCS.component,
-        r#type: MavMissionResult::MAV_MISSION_ERROR,
-        mission_type: MavMissionType::MISSION,
-    });
+    let request = request_to_gcs(0);
+    let error = ack_to_gcs(MavMissionResult::MAV_MISSION_ERROR);
     for resend in [true, false] {
         let mut c = MissionClient::new(GCS, MissionConfig::default());
         c.upload(T0, VEHICLE, MavMissionType::MISSION, items(1))
@@ -518,27 +513,10 @@ fn an_invalid_sequence_ack_without_a_resend_sends_nothing() {
     c.upload(T0, VEHICLE, MavMissionType::MISSION, items(3))
         .unwrap();
     let _count = c.poll_transmit();
-    c.handle_message(
-        T0,
-        VEHICLE,
-        &MavMessage::MissionRequestInt(MissionRequestInt {
-            target_system: GCS.system,
-            target_component: GCS.component,
-            seq: 0,
-            mission_type: MavMissionType::MISSION,
-        }),
-    );
+    c.handle_message(T0, VEHICLE, &request_to_gcs(0));
     assert!(c.poll_transmit().is_some());
-    c.handle_message(
-        T0,
-        VEHICLE,
-        &MavMessage::MissionAck(mavstack_dialects::common::MissionAck {
-            target_system: GCS.system,
-            target_component: GCS.component,
-            r#type: MavMissionResult::MAV_MISSION_INVALID_SEQUENCE,
-            mission_type: MavMissionType::MISSION,
-        }),
-    );
+    let invalid = ack_to_gcs(MavMissionResult::MAV_MISSION_INVALID_SEQUENCE);
+    c.handle_message(T0, VEHICLE, &invalid);
     assert!(c.poll_transmit().is_none());
     assert_eq!(c.poll_event(), None);
 }
