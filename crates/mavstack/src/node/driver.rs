@@ -285,6 +285,22 @@ impl Driver {
                 self.drain_events()?;
                 let _ = done.send(set);
             }
+            Some(Some(Command::SetSigningAll { signing, done })) => {
+                // Peers that come later take it from their link's template.
+                for slot in &mut self.slots {
+                    slot.template.signing.clone_from(&signing);
+                }
+                let now = clock::now();
+                let links: Vec<LinkId> = self.router.links().collect();
+                let mut set = Ok(());
+                for link in links {
+                    if let Err(e) = self.router.set_signing(now, link, signing.clone()) {
+                        set = Err(e);
+                    }
+                }
+                self.drain_events()?;
+                let _ = done.send(set);
+            }
             Some(Some(Command::Shutdown) | None) => return Ok(Turn::Stop),
             None => {}
         }

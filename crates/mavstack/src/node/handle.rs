@@ -339,6 +339,25 @@ impl NodeHandle {
         Ok(rx.await.map_err(|_| RequestError::Stopped)??)
     }
 
+    /// Turns signing on or off on every link of the node, as after a SETUP_SIGNING (which
+    /// the caller sends): the peers it has now and those that come later (a new UDP or TCP
+    /// client of a server link).
+    ///
+    /// # Errors
+    /// [`RequestError::Signing`] if a link cannot sign (`version=1`; the others are set all
+    /// the same), [`RequestError::Stopped`].
+    pub async fn set_signing_all(
+        &self,
+        signing: Option<SigningConfig>,
+    ) -> Result<(), RequestError> {
+        let (done, rx) = oneshot::channel();
+        self.commands
+            .send(Command::SetSigningAll { signing, done })
+            .await
+            .map_err(|_| RequestError::Stopped)?;
+        Ok(rx.await.map_err(|_| RequestError::Stopped)??)
+    }
+
     /// Every link event from now on (peers, version changes, handshakes answered, signing
     /// set up, frames refused). Dropping the receiver unsubscribes.
     pub async fn events(&self) -> EventSubscription {

@@ -306,5 +306,9 @@ enum Command {
         signing: Option<SigningConfig>,
         done: oneshot::Sender<Result<(), ConfigError>>,
     },
+    SetSigningAll {
+        signing: Option<SigningConfig>,
+        done: oneshot::Sender<Result<(), ConfigError>>,
+    },
     Shutdown,
 }
