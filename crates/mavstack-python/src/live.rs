@@ -413,27 +413,14 @@ impl LiveLink {
         Ok(())
     }
 
-    /// Sets `signing` on every peer of the link.
+    /// Sets `signing` on the link: its peers now and those to come.
     fn apply_signing(&self, py: Python<'_>, signing: Option<SigningConfig>) -> PyResult<()> {
         let handle = self.node_handle()?.clone();
         let rt = runtime()?;
-        let res: Result<(), String> = py.detach(|| {
-            rt.block_on(async {
-                let report = handle.report().await.ok_or("the node has stopped")?;
-                let links: Vec<LinkId> = report.links.iter().filter_map(|l| l.link_id).collect();
-                if links.is_empty() {
-                    return Err("no peer on the link yet (wait for a message first)".to_owned());
-                }
-                for link in links {
-                    handle
-                        .set_signing(link, signing.clone())
-                        .await
-                        .map_err(|e| e.to_string())?;
-                }
-                Ok(())
+        py.detach(|| rt.block_on(handle.set_signing_all(signing)))
+            .map_err(|e| {
+                PyValueError::new_err(format!("setup_signing on \"{}\": {e}", self.device))
             })
-        });
-        res.map_err(|e| PyValueError::new_err(format!("setup_signing on \"{}\": {e}", self.device)))
     }
 }
 

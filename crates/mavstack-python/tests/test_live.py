@@ -310,3 +310,36 @@ def test_mode_mapping_as_pymavlink():
     finally:
         tx.close()
         conn.close()
+
+
+def test_signing_set_up_before_any_peer():
+    """setup_signing on a udpin link nobody has spoken to yet: the peer that comes later is
+    held to it (its signed frames verified, its unsigned ones refused) and answered signed."""
+    key = bytes(range(32))
+    port = free_udp_port()
+    conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % port)
+    peer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    peer.bind(("127.0.0.1", 0))
+    peer.settimeout(5)
+    try:
+        conn.setup_signing(key, link_id=3)
+        plain = apm.MAVLink(None, srcSystem=1, srcComponent=1)
+        signed = apm.MAVLink(None, srcSystem=1, srcComponent=1)
+        signed.signing.secret_key = key
+        signed.signing.sign_outgoing = True
+        signed.signing.link_id = 1
+        signed.signing.timestamp = int((time.time() - 1420070400) * 100000)
+        peer.sendto(plain.heartbeat_encode(2, 3, 81, 7, 4).pack(plain), ("127.0.0.1", port))
+        peer.sendto(signed.heartbeat_encode(2, 3, 81, 8, 4).pack(signed), ("127.0.0.1", port))
+        hb = conn.wait_heartbeat(timeout=5)
+        assert hb is not None and hb.custom_mode == 8 and hb.get_signed() and hb.get_link_id() == 1
+        assert conn.recv_match(type="HEARTBEAT", blocking=True, timeout=0.3) is None
+        conn.mav.heartbeat_send(6, 8, 0, 0, 4)
+        checker = apm.MAVLink(None)
+        checker.signing.secret_key = key
+        got = checker.parse_buffer(peer.recv(1024))
+        assert [m.get_type() for m in got] == ["HEARTBEAT"] and got[0].get_signed()
+        assert got[0].get_link_id() == 3
+    finally:
+        peer.close()
+        conn.close()
