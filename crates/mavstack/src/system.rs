@@ -188,6 +188,9 @@ pub enum ParamsVia {
 /// How long [`ParamsVia::Auto`] waits for AUTOPILOT_VERSION.
 pub const CAPABILITIES_WAIT: Duration = Duration::from_secs(2);
 
+/// How often [`System::find_capabilities`] asks again for AUTOPILOT_VERSION.
+const CAPABILITIES_RESEND: Duration = Duration::from_millis(500);
+
 /// Retries of the first MAVFTP request (the open) of [`ParamsVia::Auto`], which can still
 /// fall back. (Applied to every request, a transfer through 20 % loss each way gave up
 /// half-way about every other time, and the fallback cost three times as long.)
@@ -490,13 +493,23 @@ impl System {
         self.capabilities
     }
 
-    /// Its capabilities: the known ones, or else AUTOPILOT_VERSION requested once with
-    /// REQUEST_MESSAGE and awaited for up to `wait`; `None` when it never came.
+    /// Its capabilities: the known ones, or else AUTOPILOT_VERSION requested with
+    /// REQUEST_MESSAGE (again every half second) and awaited for up to `wait`; `None` when
+    /// it never came.
     pub async fn find_capabilities(&mut self, wait: Duration) -> Option<MavProtocolCapability> {
         self.update();
-        if self.capabilities.is_none() {
+        let end = tokio::time::Instant::now() + wait;
+        while self.capabilities.is_none() {
+            let left = end.saturating_duration_since(tokio::time::Instant::now());
+            if left.is_zero() {
+                break;
+            }
+            // Asked again every half second: one request and its answer through a link
+            // losing 20 % each way are both there only two times in three.
             self.request_once(AutopilotVersion::ID).await;
-            self.take_until(wait, |s, _| s.capabilities.is_some()).await;
+            let slice = left.min(CAPABILITIES_RESEND);
+            self.take_until(slice, |s, _| s.capabilities.is_some())
+                .await;
         }
         self.capabilities
     }
