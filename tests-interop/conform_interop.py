@@ -1470,16 +1470,44 @@ GCS_MODE_FACTS = {
 }
 
 
-def gcs_conform(bin_, selftest, port, mode, timeout=None):
-    if selftest:
-        c = GcsStandIn(port, mode, first_timeout=timeout or FIRST_TIMEOUT)
-        c.start()
-        return c
-    args = [bin_, "conform", "udpin:127.0.0.1:%d" % port, "--role", "gcs", "--vehicle-mode", mode, "--json"]
-    if timeout is not None:
-        args += ["--timeout", str(timeout)]
-    c = Proc(args, "conform")
-    return c if c.proc is not None else None
+def gcs_conform(bin_, selftest, mode, timeout=None):
+    """conform --role gcs (or the self-test's stand-in) on a free port; returns (conform, port),
+    conform None when it could not start. A port can be taken by another process between
+    free_port's check and conform's bind (scenarios run at once): conform then exits at once
+    with "address in use", and it is started again on another port."""
+    for _ in range(5):
+        port = free_port()
+        if selftest:
+            c = GcsStandIn(port, mode, first_timeout=timeout or FIRST_TIMEOUT)
+            c.start()
+            return c, port
+        args = [bin_, "conform", "udpin:127.0.0.1:%d" % port, "--role", "gcs", "--vehicle-mode", mode, "--json"]
+        if timeout is not None:
+            args += ["--timeout", str(timeout)]
+        c = Proc(args, "conform")
+        if c.proc is None:
+            return None, port
+        if not lost_port_race(c, port):
+            return c, port
+    fail("conform could not bind a free UDP port in 5 tries: %s" % c.command())
+    return None, port
+
+
+def lost_port_race(proc, port):
+    """Waits until `proc` holds `port` (it can no longer be bound here) or has exited; true when it
+    exited because the port was in use."""
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        if not proc.running():
+            proc.wait(1)
+            return "address in use" in proc.stderr().lower()
+        try:
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+                s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+        time.sleep(0.02)
+    return False
 
 
 def gcs_scenario(name, bin_, selftest):
@@ -1487,8 +1515,7 @@ def gcs_scenario(name, bin_, selftest):
     lines = []
     for mode, behaviour in spec["runs"]:
         what = "%s (--vehicle-mode %s)" % (name, mode) if len(spec["runs"]) > 1 else name
-        port = free_port()
-        conform = gcs_conform(bin_, selftest, port, mode)
+        conform, port = gcs_conform(bin_, selftest, mode)
         if conform is None:
             return None
         gcs = PyGcs(("127.0.0.1", port), behaviour)
@@ -1580,8 +1607,7 @@ class MavproxyPeer:
 
 def gcs_mavproxy(bin_, selftest):
     name = "gcs_mavproxy"
-    port = free_port()
-    conform = gcs_conform(bin_, selftest, port, "answer", timeout=REAL_PEER_TIMEOUT)
+    conform, port = gcs_conform(bin_, selftest, "answer", timeout=REAL_PEER_TIMEOUT)
     if conform is None:
         return None
     work = tempfile.mkdtemp(prefix="conform-mavproxy-")
@@ -1643,8 +1669,7 @@ async def mavsdk_session(url, conform, limit, info):
 
 def gcs_mavsdk(bin_, selftest):
     name = "gcs_mavsdk"
-    port = free_port()
-    conform = gcs_conform(bin_, selftest, port, "answer", timeout=REAL_PEER_TIMEOUT)
+    conform, port = gcs_conform(bin_, selftest, "answer", timeout=REAL_PEER_TIMEOUT)
     if conform is None:
         return None
     url = "udpout://127.0.0.1:%d" % port
