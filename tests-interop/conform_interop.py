@@ -1494,20 +1494,47 @@ def gcs_conform(bin_, selftest, mode, timeout=None):
 
 
 def lost_port_race(proc, port):
-    """Waits until `proc` holds `port` (it can no longer be bound here) or has exited; true when it
-    exited because the port was in use."""
+    """Waits until `proc` holds UDP `port` (one of its sockets is bound to it) or has exited;
+    true when it exited because the port was in use."""
     deadline = time.monotonic() + 10
     while time.monotonic() < deadline:
         if not proc.running():
             proc.wait(1)
             return "address in use" in proc.stderr().lower()
-        try:
-            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-                s.bind(("127.0.0.1", port))
-        except OSError:
+        if udp_port_inodes(port) & socket_inodes(proc.proc.pid):
             return False
         time.sleep(0.02)
     return False
+
+
+def udp_port_inodes(port):
+    """The inodes of the UDP sockets bound to `port` (from /proc/net/udp)."""
+    inodes = set()
+    with open("/proc/net/udp", encoding="ascii") as f:
+        next(f)
+        for line in f:
+            cols = line.split()
+            if len(cols) > 9 and int(cols[1].rsplit(":", 1)[1], 16) == port:
+                inodes.add(cols[9])
+    return inodes
+
+
+def socket_inodes(pid):
+    """The inodes of the sockets process `pid` has open."""
+    inodes = set()
+    fd_dir = "/proc/%d/fd" % pid
+    try:
+        names = os.listdir(fd_dir)
+    except OSError:
+        return inodes
+    for name in names:
+        try:
+            target = os.readlink(os.path.join(fd_dir, name))
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[8:-1])
+    return inodes
 
 
 def gcs_scenario(name, bin_, selftest):
