@@ -59,7 +59,7 @@ const SAFETY_ARMED: u8 = 128;
 const CUSTOM_MODE_ENABLED: u8 = 1;
 
 /// The runtime every live connection's node runs on.
-fn runtime() -> PyResult<&'static Runtime> {
+pub(crate) fn runtime() -> PyResult<&'static Runtime> {
     static RUNTIME: OnceLock<Result<Runtime, String>> = OnceLock::new();
     RUNTIME
         .get_or_init(|| {
@@ -75,7 +75,7 @@ fn runtime() -> PyResult<&'static Runtime> {
 }
 
 /// Seconds since the Unix epoch, as `time.time()`.
-fn unix_now() -> f64 {
+pub(crate) fn unix_now() -> f64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0.0, |d| d.as_secs_f64())
