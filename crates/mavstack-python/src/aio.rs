@@ -7,22 +7,28 @@
 //! [`mavstack::serve::Served`] for a component that answers commands and offers parameters.
 //! No thread is started per call or per message.
 //!
-//! Completion: an operation is given the asyncio loop and a `settle(ok, value)` callable;
-//! when its task ends it attaches to Python and calls `loop.call_soon_threadsafe(settle, ok,
-//! value)`, so the future is completed on the loop's own thread (the Python side checks
-//! that the future is not done or cancelled first). An error is settled as `(kind,
-//! message)`, which the Python side turns into its exception classes. The [`Op`] returned
-//! aborts the task when the awaiting Python task is cancelled: dropping a `System` future
-//! abandons its operation, and the vehicle's lock is released with it.
+//! Completion: an operation is given the loop's [`AioWaker`] and a `settle(ok, value)`
+//! callable. When its task ends, the result is queued on the waker and one byte written to
+//! the socket the loop watches (`loop.add_reader`); the loop's thread then runs
+//! `AioWaker.drain`, which builds the Python values and calls `settle`, so the future is
+//! completed on the loop's own thread (the Python side checks that the future is not done or
+//! cancelled first). This is `loop.call_soon_threadsafe` without the runtime's thread ever
+//! taking the GIL (see [`AioWaker`] for why). An error is settled as `(kind, message)`, which
+//! the Python side turns into its exception classes. The [`Op`] returned aborts the task
+//! when the awaiting Python task is cancelled: dropping a `System` future abandons its
+//! operation, and the vehicle's lock is released with it.
 //!
 //! Streams (telemetry, requests to a served component) are a queue filled by a task and
-//! emptied from Python; the task wakes the loop (`call_soon_threadsafe`) only while Python
-//! waits on an empty queue, so a busy stream costs one wake-up per batch, not per message.
-//! The queue's lock is never held while attaching to Python.
+//! emptied from Python; the task wakes the loop only while Python waits on an empty queue,
+//! so a busy stream costs one wake-up per batch, not per message.
 
 use core::future::Future;
+use core::sync::atomic::{AtomicBool, Ordering};
 use core::time::Duration;
 use std::collections::VecDeque;
+use std::io::{Read as _, Write as _};
+use std::os::fd::AsRawFd as _;
+use std::os::unix::net::UnixStream;
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use mavstack::channel::{Authentication, SigningConfig};
@@ -108,42 +114,122 @@ fn system_error(e: SystemError) -> AioError {
     AioError::new(kind, e.to_string())
 }
 
-/// Schedules `settle(ok, value)` on `event_loop`, attached to Python; nothing when the
-/// interpreter is going away or the loop is closed (its future is then gone too).
-fn call_soon(event_loop: &Py<PyAny>, settle: &Py<PyAny>, result: Result<Build, AioError>) {
-    Python::try_attach(|py| {
-        let args = match result.and_then(|build| {
-            build(py).map_err(|e| AioError::new("error", format!("building the result: {e}")))
-        }) {
-            Ok(value) => (true, value),
-            Err(e) => match (e.kind, e.message).into_pyobject(py) {
-                Ok(t) => (false, t.into_any().unbind()),
-                Err(_) => return,
-            },
-        };
-        // A closed loop raises RuntimeError: nobody waits any more.
-        let _ = event_loop.call_method1(py, "call_soon_threadsafe", (settle, args.0, args.1));
-    });
+/// What the runtime hands to the loop's thread.
+enum Entry {
+    /// An operation's end: `settle(ok, value)`.
+    Settle(Py<PyAny>, Result<Build, AioError>),
+    /// A stream's reader to wake: `wake()`.
+    Call(Py<PyAny>),
 }
 
-/// Wakes a waiting stream reader: `event_loop.call_soon_threadsafe(wake)`.
-fn wake(waiter: Option<(Py<PyAny>, Py<PyAny>)>) {
-    if let Some((event_loop, wake)) = waiter {
-        Python::try_attach(|py| {
-            let _ = event_loop.call_method1(py, "call_soon_threadsafe", (wake,));
-        });
+/// The runtime's side of an [`AioWaker`]: entries for the loop, and the socket that wakes it.
+pub(crate) struct WakerInner {
+    entries: Mutex<Vec<Entry>>,
+    /// Set when a byte is on its way and the loop has not drained since.
+    signaled: AtomicBool,
+    tx: UnixStream,
+}
+
+impl WakerInner {
+    /// Queues `entry` for the loop's thread and wakes the loop (one byte, only when none is
+    /// pending): no Python, no GIL on the runtime's thread.
+    fn post(&self, entry: Entry) {
+        lock(&self.entries).push(entry);
+        if !self.signaled.swap(true, Ordering::AcqRel) {
+            // Full (a byte is pending anyway) or closed (the loop is gone): nothing to do.
+            let _ = (&self.tx).write(&[1]);
+        }
+    }
+}
+
+/// One per asyncio loop: the runtime's results reach the loop's thread through it. The
+/// loop watches `fileno()` (`loop.add_reader(w.fileno(), w.drain)`); the runtime queues
+/// each result and writes one byte when none is pending, never taking the GIL, so a
+/// result costs no thread switch into Python on the runtime's side, results that come
+/// together are settled in one wake-up, and nothing on the runtime's thread can be caught
+/// in Python at the interpreter's exit (what `loop.call_soon_threadsafe` from the runtime's
+/// thread would risk: it releases the GIL inside, and a thread that wants it back during
+/// finalization is ended).
+#[pyclass(module = "mavstack._native", name = "AioWaker", frozen)]
+pub(crate) struct AioWaker {
+    inner: Arc<WakerInner>,
+    rx: UnixStream,
+}
+
+#[pymethods]
+impl AioWaker {
+    #[new]
+    fn new() -> PyResult<Self> {
+        let (rx, tx) = UnixStream::pair()?;
+        rx.set_nonblocking(true)?;
+        tx.set_nonblocking(true)?;
+        Ok(Self {
+            inner: Arc::new(WakerInner {
+                entries: Mutex::new(Vec::new()),
+                signaled: AtomicBool::new(false),
+                tx,
+            }),
+            rx,
+        })
+    }
+
+    /// The descriptor the loop watches for reading.
+    fn fileno(&self) -> i32 {
+        self.rx.as_raw_fd()
+    }
+
+    /// Settles the operations that ended and wakes the streams' readers (on the loop's
+    /// thread); an exception in one of them is reported as unraisable, the rest still run.
+    fn drain(&self, py: Python<'_>) {
+        self.inner.signaled.store(false, Ordering::Release);
+        let mut buf = [0u8; 64];
+        while matches!((&self.rx).read(&mut buf), Ok(n) if n > 0) {}
+        let entries = core::mem::take(&mut *lock(&self.inner.entries));
+        for entry in entries {
+            let called = match entry {
+                Entry::Settle(settle, result) => {
+                    let args = match result.and_then(|build| {
+                        build(py).map_err(|e| {
+                            AioError::new("error", format!("building the result: {e}"))
+                        })
+                    }) {
+                        Ok(value) => (true, value),
+                        Err(e) => match (e.kind, e.message).into_py_any(py) {
+                            Ok(t) => (false, t),
+                            Err(e) => {
+                                e.write_unraisable(py, None);
+                                continue;
+                            }
+                        },
+                    };
+                    settle.call1(py, args).map(drop)
+                }
+                Entry::Call(wake) => wake.call0(py).map(drop),
+            };
+            if let Err(e) = called {
+                e.write_unraisable(py, None);
+            }
+        }
+    }
+}
+
+/// Wakes a waiting stream reader.
+fn wake(waiter: Option<(Arc<WakerInner>, Py<PyAny>)>) {
+    if let Some((waker, wake)) = waiter {
+        waker.post(Entry::Call(wake));
     }
 }
 
 /// Runs `op` on the runtime and settles the Python future with its result.
-fn spawn_op<F>(event_loop: Py<PyAny>, settle: Py<PyAny>, op: F) -> PyResult<Op>
+fn spawn_op<F>(waker: &AioWaker, settle: Py<PyAny>, op: F) -> PyResult<Op>
 where
     F: Future<Output = Result<Build, AioError>> + Send + 'static,
 {
     let rt = runtime()?;
+    let waker = Arc::clone(&waker.inner);
     let task = rt.spawn(async move {
         let result = op.await;
-        call_soon(&event_loop, &settle, result);
+        waker.post(Entry::Settle(settle, result));
     });
     Ok(Op {
         abort: task.abort_handle(),
@@ -180,7 +266,7 @@ impl Op {
 struct Queue<T> {
     items: VecDeque<T>,
     /// The loop and callable to call when an item comes, while the reader waits.
-    waiter: Option<(Py<PyAny>, Py<PyAny>)>,
+    waiter: Option<(Arc<WakerInner>, Py<PyAny>)>,
     ended: bool,
     dropped: u64,
 }
@@ -225,12 +311,12 @@ fn end<T>(queue: &Mutex<Queue<T>>) {
 
 /// `wait(loop, wake)`: whether the reader should wait (the queue is empty and open); its
 /// `wake` is then called once an item comes or the queue ends.
-fn set_waiter<T>(queue: &Mutex<Queue<T>>, event_loop: Py<PyAny>, wake: Py<PyAny>) -> bool {
+fn set_waiter<T>(queue: &Mutex<Queue<T>>, waker: &AioWaker, wake: Py<PyAny>) -> bool {
     let mut q = lock(queue);
     if !q.items.is_empty() || q.ended {
         return false;
     }
-    q.waiter = Some((event_loop, wake));
+    q.waiter = Some((Arc::clone(&waker.inner), wake));
     true
 }
 
@@ -285,7 +371,7 @@ pub(crate) struct AioLink {
 /// Opens a ground station's link (`udpin:0.0.0.0:14550`, ...) as system `source_system`,
 /// component `source_component`, signing with `key` when given; settles with an `AioLink`.
 #[pyfunction]
-#[pyo3(signature = (device, source_system, source_component, dialect, key, link_id, event_loop, settle))]
+#[pyo3(signature = (device, source_system, source_component, dialect, key, link_id, waker, settle))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn aio_connect(
     device: &str,
@@ -294,7 +380,7 @@ pub(crate) fn aio_connect(
     dialect: &str,
     key: Option<&Bound<'_, PyAny>>,
     link_id: u8,
-    event_loop: Py<PyAny>,
+    waker: PyRef<'_, AioWaker>,
     settle: Py<PyAny>,
 ) -> PyResult<Op> {
     if source_system == 0 {
@@ -311,7 +397,7 @@ pub(crate) fn aio_connect(
     } else {
         source_component
     };
-    spawn_op(event_loop, settle, async move {
+    spawn_op(&waker, settle, async move {
         let node = Node::ground_station(source_system, component)
             .dialect(dialect.table)
             .link(spec)
@@ -361,20 +447,20 @@ pub(crate) fn aio_connect(
 impl AioLink {
     /// Waits up to `timeout` s for the first autopilot heard (or system `system`, component
     /// `component`); settles with an `AioVehicle`.
-    #[pyo3(signature = (system, component, timeout, event_loop, settle))]
+    #[pyo3(signature = (system, component, timeout, waker, settle))]
     fn vehicle(
         &self,
         system: Option<u8>,
         component: Option<u8>,
         timeout: f64,
-        event_loop: Py<PyAny>,
+        waker: PyRef<'_, AioWaker>,
         settle: Py<PyAny>,
     ) -> PyResult<Op> {
         let wait = seconds(timeout, "timeout")?;
         let shared = Arc::clone(&self.shared);
         let wanted = system.map_or(Wanted::AnyAutopilot, |s| Wanted::System(s, component));
         spawn_op(
-            event_loop,
+            &waker,
             settle,
             until_closed(self.shared.closed.clone(), async move {
                 let system = System::wait(&shared.handle, wanted, wait)
@@ -399,11 +485,11 @@ impl AioLink {
     }
 
     /// Closes the link: streams end, running operations fail with `closed`.
-    fn close(&self, event_loop: Py<PyAny>, settle: Py<PyAny>) -> PyResult<Op> {
+    fn close(&self, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
         let _ = self.close_tx.send(true);
         let node = self.node.try_lock().ok().and_then(|mut n| n.take());
         let device = self.shared.device.clone();
-        spawn_op(event_loop, settle, async move {
+        spawn_op(&waker, settle, async move {
             if let Some(node) = node {
                 node.shutdown()
                     .await
@@ -596,14 +682,14 @@ pub(crate) struct AioVehicle {
 impl AioVehicle {
     /// Runs `f` on the vehicle's `System` (after the operations before it), until the
     /// connection closes.
-    fn run<F, Fut>(&self, event_loop: Py<PyAny>, settle: Py<PyAny>, f: F) -> PyResult<Op>
+    fn run<F, Fut>(&self, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>, f: F) -> PyResult<Op>
     where
         F: FnOnce(Arc<tokio::sync::Mutex<System>>) -> Fut + Send + 'static,
         Fut: Future<Output = Result<Build, AioError>> + Send + 'static,
     {
         let system = Arc::clone(&self.system);
         spawn_op(
-            event_loop,
+            &waker,
             settle,
             until_closed(self.shared.closed.clone(), f(system)),
         )
@@ -664,7 +750,7 @@ impl AioVehicle {
     /// The whole parameter table, `{name: value}` in the vehicle's order, and the way it
     /// came (`"ftp"` or `"list"`); `via` is `"auto"` (MAVFTP when offered), `"ftp"` or
     /// `"list"`.
-    fn params_all(&self, via: &str, event_loop: Py<PyAny>, settle: Py<PyAny>) -> PyResult<Op> {
+    fn params_all(&self, via: &str, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
         let via = match via {
             "auto" => ParamsVia::Auto,
             "ftp" => ParamsVia::Ftp,
@@ -675,7 +761,7 @@ impl AioVehicle {
                 )));
             }
         };
-        self.run(event_loop, settle, move |system| async move {
+        self.run(waker, settle, move |system| async move {
             let (table, how) = system
                 .lock()
                 .await
@@ -694,9 +780,9 @@ impl AioVehicle {
     }
 
     /// One parameter's value, read by name.
-    fn param_get(&self, name: &str, event_loop: Py<PyAny>, settle: Py<PyAny>) -> PyResult<Op> {
+    fn param_get(&self, name: &str, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
         let name = param_name(name)?;
-        self.run(event_loop, settle, move |system| async move {
+        self.run(waker, settle, move |system| async move {
             let p = system
                 .lock()
                 .await
@@ -713,12 +799,12 @@ impl AioVehicle {
         &self,
         name: &str,
         value: &Bound<'_, PyAny>,
-        event_loop: Py<PyAny>,
+        waker: PyRef<'_, AioWaker>,
         settle: Py<PyAny>,
     ) -> PyResult<Op> {
         let name = param_name(name)?;
         let value = value_of(value)?;
-        self.run(event_loop, settle, move |system| async move {
+        self.run(waker, settle, move |system| async move {
             let mut system = system.lock().await;
             let before = system.param(name).await.map_err(system_error)?;
             let typed = value
@@ -738,7 +824,7 @@ impl AioVehicle {
         items: Vec<ItemTuple>,
         kind: &str,
         as_plan: bool,
-        event_loop: Py<PyAny>,
+        waker: PyRef<'_, AioWaker>,
         settle: Py<PyAny>,
     ) -> PyResult<Op> {
         let kind = mission_type(kind)?;
@@ -751,7 +837,7 @@ impl AioVehicle {
             .map(|(seq, t)| item_of(t, seq, kind))
             .collect();
         let items = plan::to_vehicle(convention, &plan);
-        self.run(event_loop, settle, move |system| async move {
+        self.run(waker, settle, move |system| async move {
             system
                 .lock()
                 .await
@@ -767,12 +853,12 @@ impl AioVehicle {
         &self,
         kind: &str,
         as_plan: bool,
-        event_loop: Py<PyAny>,
+        waker: PyRef<'_, AioWaker>,
         settle: Py<PyAny>,
     ) -> PyResult<Op> {
         let kind = mission_type(kind)?;
         let convention = self.convention(kind, as_plan);
-        self.run(event_loop, settle, move |system| async move {
+        self.run(waker, settle, move |system| async move {
             let mut system = system.lock().await;
             let items = system.download_mission(kind).await.map_err(system_error)?;
             let home = if convention == Convention::Px4 {
@@ -787,9 +873,14 @@ impl AioVehicle {
     }
 
     /// Clears the plan of `kind`.
-    fn mission_clear(&self, kind: &str, event_loop: Py<PyAny>, settle: Py<PyAny>) -> PyResult<Op> {
+    fn mission_clear(
+        &self,
+        kind: &str,
+        waker: PyRef<'_, AioWaker>,
+        settle: Py<PyAny>,
+    ) -> PyResult<Op> {
         let kind = mission_type(kind)?;
-        self.run(event_loop, settle, move |system| async move {
+        self.run(waker, settle, move |system| async move {
             system
                 .lock()
                 .await
@@ -803,13 +894,13 @@ impl AioVehicle {
     /// Sends command `command` (an id, or a name with or without MAV_CMD_) with up to seven
     /// parameters, as COMMAND_LONG (or COMMAND_INT with `frame`, where params 5 and 6 are
     /// x and y as integers); settles with its outcome (see `CommandOutcome`).
-    #[pyo3(signature = (command, params, frame, event_loop, settle))]
+    #[pyo3(signature = (command, params, frame, waker, settle))]
     fn command(
         &self,
         command: &Bound<'_, PyAny>,
         params: Vec<f64>,
         frame: Option<u8>,
-        event_loop: Py<PyAny>,
+        waker: PyRef<'_, AioWaker>,
         settle: Py<PyAny>,
     ) -> PyResult<Op> {
         let id = self.command_id(command)?;
@@ -848,7 +939,7 @@ impl AioVehicle {
                 ..CommandInt::default()
             }),
         };
-        self.run(event_loop, settle, move |system| async move {
+        self.run(waker, settle, move |system| async move {
             let result = system.lock().await.command(command, |_| {}).await;
             Ok(build(command_outcome(cmd, result)?))
         })
@@ -856,8 +947,13 @@ impl AioVehicle {
 
     /// Switches to the mode called `name` (the autopilot's names, `mavstack command mode`'s);
     /// settles with the command's outcome.
-    fn set_mode(&self, name: String, event_loop: Py<PyAny>, settle: Py<PyAny>) -> PyResult<Op> {
-        self.run(event_loop, settle, move |system| async move {
+    fn set_mode(
+        &self,
+        name: String,
+        waker: PyRef<'_, AioWaker>,
+        settle: Py<PyAny>,
+    ) -> PyResult<Op> {
+        self.run(waker, settle, move |system| async move {
             let result = system.lock().await.set_mode(&name).await;
             Ok(build(command_outcome(MavCmd::DO_SET_MODE, result)?))
         })
@@ -962,9 +1058,9 @@ impl AioStream {
     }
 
     /// Whether the reader should wait (nothing waiting, not ended); `wake` is then called
-    /// on `event_loop` once something comes.
-    fn wait(&self, event_loop: Py<PyAny>, wake: Py<PyAny>) -> bool {
-        set_waiter(&self.queue, event_loop, wake)
+    /// through `waker` once something comes.
+    fn wait(&self, waker: PyRef<'_, AioWaker>, wake: Py<PyAny>) -> bool {
+        set_waiter(&self.queue, &waker, wake)
     }
 
     /// Whether the stream has ended (the connection closed, or `close`); what it holds can
@@ -1104,7 +1200,7 @@ pub(crate) struct AioServer {
 /// `mav_type` and `autopilot` every second; `params` its table (`(name, value)`, in order),
 /// `encoding` `"bytewise"` or `"c_cast"`. Settles with an `AioServer`.
 #[pyfunction]
-#[pyo3(signature = (device, system, component, mav_type, autopilot, params, encoding, dialect, key, link_id, event_loop, settle))]
+#[pyo3(signature = (device, system, component, mav_type, autopilot, params, encoding, dialect, key, link_id, waker, settle))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn aio_serve(
     device: &str,
@@ -1117,7 +1213,7 @@ pub(crate) fn aio_serve(
     dialect: &str,
     key: Option<&Bound<'_, PyAny>>,
     link_id: u8,
-    event_loop: Py<PyAny>,
+    waker: PyRef<'_, AioWaker>,
     settle: Py<PyAny>,
 ) -> PyResult<Op> {
     if system == 0 || component == 0 {
@@ -1157,7 +1253,7 @@ pub(crate) fn aio_serve(
     router.component_id = component;
     router.local = LocalDelivery::Addressed;
     router.forward = false;
-    spawn_op(event_loop, settle, async move {
+    spawn_op(&waker, settle, async move {
         let node = Node::builder()
             .router(router)
             .dialect(dialect.table)
@@ -1246,8 +1342,8 @@ impl AioServer {
     }
 
     /// Whether the request reader should wait; see `AioStream.wait`.
-    fn wait_request(&self, event_loop: Py<PyAny>, wake: Py<PyAny>) -> bool {
-        set_waiter(&self.requests, event_loop, wake)
+    fn wait_request(&self, waker: PyRef<'_, AioWaker>, wake: Py<PyAny>) -> bool {
+        set_waiter(&self.requests, &waker, wake)
     }
 
     /// Whether the server has stopped.
@@ -1299,9 +1395,9 @@ impl AioServer {
     }
 
     /// The table now: settles with `{name: value}`.
-    fn params(&self, event_loop: Py<PyAny>, settle: Py<PyAny>) -> PyResult<Op> {
+    fn params(&self, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
         let served = self.served.clone();
-        spawn_op(event_loop, settle, async move {
+        spawn_op(&waker, settle, async move {
             let table: Vec<(String, PyValue)> = served
                 .with(|c| {
                     c.params
@@ -1327,13 +1423,13 @@ impl AioServer {
         &self,
         name: &str,
         value: &Bound<'_, PyAny>,
-        event_loop: Py<PyAny>,
+        waker: PyRef<'_, AioWaker>,
         settle: Py<PyAny>,
     ) -> PyResult<Op> {
         let name = param_name(name)?;
         let value = value_of(value)?;
         let served = self.served.clone();
-        spawn_op(event_loop, settle, async move {
+        spawn_op(&waker, settle, async move {
             let v = served
                 .with(move |c| {
                     if c.params.get(name).is_none() {
@@ -1350,11 +1446,11 @@ impl AioServer {
     }
 
     /// Stops serving and closes the link.
-    fn close(&self, event_loop: Py<PyAny>, settle: Py<PyAny>) -> PyResult<Op> {
+    fn close(&self, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
         end(&self.requests);
         let taken = self.node.try_lock().ok().and_then(|mut n| n.take());
         let device = self.device.clone();
-        spawn_op(event_loop, settle, async move {
+        spawn_op(&waker, settle, async move {
             if let Some((node, served)) = taken {
                 served.stop().await;
                 node.shutdown()
@@ -1383,6 +1479,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(aio_connect, m)?)?;
     m.add_function(wrap_pyfunction!(aio_serve, m)?)?;
     m.add_class::<Op>()?;
+    m.add_class::<AioWaker>()?;
     m.add_class::<AioLink>()?;
     m.add_class::<AioVehicle>()?;
     m.add_class::<AioStream>()?;

@@ -393,3 +393,31 @@ def test_the_loop_thread_is_the_only_python_thread():
 
     with Vehicle(port):
         run(session())
+
+
+def test_the_example_runs_and_the_interpreter_exits_cleanly():
+    """examples/aio_ground_station.py against the vehicle, in a process of its own: its
+    output, and exit status 0 (results arriving while the interpreter finalizes must not
+    abort it), also for a process that leaves a busy stream and its connection open."""
+    port = free_udp_port()
+    example = os.path.join(os.path.dirname(__file__), "..", "examples", "aio_ground_station.py")
+    left_open = (
+        "import asyncio, mavstack.aio as aio\n"
+        "async def main():\n"
+        "    gcs = await aio.connect('udpin:127.0.0.1:%d')\n"
+        "    v = await gcs.vehicle(timeout=10)\n"
+        "    s = v.telemetry('ATTITUDE', rate_hz=500)\n"
+        "    for _ in range(50):\n"
+        "        await s.__anext__()\n"
+        "    asyncio.ensure_future(v.params.get_all(via='list'))\n"
+        "    print('left open', flush=True)\n"
+        "asyncio.run(main())\n" % port)
+    with Vehicle(port):
+        p = subprocess.run([sys.executable, example, "udpin:127.0.0.1:%d" % port],
+                           capture_output=True, text=True, timeout=60)
+        assert p.returncode == 0, (p.returncode, p.stdout, p.stderr)
+        lines = p.stdout.splitlines()
+        assert lines[0] == "vehicle 1 autopilot 3" and "arm: ACCEPTED" in lines
+        assert lines[-1] == "NO_SUCH_PARAM: no answer"
+        p = subprocess.run([sys.executable, "-c", left_open], capture_output=True, text=True, timeout=60)
+        assert (p.returncode, p.stdout) == (0, "left open\n"), (p.returncode, p.stdout, p.stderr)

@@ -33,6 +33,7 @@ import builtins
 import functools
 import inspect
 import logging
+import weakref
 from dataclasses import dataclass, field
 from typing import (
     Any,
@@ -127,13 +128,29 @@ _KINDS: Dict[str, type[Error]] = {
 Settle = Callable[[bool, Any], None]
 
 
-async def _call(start: Callable[[asyncio.AbstractEventLoop, Settle], _native.AioOp]) -> Any:
+_wakers: "weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, _native.AioWaker]" = \
+    weakref.WeakKeyDictionary()
+
+
+def _waker(loop: asyncio.AbstractEventLoop) -> _native.AioWaker:
+    """The loop's waker: the stack's runtime queues results on it and writes a byte to a
+    socket the loop watches; the loop's thread then settles the futures (the runtime's
+    thread never takes the GIL)."""
+    w = _wakers.get(loop)
+    if w is None:
+        w = _native.AioWaker()
+        loop.add_reader(w.fileno(), w.drain)
+        _wakers[loop] = w
+    return w
+
+
+async def _call(start: Callable[[_native.AioWaker, Settle], _native.AioOp]) -> Any:
     """Starts a native operation and awaits its result; cancelling abandons it."""
     loop = asyncio.get_running_loop()
     fut: asyncio.Future[Any] = loop.create_future()
 
     def settle(ok: bool, value: Any) -> None:
-        # Runs on the loop's thread (call_soon_threadsafe); the future may have been
+        # Runs on the loop's thread (the waker's drain); the future may have been
         # cancelled meanwhile.
         if fut.done():
             return
@@ -143,7 +160,7 @@ async def _call(start: Callable[[asyncio.AbstractEventLoop, Settle], _native.Aio
             kind, message = value
             fut.set_exception(_KINDS.get(kind, Error)(message))
 
-    op = start(loop, settle)
+    op = start(_waker(loop), settle)
     try:
         return await fut
     finally:
@@ -270,7 +287,7 @@ class Telemetry:
                 raise StopAsyncIteration
             loop = asyncio.get_running_loop()
             fut: asyncio.Future[None] = loop.create_future()
-            if self._native.wait(loop, functools.partial(_wake, fut)):
+            if self._native.wait(_waker(loop), functools.partial(_wake, fut)):
                 await fut
 
     @property
@@ -571,7 +588,7 @@ class Server:
                 if native.ended:
                     return
                 fut: asyncio.Future[None] = loop.create_future()
-                if native.wait_request(loop, functools.partial(_wake, fut)):
+                if native.wait_request(_waker(loop), functools.partial(_wake, fut)):
                     await fut
                 continue
             token, sysid, compid, cmd, name, params, frame = t
