@@ -9,3 +9,15 @@ from mavstack._native import (
     mavlogfile as mavlogfile,
     read_tlog as read_tlog,
 )
+
+__all__ = [
+    "LatestMessages",
+    "MAVLinkHeader",
+    "MAVLinkMessage",
+    "Table",
+    "__version__",
+    "dialects",
+    "mavlogfile",
+    "mavutil",
+    "read_tlog",
+]

@@ -1,13 +1,18 @@
 """Type stubs of mavstack's native module (the Rust extension)."""
 
 from os import PathLike
-from typing import Any, Dict, Iterator, List, Optional, Sequence, Set, Tuple, Union
+from typing import Any, Dict, Iterator, List, Optional, Sequence, Set, Tuple, Union, final
+
+from typing_extensions import disjoint_base
+
+from mavstack.messages import TypedReceiver
 
 Key = Union[bytes, str, None]
 Types = Union[str, Sequence[str], Set[str], None]
 
 __version__: str
 
+@final
 class MAVLinkHeader:
     """pymavlink's MAVLink_header: the frame's header fields."""
     msgId: int
@@ -18,9 +23,11 @@ class MAVLinkHeader:
     srcSystem: int
     srcComponent: int
 
+@disjoint_base
 class MAVLinkMessage:
     """One message of a log with pymavlink's methods and attributes; fields are attributes
-    (``m.roll``), decoded when read."""
+    (``m.roll``), decoded when read. The stubs of ``mavstack.messages.<dialect>`` subclass it
+    per message type with the fields typed; at run time it cannot be subclassed."""
     _timestamp: float
     _link: int
     _type: str
@@ -45,31 +52,27 @@ class MAVLinkMessage:
     def format_attr(self, field: str) -> Any: ...
     def to_dict(self) -> Dict[str, Any]: ...
     def to_json(self) -> str: ...
-    def __getattr__(self, name: str) -> Any: ...
+    def __getattribute__(self, name: str, /) -> Any: ...
 
+@final
 class LatestMessages:
     """The latest message of each type, by name (a log's ``messages``)."""
-    def __getitem__(self, name: str) -> MAVLinkMessage: ...
-    def __contains__(self, name: object) -> bool: ...
+    def __getitem__(self, name: str, /) -> MAVLinkMessage: ...
+    def __contains__(self, name: object, /) -> bool: ...
     def __len__(self) -> int: ...
     def __iter__(self) -> Iterator[str]: ...
     def keys(self) -> List[str]: ...
     def get(self, name: str, default: Any = None) -> Any: ...
 
-class mavlogfile:
-    """A log read message by message with pymavlink's API."""
+@final
+class mavlogfile(TypedReceiver):
+    """A log read message by message with pymavlink's API (``recv_match`` typed by
+    ``type="NAME"`` through ``TypedReceiver``)."""
     messages: LatestMessages
     percent: float
     dialect: str
     path: str
     def recv_msg(self) -> Optional[MAVLinkMessage]: ...
-    def recv_match(
-        self,
-        condition: Optional[str] = None,
-        type: Types = None,
-        blocking: bool = False,
-        timeout: Optional[float] = None,
-    ) -> Optional[MAVLinkMessage]: ...
     def stats(self) -> Dict[str, int]: ...
     def rewind(self) -> None: ...
     def close(self) -> None: ...
@@ -78,7 +81,8 @@ class mavlogfile:
     def __enter__(self) -> "mavlogfile": ...
     def __exit__(self, *args: Any) -> bool: ...
 
-class LiveLink:
+@final
+class LiveLink(TypedReceiver):
     """A live link: one mavstack node with one link (``mavutil.mavlive`` wraps it)."""
     messages: Dict[str, MAVLinkMessage]
     target_system: int
@@ -92,13 +96,6 @@ class LiveLink:
     dialect: str
     address: str
     def recv_msg(self) -> Optional[MAVLinkMessage]: ...
-    def recv_match(
-        self,
-        condition: Optional[str] = None,
-        type: Types = None,
-        blocking: bool = False,
-        timeout: Optional[float] = None,
-    ) -> Optional[MAVLinkMessage]: ...
     def messages_by_system(self) -> Dict[int, Dict[str, MAVLinkMessage]]: ...
     def motors_armed(self) -> bool: ...
     def mode_mapping(self) -> Optional[Dict[str, int]]: ...
@@ -117,6 +114,7 @@ class LiveLink:
     def report(self) -> str: ...
     def stats(self) -> Dict[str, int]: ...
 
+@final
 class Table:
     """The frames of one message type as an Arrow stream (``__arrow_c_stream__``),
     consumed once."""
@@ -125,9 +123,9 @@ class Table:
     def __arrow_c_stream__(self, requested_schema: Any = None) -> Any: ...
     def __len__(self) -> int: ...
 
-def open_log(path: Union[str, PathLike], dialect: str = "ardupilotmega", key: Key = None) -> mavlogfile: ...
+def open_log(path: Union[str, "PathLike[str]"], dialect: str = "ardupilotmega", key: Key = None) -> mavlogfile: ...
 def read_tlog(
-    path: Union[str, PathLike],
+    path: Union[str, "PathLike[str]"],
     types: Optional[Sequence[str]] = None,
     dialect: str = "ardupilotmega",
     key: Key = None,

@@ -1,35 +1,40 @@
 from os import PathLike
 from typing import Any, Callable, Dict, List, Optional, Union
 
-from mavstack._native import Key, LiveLink, MAVLinkMessage, Types, mavlogfile
+from mavstack._native import Key, LiveLink, MAVLinkMessage, mavlogfile
+from mavstack.messages import TypedReceiver
+from mavstack.messages.ardupilotmega import MAVLink as _ArdupilotmegaMAVLink
+from mavstack.messages.ardupilotmega import MAVLink_heartbeat_message
+
+__all__ = ["mavlink_connection", "mavlogfile", "mavlive", "MAVLink", "mavlink"]
 
 class _Constants:
-    """Every enum entry of the dialect by name (``mavutil.mavlink.MAV_CMD_...``) and the
-    ``MAVLINK_TYPE_*`` codes."""
+    """Every enum entry of the dialect by name (``mavutil.mavlink.MAV_CMD_...``),
+    ``MAVLINK_MSG_ID_<NAME>`` of every message and the ``MAVLINK_TYPE_*`` codes."""
+    def __init__(self) -> None: ...
     def __getattr__(self, name: str) -> int: ...
+    def __dir__(self) -> List[str]: ...
 
 mavlink: _Constants
 
 class MAVLink:
-    """pymavlink's ``MAVLink`` object of a live connection: ``<message>_send(...)`` and
+    """pymavlink's ``MAVLink`` object of a live connection (``conn.mav``). The stubs of
+    ``mavstack.messages.<dialect>.MAVLink`` add ``<message>_send(...)`` and
     ``<message>_encode(...)`` for every message of the dialect, with pymavlink's arguments."""
     srcSystem: int
     srcComponent: int
+    def __init__(self, link: LiveLink) -> None: ...
     def send(self, mavmsg: MAVLinkMessage, force_mavlink1: bool = False) -> None: ...
-    def __getattr__(self, name: str) -> Callable[..., Any]: ...
 
-class mavlive:
-    """A live MAVLink connection with pymavlink's API, backed by a mavstack node."""
+class mavlive(TypedReceiver):
+    """A live MAVLink connection with pymavlink's API, backed by a mavstack node. Typed for
+    the default dialect (ardupilotmega): with another, ``typing.cast`` ``mav`` to
+    ``mavstack.messages.<dialect>.MAVLink``."""
     address: str
     source_system: int
     source_component: int
-    mav: MAVLink
-    messages: Dict[str, MAVLinkMessage]
-    target_system: int
-    target_component: int
-    flightmode: str
-    mav_type: Optional[int]
-    base_mode: int
+    mav: _ArdupilotmegaMAVLink
+    param_fetch_start: float
     def __init__(
         self,
         device: str,
@@ -38,15 +43,26 @@ class mavlive:
         dialect: str = "ardupilotmega",
         key: Key = None,
     ) -> None: ...
-    def recv_match(
-        self,
-        condition: Optional[str] = None,
-        type: Types = None,
-        blocking: bool = False,
-        timeout: Optional[float] = None,
-    ) -> Optional[MAVLinkMessage]: ...
     def recv_msg(self) -> Optional[MAVLinkMessage]: ...
-    def wait_heartbeat(self, blocking: bool = True, timeout: Optional[float] = None) -> Optional[MAVLinkMessage]: ...
+    def wait_heartbeat(
+        self, blocking: bool = True, timeout: Optional[float] = None
+    ) -> Optional[MAVLink_heartbeat_message]: ...
+    @property
+    def messages(self) -> Dict[str, MAVLinkMessage]: ...
+    @property
+    def target_system(self) -> int: ...
+    @target_system.setter
+    def target_system(self, value: int) -> None: ...
+    @property
+    def target_component(self) -> int: ...
+    @target_component.setter
+    def target_component(self, value: int) -> None: ...
+    @property
+    def flightmode(self) -> str: ...
+    @property
+    def mav_type(self) -> Optional[int]: ...
+    @property
+    def base_mode(self) -> int: ...
     def motors_armed(self) -> int: ...
     def mode_mapping(self) -> Optional[Dict[str, int]]: ...
     def set_mode(self, mode: Union[str, int], custom_mode: int = 0, custom_sub_mode: int = 0) -> None: ...
@@ -58,7 +74,7 @@ class mavlive:
     def param_set_send(self, parm_name: str, parm_value: float, parm_type: Optional[int] = None) -> None: ...
     def setup_signing(
         self,
-        secret_key: bytes,
+        secret_key: Union[bytes, bytearray],
         sign_outgoing: bool = True,
         allow_unsigned_callback: Optional[Callable[[MAVLink, int], bool]] = None,
         initial_timestamp: Optional[int] = None,
@@ -69,10 +85,10 @@ class mavlive:
     def close(self) -> None: ...
     def stats(self) -> Dict[str, int]: ...
     def __enter__(self) -> "mavlive": ...
-    def __exit__(self, *args: Any) -> bool: ...
+    def __exit__(self, *args: object) -> bool: ...
 
 def mavlink_connection(
-    device: Union[str, PathLike],
+    device: Union[str, "PathLike[str]"],
     baud: int = 57600,
     source_system: int = 255,
     source_component: int = 0,
