@@ -9,7 +9,11 @@
 #                        mavsdk_server binary (mavsdk_grpc/bin/mavsdk_server);
 #     for the Python package (crates/mavstack-python): maturin 1.16.0 (builds the wheel),
 #     pytest 9.2.0, and the readers of its Arrow tables: pyarrow 26.0.1, polars 2.1.0,
-#     pandas 3.1.1, matplotlib 3.11.2 (its README's example).
+#     pandas 3.1.1, matplotlib 3.11.2 (its README's example); its type checks: mypy 2.4.1
+#     (with stubtest) and pyright 1.1.414 (the PyPI wheel carries pyright itself and runs it
+#     with the system's node, which scripts/setup-system.sh installs: nothing is fetched when
+#     it runs); fasttlogparser 1.1.1 (C++, the tlog benchmark's third reader: PyPI has only its
+#     source, built here into a wheel, see below).
 # Prints the python to use (also exported by scripts/test.sh as MAVSTACK_PYTHON).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -27,7 +31,15 @@ pins=(
     "matplotlib==3.11.2" "contourpy==1.3.3" "cycler==0.12.1" "fonttools==4.68.0"
     "kiwisolver==1.5.1" "pillow==13.0.0" "pyparsing==3.3.3"
     "paho-mqtt==2.2.0" "eclipse-zenoh==1.10.2"
+    "mypy==2.4.1" "mypy_extensions==1.2.0" "pathspec==1.1.1" "librt==0.17.0"
+    "ast_serialize==0.13.1" "pyright==1.1.414" "nodeenv==1.12.0"
 )
+# Built from its source distribution (see below), then installed without dependencies (it has
+# none declared; it returns numpy arrays, numpy is pinned above).
+built=("fasttlogparser==1.1.1")
+# What that build needs, in a throwaway venv of its own.
+build_pins=("scikit-build-core==1.1.2" "pybind11==3.1.0" "cmake==4.4.5" "packaging==26.4"
+            "pathspec==1.1.1")
 nodeps=("MAVProxy==1.8.75")
 if ! command -v python3 >/dev/null; then
     echo "setup-peers: python3 not found (Debian: apt-get install python3 python3-venv)" >&2
@@ -55,7 +67,7 @@ for pin in sys.argv[1:]:
         print(pin)
 PY
 }
-if [ -n "$(missing "${pins[@]}" "${nodeps[@]}")" ]; then
+if [ -n "$(missing "${pins[@]}" "${nodeps[@]}" "${built[@]}")" ]; then
     pip=("$venv/bin/python" -m pip install --quiet --disable-pip-version-check)
     constraints="$(mktemp)"
     trap 'rm -f "$constraints"' EXIT
@@ -64,7 +76,20 @@ if [ -n "$(missing "${pins[@]}" "${nodeps[@]}")" ]; then
     # MAVProxy's declared dependencies pull in the GUI stack and would float pymavlink: its
     # headless needs (pymavlink, pyserial, defusedxml, pynmeagps) are pinned above.
     "${pip[@]}" --no-deps "${nodeps[@]}" >&2
-    left="$(missing "${pins[@]}" "${nodeps[@]}")"
+    if [ -n "$(missing "${built[@]}")" ]; then
+        # fasttlogparser's build runs pip itself (to fetch pymavlink's generator's needs into
+        # its build tree, then generate the C headers with mavgen): pip's isolated build
+        # environment has no pip, so it is built without isolation in a venv that has pip
+        # and the pinned build tools (a C++ compiler: scripts/setup-system.sh).
+        work="$(mktemp -d)"
+        trap 'rm -rf "$constraints" "$work"' EXIT
+        python3 -m venv "$work/venv"
+        "$work/venv/bin/python" -m pip install --quiet --disable-pip-version-check "${build_pins[@]}" >&2
+        "$work/venv/bin/python" -m pip wheel --quiet --disable-pip-version-check --no-deps \
+            --no-build-isolation -w "$work/wheels" "${built[@]}" >&2
+        "${pip[@]}" --no-deps "$work"/wheels/*.whl >&2
+    fi
+    left="$(missing "${pins[@]}" "${nodeps[@]}" "${built[@]}")"
     if [ -n "$left" ]; then
         echo "setup-peers: not installed as pinned: $left" >&2
         exit 1

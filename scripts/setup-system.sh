@@ -4,7 +4,11 @@
 #   fonts-dejavu-core          the font `mavstack log plot` labels its images with;
 #   mosquitto                  the MQTT broker the fleet bridge's tests run (on a port of their own);
 #   openssl                    makes the throwaway certificates of the mqtts:// test;
-#   libssl-dev, pkg-config     OpenSSL for the build (mqtts:// goes through native-tls).
+#   libssl-dev, pkg-config     OpenSSL for the build (mqtts:// goes through native-tls);
+#   nodejs                     runs pyright (the Python package's type check; its PyPI wheel
+#                              carries pyright but not node);
+#   g++                        builds fasttlogparser (C++, the tlog benchmark's third reader)
+#                              from its source in scripts/setup-peers.sh.
 # Quiet when everything is in place.
 set -euo pipefail
 need=()
@@ -15,6 +19,8 @@ command -v mosquitto >/dev/null || [ -x /usr/sbin/mosquitto ] || need+=(mosquitt
 command -v openssl >/dev/null || need+=(openssl)
 command -v pkg-config >/dev/null || need+=(pkg-config)
 pkg-config --exists openssl 2>/dev/null || need+=(libssl-dev)
+command -v node >/dev/null || need+=(nodejs)
+command -v g++ >/dev/null || need+=(g++)
 if [ ${#need[@]} -eq 0 ]; then
     exit 0
 fi

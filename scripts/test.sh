@@ -15,7 +15,7 @@ if [ "${CI:-}" = "true" ]; then
     export CARGO_INCREMENTAL=0
 fi
 
-step "system packages (chromium, chromium-driver, fonts-dejavu-core, mosquitto, openssl, libssl-dev)"
+step "system packages (chromium, chromium-driver, fonts-dejavu-core, mosquitto, openssl, libssl-dev, nodejs, g++)"
 bash scripts/setup-system.sh
 
 step "peers (pymavlink 2.4.50 in .venv)"
@@ -41,6 +41,14 @@ rm -f target/wheels/mavstack-*.whl
 "$MAVSTACK_PYTHON" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps \
     target/wheels/mavstack-*-abi3-*.whl
 (cd crates/mavstack-python && "$MAVSTACK_PYTHON" -m pytest -q -p no:cacheprovider tests)
+# Types: the stubs against the installed extension (stubtest: every module of the package,
+# mavstack.aio and the generated mavstack.messages included; stubtest-allowlist.txt says why
+# each entry is there), then the typed examples under mypy --strict and pyright in strict mode
+# (examples/pyrightconfig.json; pyright's wheel runs the system's node and, told so, asks PyPI
+# for no newer version of itself). About 10 s.
+(cd crates/mavstack-python && "$MAVSTACK_PYTHON" -m mypy.stubtest mavstack --allowlist stubtest-allowlist.txt)
+(cd crates/mavstack-python/examples && "$MAVSTACK_PYTHON" -m mypy --strict . &&
+    PYRIGHT_PYTHON_IGNORE_WARNINGS=1 "$(dirname "$MAVSTACK_PYTHON")/pyright" --pythonpath "$MAVSTACK_PYTHON" .)
 # Damaged logs: `mavstack decode` and the package return exactly the frames pymavlink's reader
 # returns (order, timestamps), once with bit flips of every header field and unknown ids, once
 # with inserted garbage and flipped timestamps as well; raw streams lose none pymavlink finds.
