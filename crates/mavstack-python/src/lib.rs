@@ -16,6 +16,8 @@
 //! The frames are found by the same code as `mavstack decode` and `mavstack log`:
 //! `mavstack_core::parse::SliceParser` for raw logs, `mavstack_core::tlog::Records` for tlogs.
 
+// `mavstack.aio`: its loop wake-up is a Unix socket pair.
+#[cfg(unix)]
 mod aio;
 mod connection;
 mod dialect;
@@ -95,6 +97,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<message::Message>()?;
     m.add_class::<message::Header>()?;
     m.add_class::<tables::Table>()?;
+    #[cfg(unix)]
     aio::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

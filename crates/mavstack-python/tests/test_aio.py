@@ -196,7 +196,7 @@ def test_a_refusal_carries_the_statustext_that_explains_it():
 
 
 @pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
-def test_params_and_a_100_item_mission_through_20_percent_loss(autopilot):
+def test_params_and_a_50_item_mission_through_20_percent_loss(autopilot):
     port = free_udp_port()
 
     async def session():
@@ -205,7 +205,7 @@ def test_params_and_a_100_item_mission_through_20_percent_loss(autopilot):
             clean = await vehicle.params.get_all(via="list")
             assert len(clean) > 20
             assert await vehicle.params.get_all() == clean
-            sent = plan(100)
+            sent = plan(50)
             await vehicle.mission.upload(sent)
             same_plan(sent, await vehicle.mission.download(), autopilot)
 
@@ -222,11 +222,23 @@ def test_no_vehicle_is_a_timeout_error_of_both_kinds():
     run(session())
 
 
-def test_bad_connection_strings_are_named():
+def test_bad_connection_strings_and_ports_in_use_are_named():
+    taken = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    taken.bind(("127.0.0.1", 0))
+    busy = "udpin:127.0.0.1:%d" % taken.getsockname()[1]
+
     async def session():
         with pytest.raises(ValueError, match="udpin:nohost"):
             await aio.connect("udpin:nohost")
-    run(session())
+        with pytest.raises(aio.ConnectionFailed, match=busy) as e:
+            await aio.connect(busy)
+        assert isinstance(e.value, OSError)
+        with pytest.raises(aio.ConnectionFailed, match=busy):
+            await aio.serve(busy)
+    try:
+        run(session())
+    finally:
+        taken.close()
 
 
 def test_cancelled_and_timed_out_operations_are_abandoned_cleanly():
@@ -421,3 +433,22 @@ def test_the_example_runs_and_the_interpreter_exits_cleanly():
         assert lines[-1] == "NO_SUCH_PARAM: no answer"
         p = subprocess.run([sys.executable, "-c", left_open], capture_output=True, text=True, timeout=60)
         assert (p.returncode, p.stdout) == (0, "left open\n"), (p.returncode, p.stdout, p.stderr)
+
+
+def test_a_signed_link_with_the_key_and_without_it():
+    """`key=` signs the link: a vehicle that accepts only signed frames answers; with another
+    key its frames are refused and it is never found."""
+    key = "5c" * 16 + "a3" * 16
+    port = free_udp_port()
+
+    async def session():
+        async with aio.connect("udpin:127.0.0.1:%d" % port, key=key) as gcs:
+            vehicle = await gcs.vehicle(timeout=10)
+            assert await vehicle.params.get("MAV_SYSID") == 1
+            assert str(await vehicle.command("REQUEST_MESSAGE", 148)) == "ACCEPTED"
+        async with aio.connect("udpin:127.0.0.1:%d" % port, key="11" * 32) as gcs:
+            with pytest.raises(aio.TimeoutError):
+                await gcs.vehicle(timeout=1.5)
+
+    with Vehicle(port, "--sign-key", key):
+        run(session())
