@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """mavstack's Python package against pymavlink on one big tlog, side by side in one run.
 
-Usage: bench_tlog.py [--tlog FILE] [--seconds 64000] [--skip-slow]
+Usage: bench_tlog.py [--tlog FILE] [--seconds 64000] [--skip-slow] [--cases CASE,...]
 
 Without --tlog, writes the flight of tests-interop/log_tools.py (about 50 MB at 64,000 s).
 Each case runs in a fresh interpreter (its time and its peak RSS are its own): the imports of
@@ -15,7 +15,14 @@ Cases:
   tables     every type into tables: mavstack.read_tlog + pyarrow.table, vs pymavlink's
              recv_match loop building one list of to_dict() per type
   csv        ATTITUDE as CSV: mavstack (read_tlog + pyarrow.csv) vs mavlogdump.py --format csv
-Prints seconds, messages/s and peak RSS per case and the ratios. Not a test: nothing asserted.
+  columns    every type into columns, against fasttlogparser (C++; PyPI): its parseTLog gives
+             {name: {field: numpy array}} (with sys_id, cmp_id and timestamp in seconds);
+             mavstack's read_tlog + pyarrow.table + one numpy array per column (the same
+             output), and read_tlog + pyarrow.table alone (Arrow columns, no copy)
+Prints seconds, messages/s and peak RSS per case and the ratios. Not a test, but the columns
+case first checks that both give the same output: the same message counts per type and the
+same values in every column both have (timestamp: ours / 1e6 is theirs), for the types both
+give; a difference ends the run with exit status 1.
 """
 
 import argparse
@@ -122,7 +129,77 @@ t = pa.table(mavstack.read_tlog(path, types=["ATTITUDE"])["ATTITUDE"])
 pc.write_csv(t, path + ".mavstack.csv")
 n = t.num_rows
 """),
+    ("columns", "mavstack"): (
+        """
+import mavstack, pyarrow as pa
+pa.table({"x": [0]})  # pyarrow's first table() imports pandas (0.2 s): setup, not reading
+""",
+        """
+columns = {}
+for name, t in mavstack.read_tlog(path).items():
+    t = pa.table(t)
+    columns[name] = {c: t.column(c).to_numpy() for c in t.column_names}
+n = sum(len(c["timestamp_us"]) for c in columns.values())
+"""),
+    ("columns", "mavstack Arrow"): (
+        """
+import mavstack, pyarrow as pa
+pa.table({"x": [0]})  # pyarrow's first table() imports pandas (0.2 s): setup, not reading
+""",
+        """
+tables = {k: pa.table(v) for k, v in mavstack.read_tlog(path).items()}
+n = sum(t.num_rows for t in tables.values())
+"""),
+    ("columns", "fasttlogparser"): (
+        """
+import fasttlogparser
+""",
+        """
+messages, ids = fasttlogparser.parseTLog(path)
+n = sum(len(c["timestamp"]) for c in messages.values())
+"""),
 }
+# The reader each case is measured against.
+RIVAL = {"iterate": "pymavlink", "attitude": "pymavlink", "tables": "pymavlink",
+         "csv": "pymavlink mavlogdump.py", "columns": "fasttlogparser"}
+
+
+def check_columns(path):
+    """fasttlogparser's columns and mavstack's of the same log: the same message counts per
+    type and the same values in every column both give, for the types both give. Returns
+    (types compared, columns compared, differences)."""
+    import fasttlogparser
+    import numpy as np
+    import pyarrow as pa
+    import mavstack
+    theirs, _ = fasttlogparser.parseTLog(path)
+    ours = {k: pa.table(v) for k, v in mavstack.read_tlog(path).items()}
+    names = {"sys_id": "sysid", "cmp_id": "compid"}
+    diffs, ncols = [], 0
+    only = sorted(set(theirs) ^ set(ours))
+    if only:
+        diffs.append("types in one reader only: %s" % ", ".join(only))
+    both = sorted(set(theirs) & set(ours))
+    for name in both:
+        t, o = theirs[name], ours[name]
+        if len(t["timestamp"]) != o.num_rows:
+            diffs.append("%s: %d messages, fasttlogparser %d" % (name, o.num_rows, len(t["timestamp"])))
+            continue
+        for col, values in t.items():
+            if col == "timestamp":
+                mine = o.column("timestamp_us").to_numpy() / 1e6
+            else:
+                c = names.get(col, col)
+                if c not in o.column_names:
+                    diffs.append("%s.%s: no such column in mavstack's table" % (name, col))
+                    continue
+                mine = o.column(c).to_numpy()
+                if mine.dtype == object:  # fixed-size lists
+                    mine = np.stack(mine)
+            ncols += 1
+            if mine.shape != values.shape or not np.array_equal(mine, values, equal_nan=mine.dtype.kind == "f"):
+                diffs.append("%s.%s differs" % (name, col))
+    return len(both), ncols, diffs
 
 
 def run(case, path):
@@ -166,7 +243,13 @@ def main():
     ap.add_argument("--tlog")
     ap.add_argument("--seconds", type=int, default=64000)
     ap.add_argument("--skip-slow", action="store_true", help="leave out the pymavlink cases")
+    ap.add_argument("--cases", default=",".join(RIVAL),
+                    help="comma list of cases to run (default: all: %(default)s)")
     a = ap.parse_args()
+    cases = a.cases.split(",")
+    unknown = sorted(set(cases) - set(RIVAL))
+    if unknown:
+        ap.error("unknown case(s): %s" % ", ".join(unknown))
     with tempfile.TemporaryDirectory() as tmp:
         path = a.tlog
         if not path:
@@ -177,19 +260,29 @@ def main():
         print("tlog: %s, %.1f MB" % (path, mb))
         results = {}
         for (case, who), code in CASES.items():
-            if who == "pymavlink" and a.skip_slow:
+            if case not in cases or (who == "pymavlink" and a.skip_slow):
                 continue
             results[(case, who)] = run(code, path)
-        if not a.skip_slow:
+        if "csv" in cases and not a.skip_slow:
             results[("csv", "pymavlink mavlogdump.py")] = mavlogdump_csv(path)
+        if "columns" in cases:
+            # After the timed cases: a child forked by a process holding both readers' output
+            # would start with the parent's peak RSS.
+            types, columns, diffs = check_columns(path)
+            if diffs:
+                sys.exit("columns: mavstack and fasttlogparser differ:\n  " + "\n  ".join(diffs))
+            print("columns: the same output from mavstack and fasttlogparser (%d types, %d columns)"
+                  % (types, columns))
         for (case, who), (dt, n, rss) in results.items():
             print("  %-9s %-26s %8.3f s %12.0f msg/s  peak RSS %6.0f MB" % (case, who, dt, n / dt, rss / 1e6))
-        for case in ("iterate", "attitude", "tables", "csv"):
-            ours = results.get((case, "mavstack"))
-            theirs = results.get((case, "pymavlink")) or results.get((case, "pymavlink mavlogdump.py"))
-            if ours and theirs:
-                print("  %-9s mavstack %.0fx faster, peak RSS %.2fx pymavlink's" % (
-                    case, theirs[0] / ours[0], ours[2] / theirs[2]))
+        for case in cases:
+            rival = RIVAL[case]
+            theirs = results.get((case, rival))
+            for who in ("mavstack", "mavstack Arrow"):
+                ours = results.get((case, who))
+                if ours and theirs:
+                    print("  %-9s %s %.1fx faster, peak RSS %.2fx %s's" % (
+                        case, who, theirs[0] / ours[0], ours[2] / theirs[2], rival))
 
 
 if __name__ == "__main__":
