@@ -145,20 +145,24 @@ def dialect_constants(dialect: str = "ardupilotmega") -> List[Tuple[str, int]]: 
 # ----- mavstack.aio's native classes (src/aio.rs); used through mavstack/aio.py -----------
 
 from typing import Callable as _Callable
+from typing import final as _final
 
 _Settle = _Callable[[bool, Any], None]
 _ItemTuple = Tuple[int, int, int, int, float, float, float, float, int, int, float]
 
+@_final
 class AioWaker:
     """One per asyncio loop: results of the runtime reach the loop through it."""
     def __init__(self) -> None: ...
     def fileno(self) -> int: ...
     def drain(self) -> None: ...
 
+@_final
 class AioOp:
     """A running asyncio operation."""
     def cancel(self) -> None: ...
 
+@_final
 class AioStream:
     """Messages of one type from one vehicle."""
     def pop(self) -> Optional[MAVLinkMessage]: ...
@@ -169,6 +173,7 @@ class AioStream:
     def dropped(self) -> int: ...
     def close(self) -> None: ...
 
+@_final
 class AioVehicle:
     """A vehicle of an AioLink."""
     @property
@@ -191,6 +196,7 @@ class AioVehicle:
     def set_mode(self, name: str, waker: AioWaker, settle: _Settle) -> AioOp: ...
     def telemetry(self, name: str, rate_hz: Optional[float] = None) -> AioStream: ...
 
+@_final
 class AioLink:
     """A ground station's node with one link."""
     def vehicle(self, system: Optional[int], component: Optional[int], timeout: float, waker: AioWaker, settle: _Settle) -> AioOp: ...
@@ -203,6 +209,7 @@ class AioLink:
     @property
     def identity(self) -> Tuple[int, int]: ...
 
+@_final
 class AioServer:
     """A component served on its own node."""
     def pop_request(self) -> Optional[Tuple[int, int, int, int, str, List[float], Optional[int]]]: ...

@@ -37,7 +37,6 @@ import weakref
 from dataclasses import dataclass, field
 from typing import (
     Any,
-    AsyncIterator,
     Awaitable,
     Callable,
     Dict,
@@ -218,10 +217,10 @@ _ItemTuple = Tuple[int, int, int, int, float, float, float, float, int, int, flo
 def _item_tuple(item: ItemLike) -> _ItemTuple:
     """A mission item from a MissionItem, a dict or any object with MISSION_ITEM_INT's
     fields (a pymavlink message): command required, the rest as MissionItem's defaults."""
-    if isinstance(item, Mapping):
-        get: Callable[[str, Any], Any] = lambda k, d: item.get(k, d)  # noqa: E731
-    else:
-        get = lambda k, d: getattr(item, k, d)  # noqa: E731
+    def get(key: str, default: Any) -> Any:
+        if isinstance(item, Mapping):
+            return item.get(key, default)  # pyright: ignore[reportUnknownMemberType, reportUnknownVariableType]
+        return getattr(item, key, default)
     command = get("command", None)
     if command is None:
         raise ValueError("a mission item needs a command: %r" % (item,))
@@ -536,10 +535,9 @@ def _result_code(r: HandlerResult) -> Tuple[int, int]:
         return 4, 0
     if isinstance(r, int):
         return r, 0
-    if isinstance(r, str):
-        name = r.upper().removeprefix("MAV_RESULT_")
-        if name in MAV_RESULT:
-            return MAV_RESULT[name], 0
+    name = r.upper().removeprefix("MAV_RESULT_")
+    if name in MAV_RESULT:
+        return MAV_RESULT[name], 0
     raise ValueError("a command handler returns None, a bool, a MAV_RESULT or its name, not %r"
                      % (r,))
 
@@ -561,9 +559,10 @@ class Server:
         """Opens the link and starts serving (once)."""
         if self._native is None:
             a = self._args
-            self._native = await _call(lambda lp, s: _native.aio_serve(
+            native: _native.AioServer = await _call(lambda lp, s: _native.aio_serve(
                 a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], a[8], a[9], lp, s))
-            self._pump = asyncio.get_running_loop().create_task(self._serve(self._native))
+            self._native = native
+            self._pump = asyncio.get_running_loop().create_task(self._serve(native))
         return self
 
     def __await__(self) -> Generator[Any, None, Server]:
