@@ -355,6 +355,38 @@ async fn until_closed<T>(
     }
 }
 
+/// Queues message `name` with `fields` (by name; the others zero) on `handle`'s links, in
+/// each link's version and signing; never waits for the node unless its queue is full.
+fn send_fields(
+    handle: &NodeHandle,
+    dialect: &Dialect,
+    name: &str,
+    fields: Option<&Bound<'_, PyDict>>,
+) -> PyResult<()> {
+    let ty = dialect
+        .index_of_name(&name.to_ascii_uppercase())
+        .map(|i| Arc::clone(&dialect.messages[i]))
+        .ok_or_else(|| {
+            PyValueError::new_err(format!("no message {name:?} in dialect {}", dialect.name))
+        })?;
+    let mut payload = vec![0u8; ty.max_len];
+    if let Some(fields) = fields {
+        for (k, v) in fields.iter() {
+            let k: String = k.extract()?;
+            let f = ty
+                .field(&k)
+                .ok_or_else(|| PyTypeError::new_err(format!("{} has no field {k:?}", ty.name)))?;
+            crate::live::put_field(f, &v, &mut payload)?;
+        }
+    }
+    if !handle.queue_raw(ty.id, &payload) {
+        let handle = handle.clone();
+        let id = ty.id;
+        runtime()?.spawn(async move { handle.send_raw(id, &payload).await });
+    }
+    Ok(())
+}
+
 /// A component heard: (sysid, compid, autopilot, type).
 type Heard = (u8, u8, u8, u8);
 
@@ -497,6 +529,19 @@ impl AioLink {
             }
             Ok(build(()))
         })
+    }
+
+    /// Sends message `name` with `fields` (by name, as pymavlink's `*_send` arguments; the
+    /// others zero) as this connection's own, on its link.
+    #[pyo3(signature = (name, fields=None))]
+    fn send(&self, name: &str, fields: Option<&Bound<'_, PyDict>>) -> PyResult<()> {
+        if self.closed() {
+            return Err(pyo3::exceptions::PyConnectionError::new_err(format!(
+                "\"{}\" is closed",
+                self.shared.device
+            )));
+        }
+        send_fields(&self.shared.handle, &self.shared.dialect, name, fields)
     }
 
     /// Whether `close` was called.
@@ -1187,6 +1232,7 @@ impl Service for Component {
 #[pyclass(module = "mavstack._native", name = "AioServer", frozen)]
 pub(crate) struct AioServer {
     device: String,
+    handle: NodeHandle,
     dialect: Arc<Dialect>,
     node: tokio::sync::Mutex<Option<(Node, Served<Component>)>>,
     served: ServedHandle<Component>,
@@ -1283,6 +1329,7 @@ pub(crate) fn aio_serve(
         let served = Served::start(&node.handle(), component).await;
         let server = AioServer {
             device: shown,
+            handle: node.handle(),
             dialect,
             served: served.handle(),
             node: tokio::sync::Mutex::new(Some((node, served))),
@@ -1383,6 +1430,19 @@ impl AioServer {
                 .await;
         });
         Ok(true)
+    }
+
+    /// Sends message `name` with `fields` (by name; the others zero) as the served
+    /// component, on its link (to every peer).
+    #[pyo3(signature = (name, fields=None))]
+    fn send(&self, name: &str, fields: Option<&Bound<'_, PyDict>>) -> PyResult<()> {
+        if lock(&self.requests).ended {
+            return Err(pyo3::exceptions::PyConnectionError::new_err(format!(
+                "\"{}\" is closed",
+                self.device
+            )));
+        }
+        send_fields(&self.handle, &self.dialect, name, fields)
     }
 
     /// Parameters peers set since the last call: `[(name, value)]`.

@@ -555,7 +555,11 @@ fn px4_mode_string(custom_mode: u32) -> String {
 }
 
 /// Writes `value` into `payload` as field `f` (pymavlink's argument of that name).
-fn put_field(f: &FieldLayout, value: &Bound<'_, PyAny>, payload: &mut [u8]) -> PyResult<()> {
+pub(crate) fn put_field(
+    f: &FieldLayout,
+    value: &Bound<'_, PyAny>,
+    payload: &mut [u8],
+) -> PyResult<()> {
     if f.is_text() && f.array_len.is_some() {
         let bytes: Vec<u8> = if let Ok(s) = value.cast::<PyString>() {
             s.to_cow()?.as_bytes().to_vec()

@@ -371,6 +371,19 @@ def test_a_served_component_answers_mavstack_aio_with_a_sync_handler():
                 assert await comp.params.get("X_NEW") == 4
                 assert str(await comp.command(31000, 1)) == "ACCEPTED"
                 assert str(await comp.command(31001)) == "FAILED"
+                # Messages of its own, both ways.
+                values = comp.telemetry("NAMED_VALUE_FLOAT")
+                gcs_side = asyncio.ensure_future(values.__anext__())
+                await asyncio.sleep(0)
+                while not gcs_side.done():
+                    server.send("NAMED_VALUE_FLOAT", name="TEMP", value=21.5, time_boot_ms=7)
+                    await asyncio.wait([gcs_side], timeout=0.2)
+                m = gcs_side.result()
+                assert (m.name, m.value, m.time_boot_ms, m.get_srcComponent()) == ("TEMP", 21.5, 7, 191)
+                with pytest.raises(TypeError, match="no field"):
+                    gcs.send("NAMED_VALUE_FLOAT", nope=1)
+            with pytest.raises(ConnectionError):
+                gcs.send("HEARTBEAT")
             assert calls == [31000, 31001]
 
     run(session())

@@ -466,6 +466,12 @@ class Connection:
         native = await _call(lambda lp, s: link.vehicle(system, component, float(timeout), lp, s))
         return Vehicle(native)
 
+    def send(self, message: str, /, **fields: Any) -> None:
+        """Sends ``message`` (a name) with ``fields`` by name (pymavlink's ``*_send``
+        arguments; the fields not given are zero) as this ground station, on its link;
+        returns at once (the node frames it in the link's version and signing)."""
+        self._link().send(message, fields)
+
     def systems(self) -> List[SystemInfo]:
         """The components heard on the link and not silent for 3 s."""
         return [SystemInfo(*t) for t in self._link().systems()]
@@ -623,6 +629,12 @@ class Server:
         returns the value in force (in an existing parameter's type)."""
         s = self._server()
         return await _call(lambda lp, st: s.set_param(name, value, lp, st))  # type: ignore[no-any-return]
+
+    def send(self, message: str, /, **fields: Any) -> None:
+        """Sends ``message`` (a name) with ``fields`` by name (the others zero) as this
+        component, to every peer of its link (telemetry of your own: ``server.send(
+        "NAMED_VALUE_FLOAT", name="TEMP", value=21.5)``); returns at once."""
+        self._server().send(message, fields)
 
     def changes(self) -> List[Tuple[str, Number]]:
         """Parameters ground stations set since the last call, in order: (name, value)."""
