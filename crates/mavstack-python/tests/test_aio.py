@@ -465,3 +465,37 @@ def test_a_signed_link_with_the_key_and_without_it():
 
     with Vehicle(port, "--sign-key", key):
         run(session())
+
+
+def test_a_slow_handler_runs_once_and_its_retries_hear_in_progress():
+    """A handler slower than the client's retry timeout: the retries are answered IN_PROGRESS
+    by the stack (never handed to the handler again), and the final ACK ends the command.
+    The handler waits for an event set only after the client has sent the command again."""
+    port = free_udp_port()
+    calls = []
+
+    async def session():
+        gate = asyncio.Event()
+
+        async def handler(request):
+            calls.append(request.command)
+            await gate.wait()
+            return "ACCEPTED"
+
+        async with aio.serve("udpin:127.0.0.1:%d" % port, system=9, component=191,
+                             on_command=handler, autopilot=0, mav_type=2):
+            async with aio.connect("udpout:127.0.0.1:%d" % port) as gcs:
+                comp = await gcs.vehicle(timeout=10, system=9)
+                acks = comp.telemetry("COMMAND_ACK")
+                # The raw COMMAND_ACKs the ground station receives, in order.
+                command = asyncio.ensure_future(comp.command(31000, 1))
+                first = await acks.__anext__()
+                gate.set()
+                result = await command
+                return calls, first, result
+
+    calls_seen, first, result = run(session())
+    assert str(result) == "ACCEPTED"
+    assert calls_seen == [31000]
+    # The first ACK that came was IN_PROGRESS, answering a retry (result 5).
+    assert (first.command, first.result) == (31000, 5)
