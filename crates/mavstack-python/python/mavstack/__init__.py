@@ -36,3 +36,13 @@ __all__ = [
     "mavutil",
     "read_tlog",
 ]
+
+
+def __getattr__(name: str) -> object:
+    # `mavstack.aio` after a plain `import mavstack`, imported when first used (asyncio
+    # takes longer to import than the rest of the package).
+    if name == "aio":
+        import importlib
+
+        return importlib.import_module("mavstack.aio")
+    raise AttributeError("module 'mavstack' has no attribute %r" % name)
