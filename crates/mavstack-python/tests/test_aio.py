@@ -499,3 +499,16 @@ def test_a_slow_handler_runs_once_and_its_retries_hear_in_progress():
     assert calls_seen == [31000]
     # The first ACK that came was IN_PROGRESS, answering a retry (result 5).
     assert (first.command, first.result) == (31000, 5)
+
+
+def test_import_mavstack_then_mavstack_aio():
+    """`import mavstack` does not import asyncio; `mavstack.aio` is there on first use."""
+    code = ("import sys, mavstack\n"
+            "assert 'mavstack.aio' not in sys.modules\n"
+            "assert mavstack.aio.connect is sys.modules['mavstack.aio'].connect\n"
+            "try:\n"
+            "    mavstack.nothing\n"
+            "except AttributeError as e:\n"
+            "    print(e)\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=30)
+    assert (p.returncode, p.stdout) == (0, "module 'mavstack' has no attribute 'nothing'\n"), p.stderr
