@@ -180,3 +180,23 @@ def test_live_link_example():
         out = run_example("live_link.py", "udpin:127.0.0.1:%d" % port, "2")
     assert "vehicle 1 " in out and "parameter RTL_ALT = 3000" in out, out
     assert "ATTITUDE, last roll" in out, out
+
+
+def test_send_arguments_are_pymavlinks():
+    """The stubs' `mav.<name>_send` arguments are those of pymavlink's generated module (names,
+    order, which are optional), for every message of ardupilotmega that it has."""
+    from pymavlink.dialects.v20 import ardupilotmega as apm
+    gen = stubgen()
+    messages, _ = gen.load(os.path.join(ROOT, "definitions"), "ardupilotmega")
+    compared, wrong = 0, []
+    for m in messages:
+        theirs = getattr(apm.MAVLink, m.name.lower() + "_send", None)
+        if theirs is None:
+            continue
+        params = list(inspect.signature(theirs).parameters.values())[1:]
+        got = [(p.name, p.default is not inspect.Parameter.empty) for p in params]
+        want = [(f.arg_name(), f.optional()) for f in m.fields] + [("force_mavlink1", True)]
+        compared += 1
+        if got != want:
+            wrong.append((m.name, got, want))
+    assert compared > 200 and not wrong, (compared, wrong[:3])
