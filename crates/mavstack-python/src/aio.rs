@@ -120,6 +120,39 @@ enum Entry {
     Settle(Py<PyAny>, Result<Build, AioError>),
     /// A stream's reader to wake: `wake()`.
     Call(Py<PyAny>),
+    /// An operation's progress: `callback(done, total)` with the latest values.
+    Progress(Arc<ProgressSlot>),
+}
+
+/// The latest progress of an operation and whom to tell: values that come faster than the
+/// loop takes them replace each other.
+pub(crate) struct ProgressSlot {
+    callback: Py<PyAny>,
+    latest: Mutex<Option<(u64, u64)>>,
+}
+
+/// A progress function for a `System` operation: `(done, total)` to `callback` on the
+/// loop's thread (nothing without a callback).
+fn progress_fn(
+    waker: &Arc<WakerInner>,
+    callback: Option<Py<PyAny>>,
+) -> impl FnMut(u64, u64) + Send + 'static {
+    let slot = callback.map(|callback| {
+        (
+            Arc::clone(waker),
+            Arc::new(ProgressSlot {
+                callback,
+                latest: Mutex::new(None),
+            }),
+        )
+    });
+    move |done, total| {
+        if let Some((waker, slot)) = &slot
+            && lock(&slot.latest).replace((done, total)).is_none()
+        {
+            waker.post(Entry::Progress(Arc::clone(slot)));
+        }
+    }
 }
 
 /// The runtime's side of an [`AioWaker`]: entries for the loop, and the socket that wakes it.
@@ -205,6 +238,10 @@ impl AioWaker {
                     settle.call1(py, args).map(drop)
                 }
                 Entry::Call(wake) => wake.call0(py).map(drop),
+                Entry::Progress(slot) => match lock(&slot.latest).take() {
+                    Some(p) => slot.callback.call1(py, p).map(drop),
+                    None => Ok(()),
+                },
             };
             if let Err(e) = called {
                 e.write_unraisable(py, None);
@@ -794,8 +831,17 @@ impl AioVehicle {
 
     /// The whole parameter table, `{name: value}` in the vehicle's order, and the way it
     /// came (`"ftp"` or `"list"`); `via` is `"auto"` (MAVFTP when offered), `"ftp"` or
-    /// `"list"`.
-    fn params_all(&self, via: &str, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
+    /// `"list"`; `progress(done, total)` in bytes of the file over MAVFTP, else in
+    /// parameters.
+    #[pyo3(signature = (via, progress, waker, settle))]
+    fn params_all(
+        &self,
+        via: &str,
+        progress: Option<Py<PyAny>>,
+        waker: PyRef<'_, AioWaker>,
+        settle: Py<PyAny>,
+    ) -> PyResult<Op> {
+        let mut progress = progress_fn(&waker.inner, progress);
         let via = match via {
             "auto" => ParamsVia::Auto,
             "ftp" => ParamsVia::Ftp,
@@ -810,7 +856,7 @@ impl AioVehicle {
             let (table, how) = system
                 .lock()
                 .await
-                .params_by(via, |_, _, _| {})
+                .params_by(via, |_, done, total| progress(done, total))
                 .await
                 .map_err(system_error)?;
             let how = if how == ParamsVia::Ftp { "ftp" } else { "list" };
@@ -864,14 +910,17 @@ impl AioVehicle {
 
     /// Uploads `items` (tuples, see `ItemTuple`) as the plan of `kind`; with `as_plan`, a
     /// mission's item 0 is home, as in a plan file, for every autopilot (PX4's left out).
+    /// `progress(sent, count)` hears each time the vehicle asked for more.
     fn mission_upload(
         &self,
         items: Vec<ItemTuple>,
         kind: &str,
         as_plan: bool,
+        progress: Option<Py<PyAny>>,
         waker: PyRef<'_, AioWaker>,
         settle: Py<PyAny>,
     ) -> PyResult<Op> {
+        let mut progress = progress_fn(&waker.inner, progress);
         let kind = mission_type(kind)?;
         if items.len() > usize::from(u16::MAX) {
             return Err(PyValueError::new_err("a plan holds at most 65,535 items"));
@@ -886,26 +935,36 @@ impl AioVehicle {
             system
                 .lock()
                 .await
-                .upload_mission(kind, items)
+                .upload_mission_with_progress(kind, items, |sent, count| {
+                    progress(sent as u64, count as u64);
+                })
                 .await
                 .map_err(system_error)?;
             Ok(build(()))
         })
     }
 
-    /// Downloads the plan of `kind` as tuples (see `mission_upload` for `as_plan`).
+    /// Downloads the plan of `kind` as tuples (see `mission_upload` for `as_plan`);
+    /// `progress(received, count)` as items come (the vehicle's count: PX4's has no home).
     fn mission_download(
         &self,
         kind: &str,
         as_plan: bool,
+        progress: Option<Py<PyAny>>,
         waker: PyRef<'_, AioWaker>,
         settle: Py<PyAny>,
     ) -> PyResult<Op> {
+        let mut progress = progress_fn(&waker.inner, progress);
         let kind = mission_type(kind)?;
         let convention = self.convention(kind, as_plan);
         self.run(waker, settle, move |system| async move {
             let mut system = system.lock().await;
-            let items = system.download_mission(kind).await.map_err(system_error)?;
+            let items = system
+                .download_mission_with_progress(kind, |got, count| {
+                    progress(got as u64, count as u64);
+                })
+                .await
+                .map_err(system_error)?;
             let home = if convention == Convention::Px4 {
                 system.home_item(Duration::from_secs(3)).await
             } else {

@@ -121,16 +121,23 @@ def test_a_ground_station_session(autopilot):
             params = await vehicle.params.get_all()
             assert vehicle.params.last_via == "ftp"  # the vehicle offers @PARAM/param.pck
             assert params["MAV_SYS_ID" if autopilot == "px4" else "MAV_SYSID"] == 1
-            listed = await vehicle.params.get_all(via="list")
+            told = []
+            listed = await vehicle.params.get_all(via="list", progress=lambda d, t: told.append((d, t)))
             assert listed == params
+            assert told[-1] == (len(params), len(params)) and told == sorted(told), told
             name, value = ("MPC_XY_CRUISE", 7.5) if autopilot == "px4" else ("RTL_ALT", 3456)
             assert await vehicle.params.set(name, value) == value
             assert await vehicle.params.get(name) == value
             assert isinstance(await vehicle.params.get(name), type(value))
 
             sent = plan(8)
-            await vehicle.mission.upload(sent)
-            back = await vehicle.mission.download()
+            told = []
+            await vehicle.mission.upload(sent, progress=lambda done, total: told.append((done, total)))
+            n = 8 if autopilot == "ardupilot" else 7  # PX4 stores no home
+            assert told[-1] == (n, n) and told == sorted(told), told
+            told.clear()
+            back = await vehicle.mission.download(progress=lambda done, total: told.append((done, total)))
+            assert told[-1] == (n, n) and told == sorted(told), told
             same_plan(sent, back, autopilot)
             raw = await vehicle.mission.download(plan=False)
             assert len(raw) == (8 if autopilot == "ardupilot" else 7)

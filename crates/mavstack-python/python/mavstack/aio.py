@@ -125,6 +125,7 @@ _KINDS: Dict[str, type[Error]] = {
 }
 
 Settle = Callable[[bool, Any], None]
+Progress = Callable[[int, int], None]
 
 
 _wakers: "weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, _native.AioWaker]" = \
@@ -306,12 +307,15 @@ class Params:
         self._native = native
         self.last_via: Optional[str] = None
 
-    async def get_all(self, via: str = "auto") -> Dict[str, Number]:
+    async def get_all(self, via: str = "auto",
+                      progress: Optional[Progress] = None) -> Dict[str, Number]:
         """The whole table, name → value (``int`` for integer types, ``float`` for REAL32),
         in the vehicle's order: over MAVFTP (``@PARAM/param.pck``) when the vehicle offers it
         (``via="auto"``), else PARAM_REQUEST_LIST with the missing ones asked for again;
-        ``via="ftp"`` or ``"list"`` forces one. ``last_via`` tells which it was."""
-        table, how = await _call(lambda lp, s: self._native.params_all(via, lp, s))
+        ``via="ftp"`` or ``"list"`` forces one. ``last_via`` tells which it was.
+        ``progress(done, total)`` is called on the loop as it comes (bytes of the file over
+        MAVFTP, parameters otherwise; the latest values when several came at once)."""
+        table, how = await _call(lambda lp, s: self._native.params_all(via, progress, lp, s))
         self.last_via = how
         return table  # type: ignore[no-any-return]
 
@@ -338,15 +342,18 @@ class Mission:
         self._native = native
 
     async def upload(self, items: Iterable[ItemLike], kind: str = "mission",
-                     plan: bool = True) -> None:
+                     plan: bool = True, progress: Optional[Progress] = None) -> None:
         """Uploads ``items`` (MissionItem, dicts or objects with MISSION_ITEM_INT's
-        fields; ``seq`` is their order)."""
+        fields; ``seq`` is their order); ``progress(sent, count)`` as the vehicle asks for
+        them (in the vehicle's items: PX4's have no home)."""
         tuples = [_item_tuple(i) for i in items]
-        await _call(lambda lp, s: self._native.mission_upload(tuples, kind, plan, lp, s))
+        await _call(lambda lp, s: self._native.mission_upload(tuples, kind, plan, progress, lp, s))
 
-    async def download(self, kind: str = "mission", plan: bool = True) -> List[MissionItem]:
-        """The vehicle's plan."""
-        tuples = await _call(lambda lp, s: self._native.mission_download(kind, plan, lp, s))
+    async def download(self, kind: str = "mission", plan: bool = True,
+                       progress: Optional[Progress] = None) -> List[MissionItem]:
+        """The vehicle's plan; ``progress(received, count)`` as items come."""
+        tuples = await _call(
+            lambda lp, s: self._native.mission_download(kind, plan, progress, lp, s))
         return [MissionItem(command=t[1], frame=t[0], current=t[2], autocontinue=t[3],
                             param1=t[4], param2=t[5], param3=t[6], param4=t[7], x=t[8],
                             y=t[9], z=t[10], seq=i) for i, t in enumerate(tuples)]
