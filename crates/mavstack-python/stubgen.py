@@ -297,7 +297,7 @@ def runtime_module(name, what):
             "do not edit). At run time every message is a ``mavstack.MAVLinkMessage``: import these\n"
             'names under ``typing.TYPE_CHECKING``."""\n\n\n'
             "def __getattr__(name):\n"
-            '    if name.startswith("__"):\n'
+            '    if name.startswith("_"):\n'
             "        raise AttributeError(name)\n"
             '    raise ImportError("%%s.%%s is for type checkers only: import it under typing.TYPE_CHECKING"\n'
             "                      %% (__name__, name))\n" % what)

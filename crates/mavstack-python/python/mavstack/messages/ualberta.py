@@ -6,7 +6,7 @@ names under ``typing.TYPE_CHECKING``."""
 
 
 def __getattr__(name):
-    if name.startswith("__"):
+    if name.startswith("_"):
         raise AttributeError(name)
     raise ImportError("%s.%s is for type checkers only: import it under typing.TYPE_CHECKING"
                       % (__name__, name))
