@@ -16,7 +16,8 @@ For every dialect the package has built in (every ``definitions/*.xml``, as
 
 and ``python/mavstack/messages/__init__.pyi``: ``TypedReceiver``, ``recv_match`` overloaded
 on ``type="NAME"`` for the default dialect (ardupilotmega), which the connections' stubs
-inherit. The names are for type checkers only (like typeshed's ``_typeshed``): at run time
+inherit, and ``TypedLatest`` / ``TypedMessages``, ``messages["NAME"]`` typed the same way (a
+log's ``LatestMessages``, a live link's dict). The names are for type checkers only (like typeshed's ``_typeshed``): at run time
 every message is a ``mavstack.MAVLinkMessage``; import them under ``typing.TYPE_CHECKING``.
 Beside each stub a ``.py`` of a few lines makes the module importable (tools look for a
 source) and answers any name with an ``ImportError`` saying so.
@@ -258,7 +259,7 @@ def receiver_stub(name, loaded):
                "dialect and ``MAVLink``, the ``conn.mav`` of a live connection with it. At run time\n"
                "every message is a ``mavstack.MAVLinkMessage``: import these modules under\n"
                '``typing.TYPE_CHECKING``."""\n\n')
-    out.append("from typing import Literal, Optional, Sequence, Set, Union, overload\n\n")
+    out.append("from typing import Dict, Literal, Optional, Sequence, Set, Union, overload\n\n")
     out.append("from mavstack._native import MAVLinkMessage\n")
     out.append("from mavstack.messages import %s as _d\n" % name)
     out.append("\n\nclass TypedReceiver:\n")
@@ -286,6 +287,19 @@ def receiver_stub(name, loaded):
                "        ``condition`` holds; with ``blocking``, waits up to ``timeout`` seconds.\n"
                '        ``None`` when nothing matched."""\n'
                "        ...\n")
+    # The latest message of each type by name: a log's LatestMessages, a live link's dict.
+    for cls, base, doc in (
+            ("TypedLatest", "", "``messages[\"NAME\"]`` of a log typed by the name: ``LatestMessages``' base."),
+            ("TypedMessages", "(Dict[str, MAVLinkMessage])",
+             "``messages[\"NAME\"]`` of a live link typed by the name: a dict at run time.")):
+        out.append("\n\nclass %s%s:\n" % (cls, base))
+        out.append('    """%s"""\n' % doc)
+        for m in messages:
+            out.append("\n    @overload\n")
+            out.append('    def __getitem__(self, name: Literal["%s"], /) -> _d.%s: ...\n'
+                       % (m.name, class_name(m)))
+        out.append("\n    @overload\n")
+        out.append("    def __getitem__(self, name: str, /) -> MAVLinkMessage: ...\n")
     return "".join(out)
 
 

@@ -125,7 +125,7 @@ def test_mypy_rejects_what_the_stubs_rule_out(tmp_path):
             conn.mav.attitude_send(1, 0.1, 0.2, 0.3, 0.0, 0.0, 0.0)
             conn.mav.param_set_send(1, 1, b"RTL_ALT", 3000.0, 9)
             m = conn.recv_match(type="ATTITUDE", blocking=True, timeout=1)
-            return 0.0 if m is None else m.roll
+            return conn.messages["ATTITUDE"].pitch if m is None else m.roll
         """))
     p = mypy(good)
     assert p.returncode == 0, p.stdout + p.stderr
@@ -140,11 +140,15 @@ def test_mypy_rejects_what_the_stubs_rule_out(tmp_path):
             m = conn.recv_match(type="ATTITUDE")
             assert m is not None
             return m.roll
+
+        def latest(conn: mavutil.mavlive) -> str:
+            return conn.messages["ATTITUDE"].roll
         """))
     p = mypy(bad)
     out = p.stdout
     assert p.returncode == 1, out + p.stderr
-    for line, code in ((4, "call-arg"), (5, "attr-defined"), (6, "arg-type"), (9, "return-value")):
+    for line, code in ((4, "call-arg"), (5, "attr-defined"), (6, "arg-type"), (9, "return-value"),
+                       (12, "return-value")):
         assert "bad.py:%d: error:" % line in out and "[%s]" % code in out, out
 
 

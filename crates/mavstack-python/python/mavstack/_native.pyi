@@ -5,7 +5,7 @@ from typing import Any, Dict, Iterator, List, Optional, Sequence, Set, Tuple, Un
 
 from typing_extensions import disjoint_base
 
-from mavstack.messages import TypedReceiver
+from mavstack.messages import TypedLatest, TypedMessages, TypedReceiver
 
 Key = Union[bytes, str, None]
 Types = Union[str, Sequence[str], Set[str], None]
@@ -55,9 +55,9 @@ class MAVLinkMessage:
     def __getattribute__(self, name: str, /) -> Any: ...
 
 @final
-class LatestMessages:
-    """The latest message of each type, by name (a log's ``messages``)."""
-    def __getitem__(self, name: str, /) -> MAVLinkMessage: ...
+class LatestMessages(TypedLatest):
+    """The latest message of each type, by name (a log's ``messages``; ``messages["NAME"]``
+    typed by the name through ``TypedLatest``)."""
     def __contains__(self, name: object, /) -> bool: ...
     def __len__(self) -> int: ...
     def __iter__(self) -> Iterator[str]: ...
@@ -84,7 +84,7 @@ class mavlogfile(TypedReceiver):
 @final
 class LiveLink(TypedReceiver):
     """A live link: one mavstack node with one link (``mavutil.mavlive`` wraps it)."""
-    messages: Dict[str, MAVLinkMessage]
+    messages: TypedMessages
     target_system: int
     target_component: int
     flightmode: str

@@ -2,7 +2,7 @@ from os import PathLike
 from typing import Any, Callable, Dict, List, Optional, Union
 
 from mavstack._native import Key, LiveLink, MAVLinkMessage, mavlogfile
-from mavstack.messages import TypedReceiver
+from mavstack.messages import TypedMessages, TypedReceiver
 from mavstack.messages.ardupilotmega import MAVLink as _ArdupilotmegaMAVLink
 from mavstack.messages.ardupilotmega import MAVLink_heartbeat_message
 
@@ -48,7 +48,7 @@ class mavlive(TypedReceiver):
         self, blocking: bool = True, timeout: Optional[float] = None
     ) -> Optional[MAVLink_heartbeat_message]: ...
     @property
-    def messages(self) -> Dict[str, MAVLinkMessage]: ...
+    def messages(self) -> TypedMessages: ...
     @property
     def target_system(self) -> int: ...
     @target_system.setter
