@@ -67,7 +67,7 @@ const STREAM_DEPTH: usize = 1024;
 /// MAV_COMP_ID_MISSIONPLANNER, the default component of a ground station.
 const MISSION_PLANNER: u8 = 190;
 
-/// The settled value of an operation, built once attached to Python.
+/// The settled value of an operation, built on the loop's thread (with the GIL).
 type Build = Box<dyn for<'py> FnOnce(Python<'py>) -> PyResult<Py<PyAny>> + Send>;
 
 /// Why an operation failed: a kind the Python side maps to its exception class, and the

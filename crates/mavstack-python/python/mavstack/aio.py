@@ -14,11 +14,13 @@
 
     asyncio.run(main())
 
-Everything runs on the stack's own runtime (one thread for every connection of the process;
-a UDP link's node on a thread of its own): parameters, missions, commands and rates are the
-Rust `mavstack::system::System`'s, the served component `mavstack::serve::Served`'s. No helper
-process, no thread per call or per message. A result is handed to the asyncio loop with
-``loop.call_soon_threadsafe``; cancelling the task that awaits an operation (or
+Everything runs on the stack's own runtime (one thread for every connection of the process,
+the nodes' included): parameters, missions, commands and rates are the Rust
+`mavstack::system::System`'s, the served component `mavstack::serve::Served`'s. No helper
+process, no thread per call or per message. Results reach the asyncio loop as
+``loop.call_soon_threadsafe`` would hand them, through a socket the loop watches
+(``loop.add_reader``: a selector event loop, the default on Unix), without the runtime's
+thread ever taking the GIL; cancelling the task that awaits an operation (or
 ``asyncio.wait_for`` running out) abandons the operation, and closing a connection ends its
 telemetry iterators and fails its running operations with :class:`ConnectionClosed`.
 
