@@ -1,11 +1,11 @@
 """A pymavlink dialect generated from mavstack's own definitions, so pymavlink speaks
-PROTOCOL_VERSION (id 300) too.
+PROTOCOL_VERSION (id 300) and the events protocol (EVENT 410-413, COMPONENT_METADATA 397) too.
 
 pymavlink's stock XML (the official files mavstack vendors) no longer defines
-PROTOCOL_VERSION, the reply of the MAVLink 2 handshake. mavstack's loader merges
-definitions/extras/protocol_version.xml into common.xml; this module does the same for
+PROTOCOL_VERSION, the reply of the MAVLink 2 handshake, nor the events protocol. mavstack's
+loader merges definitions/extras/*.xml into common.xml; this module does the same for
 pymavlink: it copies definitions/*.xml into a cache directory, writes a wrapper XML that
-includes ardupilotmega.xml and adds the extra message, and generates a Python module with
+includes ardupilotmega.xml and adds the extra messages and enums, and generates a Python module with
 pymavlink's own generator (mavgen, wire protocol 2.0). The module is cached by the content
 of the XML files.
 
@@ -28,18 +28,25 @@ DEFINITIONS = os.path.join(HERE, "..", "definitions")
 NAME = "mavstack_ardupilotmega"
 
 
-def _extra_messages():
-    with open(os.path.join(DEFINITIONS, "extras", "protocol_version.xml"), encoding="utf-8") as f:
-        text = f.read()
-    m = re.search(r"<messages>(.*)</messages>", text, re.S)
-    if not m:
-        raise RuntimeError("extras/protocol_version.xml has no <messages>")
-    return m.group(1)
+EXTRAS = [os.path.join(DEFINITIONS, "extras", name) for name in ("protocol_version.xml", "events.xml")]
+
+
+def _extra(tag):
+    """The contents of every extras file's <tag> element (messages or enums), joined."""
+    parts = []
+    for path in EXTRAS:
+        with open(path, encoding="utf-8") as f:
+            text = f.read()
+        m = re.search(r"<%s>(.*)</%s>" % (tag, tag), text, re.S)
+        if m:
+            parts.append(m.group(1))
+        elif tag == "messages":
+            raise RuntimeError("%s has no <messages>" % path)
+    return "".join(parts)
 
 
 def _cache_dir():
-    files = sorted(glob.glob(os.path.join(DEFINITIONS, "*.xml"))) + [
-        os.path.join(DEFINITIONS, "extras", "protocol_version.xml")]
+    files = sorted(glob.glob(os.path.join(DEFINITIONS, "*.xml"))) + EXTRAS
     h = hashlib.sha256()
     for p in files:
         with open(p, "rb") as f:
@@ -59,12 +66,13 @@ def load():
         from pymavlink.generator import mavgen
         xml_dir = os.path.join(out, "xml")
         os.makedirs(xml_dir, exist_ok=True)
-        for p in files[:-1]:
+        for p in files[:-len(EXTRAS)]:
             shutil.copy(p, xml_dir)
         wrapper = os.path.join(xml_dir, NAME + ".xml")
         with open(wrapper, "w", encoding="utf-8") as f:
             f.write('<?xml version="1.0"?>\n<mavlink>\n  <include>ardupilotmega.xml</include>\n'
-                    "  <messages>%s</messages>\n</mavlink>\n" % _extra_messages())
+                    "  <enums>%s</enums>\n  <messages>%s</messages>\n</mavlink>\n"
+                    % (_extra("enums"), _extra("messages")))
         # mavgen appends ".py"; one name per process (test processes may generate at once),
         # and the rename is atomic.
         tmp = os.path.join(out, "%s_tmp%d" % (NAME, os.getpid()))

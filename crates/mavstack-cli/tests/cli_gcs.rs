@@ -255,6 +255,32 @@ fn a_refused_command_shows_the_statustext_that_says_why() {
 }
 
 #[test]
+fn a_refusal_explained_in_events_shows_their_texts() {
+    // As PX4 v1.16 while its estimator settles: TEMPORARILY_REJECTED, the reasons only in
+    // EVENT messages, made into text with the metadata it serves over MAVFTP.
+    let v = Vehicle::start(&["--autopilot", "px4", "--estimator-settle", "600"]);
+    let json = gcs(v.port, &["command", "arm", "--json"]);
+    assert_eq!(json.status.code(), Some(1));
+    let line = &json_lines(&String::from_utf8_lossy(&json.stdout))[0];
+    assert_eq!(line["result"], "TEMPORARILY_REJECTED");
+    let said: Vec<&str> = line["statustext"]
+        .as_array()
+        .expect("a list")
+        .iter()
+        .filter_map(|v| v.as_str())
+        .collect();
+    assert_eq!(said.len(), 2, "{said:?}");
+    assert!(
+        said[0].starts_with("Preflight Fail: position estimate not valid yet"),
+        "{said:?}"
+    );
+    assert_eq!(
+        said[1],
+        "Arming denied: Resolve system health failures first"
+    );
+}
+
+#[test]
 fn modes_by_name_follow_the_autopilot() {
     let v = Vehicle::start(&["--autopilot", "px4"]);
     let hold = json_lines(&ok(&gcs(v.port, &["command", "mode", "Hold", "--json"])));

@@ -11,6 +11,7 @@
 //! every service it takes decoded messages and the time, and hands out messages to send:
 //! the caller moves them over its links (`mavstack vehicle` over a `mavstack-channel` link).
 
+pub mod events;
 pub mod flight;
 pub mod logs;
 pub mod modes;
@@ -54,12 +55,12 @@ use std::collections::VecDeque;
 use mavstack_core::Message;
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::{
-    Attitude, AutopilotVersion, BatteryStatus, ExtendedSysState, GlobalPositionInt, GpsFixType,
-    GpsRawInt, Heartbeat, HomePosition, MavAutopilot, MavBatteryChargeState, MavBatteryFunction,
-    MavBatteryType, MavCmd, MavDataStream, MavFrame, MavMessage, MavMissionType, MavModeFlag,
-    MavProtocolCapability, MavResult, MavSeverity, MavState, MavSysStatusSensor, MavType,
-    MavVtolState, MissionCurrent, MissionItemInt, MissionItemReached, MissionState,
-    RequestDataStream, Statustext, SysStatus, VfrHud,
+    Attitude, AutopilotVersion, BatteryStatus, ComponentMetadata, ExtendedSysState,
+    GlobalPositionInt, GpsFixType, GpsRawInt, Heartbeat, HomePosition, MavAutopilot,
+    MavBatteryChargeState, MavBatteryFunction, MavBatteryType, MavCmd, MavDataStream, MavFrame,
+    MavMessage, MavMissionType, MavModeFlag, MavProtocolCapability, MavResult, MavSeverity,
+    MavState, MavSysStatusSensor, MavType, MavVtolState, MissionCurrent, MissionItemInt,
+    MissionItemReached, MissionState, RequestDataStream, Statustext, SysStatus, VfrHud,
 };
 use mavstack_services::command::{Command, CommandHandler, CommandServer, Request, Response};
 use mavstack_services::ftp::param_pck::TableFile;
@@ -167,6 +168,8 @@ struct Craft {
     ready_at: Instant,
     /// SET_MESSAGE_INTERVAL refused: rates only through REQUEST_DATA_STREAM.
     data_streams_only: bool,
+    /// EVENTs to send (the PX4 flavour says why it refuses in them).
+    events: events::Events,
 }
 
 /// The numeric params of a command: p1–p4, latitude and longitude in degrees (`None` when
@@ -306,6 +309,9 @@ impl Craft {
         let percent = (left * 100.0).round() as i8;
         Some(match msg_id {
             Heartbeat::ID => MavMessage::Heartbeat(self.heartbeat()),
+            ComponentMetadata::ID => {
+                MavMessage::ComponentMetadata(events::component_metadata(boot_ms))
+            }
             SysStatus::ID => {
                 let sensors = MavSysStatusSensor(
                     MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_GYRO.0
@@ -488,7 +494,12 @@ impl CommandHandler for Craft {
                             self.flight.warn("PreArm: Need Position Estimate");
                             done(MavResult::FAILED)
                         }
-                        Autopilot::Px4 => done(MavResult::TEMPORARILY_REJECTED),
+                        Autopilot::Px4 => {
+                            let boot_ms = u32::try_from(now.as_micros() / 1000).unwrap_or(u32::MAX);
+                            let left = self.ready_at.saturating_duration_since(now);
+                            self.events.arm_refused(boot_ms, left.as_secs_f32());
+                            done(MavResult::TEMPORARILY_REJECTED)
+                        }
                     };
                 }
                 match self.flight.arm(arm, force) {
@@ -578,8 +589,11 @@ impl CommandHandler for Craft {
 }
 
 /// The vehicle's MAVFTP server: `@PARAM/param.pck` over the served directory, if any.
-/// The logs of a [`logs::LogDir`] are a second overlay, under it.
-type Files = FtpServer<Overlay<Overlay<DirBackend, logs::LogFiles>, TableFile>>;
+/// Under it, the PX4 flavour's event metadata ([`events::MetadataFiles`]), and under that
+/// the logs of a [`logs::LogDir`].
+type Files = FtpServer<
+    Overlay<Overlay<Overlay<DirBackend, logs::LogFiles>, events::MetadataFiles>, TableFile>,
+>;
 
 /// The simulated vehicle; see the [module docs](self).
 #[derive(Debug)]
@@ -614,20 +628,30 @@ impl Vehicle {
         }
         let logs = logs::SimLogs::new(config.log_dir);
         let log_files = logs.ftp_view();
-        let files = config.ftp.then(|| {
+        // PX4 serves its component metadata over MAVFTP whether or not a directory is served.
+        let px4 = config.autopilot == Autopilot::Px4;
+        let files = (config.ftp || px4).then(|| {
             let table: Vec<(Name, Value)> = params.iter().copied().collect();
             let provider = TableFile::new(&table);
             let under = match config.ftp_files {
                 Some(dir) => Overlay::new(dir, log_files),
                 None => Overlay::alone(log_files),
             };
-            let overlay = Overlay::new(under, provider);
+            let metadata = if px4 {
+                events::MetadataFiles::px4()
+            } else {
+                events::MetadataFiles::none()
+            };
+            let overlay = Overlay::new(Overlay::new(under, metadata), provider);
             FtpServer::new(config.own, ServerConfig::default(), overlay)
         });
         let mut streams = StreamScheduler::new();
         for &(id, interval) in STREAMS {
             let unasked = config.streams_on_request && id != Heartbeat::ID;
             streams.support(id, interval.filter(|_| !unasked));
+        }
+        if config.autopilot == Autopilot::Px4 {
+            streams.support(ComponentMetadata::ID, None);
         }
         let craft = Craft {
             autopilot: config.autopilot,
@@ -638,6 +662,7 @@ impl Vehicle {
             new_current: None,
             ready_at: now + config.estimator_settle,
             data_streams_only: config.data_streams_only,
+            events: events::Events::default(),
         };
         let mut vehicle = Self {
             own: config.own,
@@ -848,6 +873,9 @@ impl Vehicle {
         }
         if let Some(seq) = self.craft().new_current.take() {
             self.missions.set_current(seq);
+        }
+        for e in self.craft().events.take() {
+            self.broadcast(MavMessage::Event(e));
         }
         while let Some(e) = self.craft().flight.poll_event() {
             match e {

@@ -46,7 +46,9 @@ mod table;
 mod xml;
 
 pub use error::{Error, ErrorKind, Location};
-pub use loader::{Builtin, FileSystem, Loader, PROTOCOL_VERSION_SUPPLEMENT, Source};
+pub use loader::{
+    Builtin, EVENTS_SUPPLEMENT, FileSystem, Loader, PROTOCOL_VERSION_SUPPLEMENT, Source,
+};
 pub use model::{
     Deprecation, Dialect, Entry, EntryParam, Enum, Field, FieldType, FileInfo, Message,
     PrimitiveType,

@@ -6,10 +6,12 @@
 //! ## Supplements
 //! A supplement is a definition file merged into another file of a given name whenever the
 //! dialect does not define the supplement's messages itself. The loaders made by
-//! [`Loader::builtin`] and [`Loader::filesystem`] register one: mavstack's
-//! `extras/protocol_version.xml` (PROTOCOL_VERSION, id 300, dropped from the newest
-//! official `common.xml`) goes into `common.xml`, so `common` and every dialect that includes
-//! it can decode and send the version handshake's reply.
+//! [`Loader::builtin`] and [`Loader::filesystem`] register two, both merged into
+//! `common.xml`, so `common` and every dialect that includes it have their messages:
+//! mavstack's `extras/protocol_version.xml` (PROTOCOL_VERSION, id 300, dropped from the
+//! newest official `common.xml`: the version handshake's reply) and `extras/events.xml` (the
+//! events protocol, ids 410–413, and COMPONENT_METADATA, 397, which the official
+//! `common.xml` mavstack vendors lacks: PX4 says why it refuses a command in EVENT messages).
 
 use std::collections::{HashMap, HashSet};
 use std::path::{Component, Path, PathBuf};
@@ -84,8 +86,13 @@ pub struct Loader<S> {
 /// The path of mavstack's own PROTOCOL_VERSION definition among the built-in files.
 pub const PROTOCOL_VERSION_SUPPLEMENT: &str = "extras/protocol_version.xml";
 
+/// The path of mavstack's own definition of the events protocol (EVENT and its companions,
+/// COMPONENT_METADATA) among the built-in files.
+pub const EVENTS_SUPPLEMENT: &str = "extras/events.xml";
+
 impl Loader<Builtin> {
-    /// A loader over the built-in definitions, with the PROTOCOL_VERSION supplement.
+    /// A loader over the built-in definitions, with the PROTOCOL_VERSION and events
+    /// supplements.
     #[must_use]
     pub fn builtin() -> Self {
         Self::new(Builtin).with_standard_supplements()
@@ -93,7 +100,7 @@ impl Loader<Builtin> {
 }
 
 impl Loader<FileSystem> {
-    /// A loader over the file system, with the PROTOCOL_VERSION supplement.
+    /// A loader over the file system, with the PROTOCOL_VERSION and events supplements.
     #[must_use]
     pub fn filesystem() -> Self {
         Self::new(FileSystem).with_standard_supplements()
@@ -111,15 +118,16 @@ impl<S: Source> Loader<S> {
     }
 
     fn with_standard_supplements(mut self) -> Self {
-        let text = builtin::file(PROTOCOL_VERSION_SUPPLEMENT).unwrap_or_default();
-        let path = PathBuf::from(PROTOCOL_VERSION_SUPPLEMENT);
-        // The built-in supplement is ours and covered by tests; a parse failure here would be
-        // a bug in this crate, so it is dropped rather than failing every load.
-        if let Ok(decls) = xml::parse_file(&path, text) {
-            self.supplements.push(Supplement {
-                target: "common.xml".into(),
-                decls: Arc::new(decls),
-            });
+        for name in [PROTOCOL_VERSION_SUPPLEMENT, EVENTS_SUPPLEMENT] {
+            let text = builtin::file(name).unwrap_or_default();
+            // The built-in supplements are ours and covered by tests; a parse failure here
+            // would be a bug in this crate, so it is dropped rather than failing every load.
+            if let Ok(decls) = xml::parse_file(Path::new(name), text) {
+                self.supplements.push(Supplement {
+                    target: "common.xml".into(),
+                    decls: Arc::new(decls),
+                });
+            }
         }
         self
     }

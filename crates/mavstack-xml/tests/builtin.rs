@@ -59,6 +59,13 @@ fn crc_extra_anchors_for_common() {
         ("STATUSTEXT", 253, 83, 51),
         ("SETUP_SIGNING", 256, 71, 42),
         ("PROTOCOL_VERSION", 300, 217, 22),
+        // extras/events.xml: CRC_EXTRA and lengths as the MAVLink C library generated from
+        // the official definitions has them (mavlink_msg_event.h and its neighbours).
+        ("COMPONENT_METADATA", 397, 182, 108),
+        ("EVENT", 410, 160, 53),
+        ("CURRENT_EVENT_SEQUENCE", 411, 106, 3),
+        ("REQUEST_EVENT", 412, 33, 6),
+        ("RESPONSE_EVENT_ERROR", 413, 77, 7),
     ];
     for &(name, id, crc, min) in anchors {
         let m = common
@@ -117,6 +124,22 @@ fn protocol_version_reaches_every_dialect_that_includes_common() {
         assert!(pv.location.file.ends_with("protocol_version.xml"));
     }
     assert!(load("minimal").expect("loads").message(300).is_none());
+}
+
+#[test]
+fn the_events_protocol_reaches_every_dialect_that_includes_common() {
+    for name in ["common", "ardupilotmega", "all", "development"] {
+        let d = load(name).expect("loads");
+        for id in [397, 410, 411, 412, 413] {
+            let m = d
+                .message(id)
+                .unwrap_or_else(|| panic!("{name} lacks message {id}"));
+            assert!(m.file.ends_with("common.xml"), "{name}: {:?}", m.file);
+            assert!(m.location.file.ends_with("events.xml"));
+        }
+        assert!(d.enum_by_name("MAV_EVENT_ERROR_REASON").is_some());
+    }
+    assert!(load("minimal").expect("loads").message(410).is_none());
 }
 
 #[test]

@@ -188,7 +188,18 @@ fn protocol_version_supplement_only_with_the_standard_loaders() {
         .iter()
         .map(|m| (m.id, m.name.as_str()))
         .collect();
-    assert_eq!(ids, [(1, "ONLY"), (300, "PROTOCOL_VERSION")]);
+    assert_eq!(
+        ids,
+        [
+            (1, "ONLY"),
+            (300, "PROTOCOL_VERSION"),
+            (397, "COMPONENT_METADATA"),
+            (410, "EVENT"),
+            (411, "CURRENT_EVENT_SEQUENCE"),
+            (412, "REQUEST_EVENT"),
+            (413, "RESPONSE_EVENT_ERROR"),
+        ]
+    );
     let pv = with.message(300).expect("PROTOCOL_VERSION");
     assert_eq!((pv.crc_extra, pv.min_len, pv.max_len), (217, 22, 22));
     assert_eq!(pv.file, path);
@@ -203,12 +214,19 @@ fn protocol_version_supplement_only_with_the_standard_loaders() {
         assert_eq!(d.messages[0].name, "ONLY");
     }
 
-    // A common.xml that defines message 300 itself keeps its own.
+    // A common.xml that defines message 300 itself keeps its own (and still gets the events
+    // protocol, a supplement of its own).
     let own = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/fixtures/supplement/own_protocol_version/common.xml");
     let d = Loader::filesystem()
         .load(&own)
         .unwrap_or_else(|e| panic!("{e}"));
-    let names: Vec<&str> = d.messages.iter().map(|m| m.name.as_str()).collect();
+    let names: Vec<&str> = d
+        .messages
+        .iter()
+        .map(|m| m.name.as_str())
+        .filter(|n| !n.contains("EVENT") && *n != "COMPONENT_METADATA")
+        .collect();
     assert_eq!(names, ["MY_VERSION"]);
+    assert!(d.message(410).is_some());
 }

@@ -327,10 +327,20 @@ fn every_builtin_dialect_matches_pymavlink() {
             .get(name)
             .unwrap_or_else(|| panic!("pymavlink has no dialect {name}"));
         let extra = compare_dialect(name, &ours, theirs, &mut problems);
-        // Our only addition: the PROTOCOL_VERSION supplement, in every dialect with common.xml.
+        // Our only additions: the PROTOCOL_VERSION and events supplements, in every dialect
+        // with common.xml.
         let includes_common = ours.files.iter().any(|f| f.path.ends_with("common.xml"));
         let expected: Vec<(u32, String)> = if includes_common {
-            vec![(300, "PROTOCOL_VERSION".to_owned())]
+            [
+                (300, "PROTOCOL_VERSION"),
+                (397, "COMPONENT_METADATA"),
+                (410, "EVENT"),
+                (411, "CURRENT_EVENT_SEQUENCE"),
+                (412, "REQUEST_EVENT"),
+                (413, "RESPONSE_EVENT_ERROR"),
+            ]
+            .map(|(id, name)| (id, name.to_owned()))
+            .to_vec()
         } else {
             Vec::new()
         };

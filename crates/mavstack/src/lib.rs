@@ -112,6 +112,8 @@
 
 #[cfg(feature = "sim")]
 pub mod conform;
+#[cfg(feature = "services")]
+pub mod events;
 pub mod link_spec;
 #[cfg(feature = "services")]
 pub mod modes;

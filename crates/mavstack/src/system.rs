@@ -56,6 +56,8 @@ use mavstack_services::statustext::Lines;
 use mavstack_services::{Address, Service};
 use mavstack_transport::clock;
 
+mod said;
+
 use crate::modes::Flavour;
 use crate::node::{NodeHandle, Subscription};
 
@@ -112,8 +114,10 @@ pub enum SystemError {
         command: String,
         /// Why.
         source: CommandError,
-        /// What the system said in STATUSTEXT between the request and 0.5 s after its answer
-        /// (flight stacks say why they refuse there: `PreArm: Need Position Estimate`).
+        /// What the system said between the request and 0.5 s after its answer, in
+        /// STATUSTEXT (ArduPilot says why it refuses there: `PreArm: Need Position
+        /// Estimate`) and in EVENT messages made into text with its event metadata (PX4:
+        /// `Arming denied: Resolve system health failures first`).
         statustext: Vec<String>,
     },
     /// A mode name the system's autopilot does not have (or an autopilot whose modes are
@@ -273,7 +277,7 @@ pub struct RateRequest {
     pub arrived: bool,
 }
 
-/// STATUSTEXT lines kept while a command runs.
+/// STATUSTEXT lines and events kept while a command runs.
 const MAX_SAID: usize = 32;
 
 /// How long STATUSTEXT is still collected after a refusal.
@@ -302,8 +306,9 @@ pub struct System {
     ftp_probe_retries: Option<u8>,
     /// STATUSTEXT chunks put together.
     lines: Lines,
-    /// STATUSTEXT lines of the target since the current command started.
-    said: Vec<String>,
+    /// What the target said (STATUSTEXT, EVENT) since the current command started, and its
+    /// event metadata.
+    listening: said::Listening,
     /// Its logs as last listed ([`System::log_list`]).
     logs: Option<Vec<LogInfo>>,
     /// Where the next MAVFTP client starts its sequence numbers (see
@@ -379,7 +384,7 @@ impl System {
             retries: PATIENT_RETRIES,
             ftp_probe_retries: None,
             lines: Lines::default(),
-            said: Vec::new(),
+            listening: said::Listening::default(),
             logs: None,
             ftp_seq: clock_seed(),
         };
@@ -997,7 +1002,7 @@ impl System {
     ) -> Result<CommandAck, SystemError> {
         let id = command.id();
         self.update();
-        self.said.clear();
+        self.listening.said.clear();
         let mut client = CommandClient::new(self.own, CommandConfig::default());
         let handle = client
             .send(clock::now(), self.target, command)
@@ -1020,12 +1025,13 @@ impl System {
         match result {
             Ok(ack) => Ok(ack),
             Err(source) => {
-                // STATUSTEXT that says why may follow the refusal.
+                // STATUSTEXT or EVENTs that say why may follow the refusal.
                 self.take_until(SAID_AFTER, |_, _| false).await;
+                let said = core::mem::take(&mut self.listening.said);
                 Err(SystemError::Command {
                     command: command_name(id),
                     source,
-                    statustext: core::mem::take(&mut self.said),
+                    statustext: self.said_texts(said).await,
                 })
             }
         }
@@ -1571,15 +1577,16 @@ impl System {
             && from.system == self.target.system
             && let Some(line) = self.lines.push((from.system, from.component), text)
         {
-            if self.said.len() == MAX_SAID {
-                self.said.remove(0);
-            }
-            self.said.push(line.text);
+            self.listening.push(said::Said::Text(line.text));
         }
         if from.system != self.target.system {
             return;
         }
         match msg {
+            MavMessage::Event(e) => self.listening.event(from, self.own, e),
+            MavMessage::ComponentMetadata(m) if from.component == self.target.component => {
+                self.listening.component_metadata(m);
+            }
             MavMessage::GlobalPositionInt(GlobalPositionInt {
                 alt, relative_alt, ..
             }) => self.home_amsl = Some((alt - relative_alt) as f32 / 1000.0),

@@ -392,6 +392,49 @@ async fn a_refused_command_carries_the_statustext_that_says_why() {
 }
 
 #[tokio::test]
+async fn a_refusal_explained_in_events_carries_their_texts() {
+    // As PX4 v1.16 while its estimator settles: TEMPORARILY_REJECTED, the reasons in EVENT
+    // messages whose texts are in the metadata it serves over MAVFTP (COMPONENT_METADATA,
+    // then two xz files).
+    let mut config = SimVehicle::config(Autopilot::Px4, params::defaults(Autopilot::Px4));
+    config.estimator_settle = Duration::from_secs(600);
+    let (vehicle, gcs) = vehicle_and_gcs(ProtocolVersionSupport::Answer, config).await;
+    let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
+        .await
+        .expect("the vehicle is found");
+    let arm = Command::Long(CommandLong {
+        command: MavCmd::COMPONENT_ARM_DISARM,
+        param1: 1.0,
+        ..CommandLong::default()
+    });
+    for attempt in 0..2 {
+        let error = v.command(arm.clone(), |_| {}).await.expect_err("refused");
+        let SystemError::Command {
+            source, statustext, ..
+        } = &error
+        else {
+            panic!("{error}");
+        };
+        assert!(
+            matches!(source, CommandError::Rejected { result, .. } if *result == MavResult::TEMPORARILY_REJECTED),
+            "{source}"
+        );
+        assert_eq!(statustext.len(), 2, "attempt {attempt}: {statustext:?}");
+        assert!(
+            statustext[0].starts_with("Preflight Fail: position estimate not valid yet, about ")
+                && statustext[0].ends_with(" s to go"),
+            "{statustext:?}"
+        );
+        assert_eq!(
+            statustext[1],
+            "Arming denied: Resolve system health failures first"
+        );
+    }
+    gcs.shutdown().await.expect("stops");
+    vehicle.shutdown().await.expect("stops");
+}
+
+#[tokio::test]
 async fn a_rate_is_asked_with_set_message_interval_and_else_with_request_data_stream() {
     use mavstack::dialects::common::{Attitude, MavDataStream};
     use mavstack::system::RateMethod;
