@@ -2491,6 +2491,56 @@ class TypedReceiver:
         self,
         condition: Optional[str] = ...,
         *,
+        type: Literal["COMPONENT_METADATA"],
+        blocking: bool = ...,
+        timeout: Optional[float] = ...,
+    ) -> Optional[_d.MAVLink_component_metadata_message]: ...
+
+    @overload
+    def recv_match(
+        self,
+        condition: Optional[str] = ...,
+        *,
+        type: Literal["EVENT"],
+        blocking: bool = ...,
+        timeout: Optional[float] = ...,
+    ) -> Optional[_d.MAVLink_event_message]: ...
+
+    @overload
+    def recv_match(
+        self,
+        condition: Optional[str] = ...,
+        *,
+        type: Literal["CURRENT_EVENT_SEQUENCE"],
+        blocking: bool = ...,
+        timeout: Optional[float] = ...,
+    ) -> Optional[_d.MAVLink_current_event_sequence_message]: ...
+
+    @overload
+    def recv_match(
+        self,
+        condition: Optional[str] = ...,
+        *,
+        type: Literal["REQUEST_EVENT"],
+        blocking: bool = ...,
+        timeout: Optional[float] = ...,
+    ) -> Optional[_d.MAVLink_request_event_message]: ...
+
+    @overload
+    def recv_match(
+        self,
+        condition: Optional[str] = ...,
+        *,
+        type: Literal["RESPONSE_EVENT_ERROR"],
+        blocking: bool = ...,
+        timeout: Optional[float] = ...,
+    ) -> Optional[_d.MAVLink_response_event_error_message]: ...
+
+    @overload
+    def recv_match(
+        self,
+        condition: Optional[str] = ...,
+        *,
         type: Literal["WHEEL_DISTANCE"],
         blocking: bool = ...,
         timeout: Optional[float] = ...,
@@ -3795,6 +3845,21 @@ class TypedLatest:
     def __getitem__(self, name: Literal["ONBOARD_COMPUTER_STATUS"], /) -> _d.MAVLink_onboard_computer_status_message: ...
 
     @overload
+    def __getitem__(self, name: Literal["COMPONENT_METADATA"], /) -> _d.MAVLink_component_metadata_message: ...
+
+    @overload
+    def __getitem__(self, name: Literal["EVENT"], /) -> _d.MAVLink_event_message: ...
+
+    @overload
+    def __getitem__(self, name: Literal["CURRENT_EVENT_SEQUENCE"], /) -> _d.MAVLink_current_event_sequence_message: ...
+
+    @overload
+    def __getitem__(self, name: Literal["REQUEST_EVENT"], /) -> _d.MAVLink_request_event_message: ...
+
+    @overload
+    def __getitem__(self, name: Literal["RESPONSE_EVENT_ERROR"], /) -> _d.MAVLink_response_event_error_message: ...
+
+    @overload
     def __getitem__(self, name: Literal["WHEEL_DISTANCE"], /) -> _d.MAVLink_wheel_distance_message: ...
 
     @overload
@@ -4706,6 +4771,21 @@ class TypedMessages(Dict[str, MAVLinkMessage]):
 
     @overload
     def __getitem__(self, name: Literal["ONBOARD_COMPUTER_STATUS"], /) -> _d.MAVLink_onboard_computer_status_message: ...
+
+    @overload
+    def __getitem__(self, name: Literal["COMPONENT_METADATA"], /) -> _d.MAVLink_component_metadata_message: ...
+
+    @overload
+    def __getitem__(self, name: Literal["EVENT"], /) -> _d.MAVLink_event_message: ...
+
+    @overload
+    def __getitem__(self, name: Literal["CURRENT_EVENT_SEQUENCE"], /) -> _d.MAVLink_current_event_sequence_message: ...
+
+    @overload
+    def __getitem__(self, name: Literal["REQUEST_EVENT"], /) -> _d.MAVLink_request_event_message: ...
+
+    @overload
+    def __getitem__(self, name: Literal["RESPONSE_EVENT_ERROR"], /) -> _d.MAVLink_response_event_error_message: ...
 
     @overload
     def __getitem__(self, name: Literal["WHEEL_DISTANCE"], /) -> _d.MAVLink_wheel_distance_message: ...

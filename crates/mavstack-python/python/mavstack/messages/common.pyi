@@ -4288,6 +4288,73 @@ class MAVLink_onboard_computer_status_message(MAVLinkMessage):
     """Bitmap of status flags. (enum COMPUTER_STATUS_FLAGS) (extension)"""
 
 
+class MAVLink_component_metadata_message(MAVLinkMessage):
+    """Where a component's general metadata file is (a MAVLink FTP URI; the file may be xz-compressed). That file names the component's other metadata, the event definitions among them. (id 397)"""
+
+    time_boot_ms: int
+    """[ms] Time since the sender booted."""
+    file_crc: int
+    """CRC32 of the general metadata file."""
+    uri: str
+    """MAVLink FTP URI of the general metadata file, NUL-terminated."""
+
+
+class MAVLink_event_message(MAVLinkMessage):
+    """An event: an id defined in the sender's event metadata, with its arguments. Each new event of a component gets the next sequence number; an event asked for again is sent again with its own number. (id 410)"""
+
+    destination_component: int
+    """Component the event is for (0 for all)."""
+    destination_system: int
+    """System the event is for (0 for all)."""
+    id: int
+    """Event id: the component's id in the metadata in the top 8 bits, the event's sub id below."""
+    event_time_boot_ms: int
+    """[ms] When the event happened, in time since the sender booted."""
+    sequence: int
+    """Sequence number of the event."""
+    log_levels: int
+    """Log levels: external in the low 4 bits, internal in the high 4 bits (0 emergency, 1 alert, 2 critical, 3 error, 4 warning, 5 notice, 6 info, 7 debug, 8 protocol, 9 disabled)."""
+    arguments: List[int]
+    """Arguments of the event, packed little-endian in the order and types the metadata gives."""
+
+
+class MAVLink_current_event_sequence_message(MAVLinkMessage):
+    """The sequence number of the sender's latest event, sent regularly so that a receiver notices events it missed. (id 411)"""
+
+    sequence: int
+    """Sequence number of the latest event."""
+    flags: int
+    """Flags. (enum MAV_EVENT_CURRENT_SEQUENCE_FLAGS)"""
+
+
+class MAVLink_request_event_message(MAVLinkMessage):
+    """Asks a component to send again the events of a range of sequence numbers. (id 412)"""
+
+    target_system: int
+    """System ID"""
+    target_component: int
+    """Component ID"""
+    first_sequence: int
+    """First sequence number asked for."""
+    last_sequence: int
+    """Last sequence number asked for (inclusive)."""
+
+
+class MAVLink_response_event_error_message(MAVLinkMessage):
+    """The answer to REQUEST_EVENT for an event that cannot be sent again. (id 413)"""
+
+    target_system: int
+    """System ID"""
+    target_component: int
+    """Component ID"""
+    sequence: int
+    """Sequence number that was asked for."""
+    sequence_oldest_available: int
+    """Oldest sequence number the sender still keeps."""
+    reason: int
+    """Why. (enum MAV_EVENT_ERROR_REASON)"""
+
+
 class MAVLink_wheel_distance_message(MAVLinkMessage):
     """Cumulative distance traveled for each reported wheel. (id 9000)"""
 
@@ -10115,6 +10182,108 @@ class MAVLink(_standard.MAVLink):
         force_mavlink1: bool = ...,
     ) -> None:
         """ONBOARD_COMPUTER_STATUS (id 390), fields in XML order."""
+        ...
+
+    def component_metadata_encode(
+        self,
+        time_boot_ms: int,
+        file_crc: int,
+        uri: Union[str, bytes],
+    ) -> MAVLink_component_metadata_message:
+        """COMPONENT_METADATA (id 397), fields in XML order."""
+        ...
+    def component_metadata_send(
+        self,
+        time_boot_ms: int,
+        file_crc: int,
+        uri: Union[str, bytes],
+        force_mavlink1: bool = ...,
+    ) -> None:
+        """COMPONENT_METADATA (id 397), fields in XML order."""
+        ...
+
+    def event_encode(
+        self,
+        destination_component: int,
+        destination_system: int,
+        id: int,
+        event_time_boot_ms: int,
+        sequence: int,
+        log_levels: int,
+        arguments: Sequence[int],
+    ) -> MAVLink_event_message:
+        """EVENT (id 410), fields in XML order."""
+        ...
+    def event_send(
+        self,
+        destination_component: int,
+        destination_system: int,
+        id: int,
+        event_time_boot_ms: int,
+        sequence: int,
+        log_levels: int,
+        arguments: Sequence[int],
+        force_mavlink1: bool = ...,
+    ) -> None:
+        """EVENT (id 410), fields in XML order."""
+        ...
+
+    def current_event_sequence_encode(
+        self,
+        sequence: int,
+        flags: int,
+    ) -> MAVLink_current_event_sequence_message:
+        """CURRENT_EVENT_SEQUENCE (id 411), fields in XML order."""
+        ...
+    def current_event_sequence_send(
+        self,
+        sequence: int,
+        flags: int,
+        force_mavlink1: bool = ...,
+    ) -> None:
+        """CURRENT_EVENT_SEQUENCE (id 411), fields in XML order."""
+        ...
+
+    def request_event_encode(
+        self,
+        target_system: int,
+        target_component: int,
+        first_sequence: int,
+        last_sequence: int,
+    ) -> MAVLink_request_event_message:
+        """REQUEST_EVENT (id 412), fields in XML order."""
+        ...
+    def request_event_send(
+        self,
+        target_system: int,
+        target_component: int,
+        first_sequence: int,
+        last_sequence: int,
+        force_mavlink1: bool = ...,
+    ) -> None:
+        """REQUEST_EVENT (id 412), fields in XML order."""
+        ...
+
+    def response_event_error_encode(
+        self,
+        target_system: int,
+        target_component: int,
+        sequence: int,
+        sequence_oldest_available: int,
+        reason: int,
+    ) -> MAVLink_response_event_error_message:
+        """RESPONSE_EVENT_ERROR (id 413), fields in XML order."""
+        ...
+    def response_event_error_send(
+        self,
+        target_system: int,
+        target_component: int,
+        sequence: int,
+        sequence_oldest_available: int,
+        reason: int,
+        force_mavlink1: bool = ...,
+    ) -> None:
+        """RESPONSE_EVENT_ERROR (id 413), fields in XML order."""
         ...
 
     def wheel_distance_encode(
