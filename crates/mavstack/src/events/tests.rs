@@ -202,3 +202,44 @@ fn the_general_file_names_the_events_file() {
     assert_eq!(ftp_path("https://example.com/x.json"), None);
     assert_eq!(ftp_path("mftp://"), None);
 }
+
+proptest::proptest! {
+    /// Any template and arguments: no panic, nothing a terminal would act on, and text
+    /// without tags or placeholders comes out as written (escapes aside).
+    #[test]
+    fn any_template_gives_safe_text(
+        message in "[ -~\\x00-\\x1f\u{80}-\u{200}]{0,120}",
+        args in proptest::collection::vec(proptest::num::u8::ANY, 0..48),
+    ) {
+        let json = serde_json::json!({"version": 1, "components": {"1": {"namespace": "p",
+            "enums": {"e_t": {"type": "uint16_t", "is_bitfield": true,
+                "entries": {"1": {"name": "a", "description": "A"}}}},
+            "event_groups": {"g": {"events": {"3": {"name": "n", "message": message,
+                "arguments": [{"type": "float", "name": "f"}, {"type": "e_t", "name": "e"},
+                              {"type": "int64_t", "name": "i"}]}}}}}}});
+        let c = Catalog::from_json(json.to_string().as_bytes()).expect("parses");
+        let e = c.decode((1 << 24) | 3, &args).expect("defined");
+        proptest::prop_assert!(!e.text.chars().any(char::is_control), "{:?}", e.text);
+        if !message.contains(['<', '{', '\\']) {
+            let plain: String = message
+                .trim()
+                .chars()
+                .map(|c| if c.is_control() { '\u{fffd}' } else { c })
+                .collect();
+            proptest::prop_assert_eq!(e.text, plain);
+        }
+    }
+
+    /// Any bytes as a metadata file, plain or as xz: an error or a catalog, never a panic.
+    #[test]
+    fn any_file_is_an_error_or_a_catalog(bytes in proptest::collection::vec(proptest::num::u8::ANY, 0..200)) {
+        let _ = Catalog::from_json(&bytes);
+        let mut xz = LIBLZMA_PACKED.to_vec();
+        let at = bytes.first().map_or(0, |&b| usize::from(b) % xz.len());
+        xz[at] ^= bytes.get(1).copied().unwrap_or(1) | 1;
+        if let Ok(json) = unpack(&xz) {
+            let _ = Catalog::from_json(&json);
+        }
+        let _ = events_uri(&bytes);
+    }
+}
