@@ -4,6 +4,7 @@ pymavlink and by mavstack.aio itself, cancellation, timeouts and closing."""
 
 import asyncio
 import builtins
+import faulthandler
 import os
 import socket
 import subprocess
@@ -28,6 +29,15 @@ def vehicle_binary():
             return path
     pytest.fail("no mavstack binary in target/debug or target/release (cargo build -p mavstack-cli), "
                 "nor $MAVSTACK_BIN: the simulated vehicle is needed")
+
+
+@pytest.fixture(autouse=True)
+def hang_guard():
+    """A test that hangs (a result that never reaches the loop) dumps every thread's stack and
+    ends the process after 120 s, instead of blocking the run."""
+    faulthandler.dump_traceback_later(120, exit=True)
+    yield
+    faulthandler.cancel_dump_traceback_later()
 
 
 def free_udp_port():
