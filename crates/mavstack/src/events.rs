@@ -524,16 +524,6 @@ pub fn unpack(bytes: &[u8]) -> Result<Vec<u8>, EventsError> {
     }
 }
 
-/// Packs `json` as xz (what a vehicle serves; the simulator's metadata).
-#[must_use]
-pub fn pack(json: &[u8]) -> Vec<u8> {
-    let mut out = Vec::new();
-    let mut input = json;
-    // Writing into a Vec cannot fail.
-    let _ = lzma_rs::xz_compress(&mut input, &mut out);
-    out
-}
-
 /// A writer that refuses to grow past [`MAX_UNPACKED`].
 struct Bounded(Vec<u8>);
 

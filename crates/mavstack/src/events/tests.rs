@@ -28,6 +28,14 @@ const PX4_LIKE: &str = r#"{
   }
 }"#;
 
+/// `json` packed as xz (as the simulator packs its metadata).
+fn pack(json: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut input = json;
+    lzma_rs::xz_compress(&mut input, &mut out).expect("into a Vec");
+    out
+}
+
 fn px4() -> Catalog {
     Catalog::from_json(PX4_LIKE.as_bytes()).expect("parses")
 }
