@@ -168,7 +168,7 @@ impl WakerInner {
     /// pending): no Python, no GIL on the runtime's thread.
     fn post(&self, entry: Entry) {
         lock(&self.entries).push(entry);
-        if !self.signaled.swap(true, Ordering::AcqRel) {
+        if !self.signaled.swap(true, Ordering::SeqCst) {
             // Full (a byte is pending anyway) or closed (the loop is gone): nothing to do.
             let _ = (&self.tx).write(&[1]);
         }
@@ -214,9 +214,13 @@ impl AioWaker {
     /// Settles the operations that ended and wakes the streams' readers (on the loop's
     /// thread); an exception in one of them is reported as unraisable, the rest still run.
     fn drain(&self, py: Python<'_>) {
-        self.inner.signaled.store(false, Ordering::Release);
+        // The byte first, then `signaled`, then the entries: a `post` that comes after the
+        // byte was read either still sees `signaled` set (its entry is taken below) or writes
+        // a byte of its own. Clearing `signaled` before reading would swallow that byte and
+        // leave `signaled` set with nothing pending: every later result would wait forever.
         let mut buf = [0u8; 64];
         while matches!((&self.rx).read(&mut buf), Ok(n) if n > 0) {}
+        self.inner.signaled.store(false, Ordering::SeqCst);
         let entries = core::mem::take(&mut *lock(&self.inner.entries));
         for entry in entries {
             let called = match entry {
