@@ -32,6 +32,13 @@ Scenarios (in this order, each independent of the ones before but the flight, la
   record       `mavstack record CONN FILE.tlog --duration 10`, then `mavstack log summary
                --json FILE` and pymavlink's reading of the same tlog agree on the count of
                every message type (per system and component)
+  aio          mavstack.aio's ground-station session (tests-interop/flight_aio.py): the
+               vehicle found, the whole parameter table (the count `params` got), a get, a
+               20-item plan up and down, ATTITUDE asked at 10 Hz and seen at 8-12 Hz, arming
+               accepted or refused with the reasons, a mode change there and back
+  pymavlink_scripts  the scripts written for pymavlink only (crates/mavstack-python/tests/
+               pymavlink_scripts), each run with pymavlink and then unchanged with
+               mavstack.mavutil: the same lines printed (arm_mode and signing on ArduPilot)
   flight       (with --flight BIN, the `flight` example of crates/mavstack) telemetry at
                requested rates (ATTITUDE 10 Hz, GLOBAL_POSITION_INT 5 Hz, within 20 % over 5 s),
                then arm (refusals waited out), take off, a 4-item mission flown to its end
@@ -291,6 +298,76 @@ class Runner:
                 detail, ok = "%s: %s" % (type(e).__name__, str(e).strip()[:700]), False
         self.report("router", "pass" if ok else "fail", time.monotonic() - t0,
                     "direct %d; %s" % (direct, detail))
+
+    def aio(self):
+        """mavstack.aio's session (tests-interop/flight_aio.py): every step passes."""
+        table = getattr(self, "table", None)
+        argv = [sys.executable, os.path.join(HERE, "flight_aio.py"), self.conn]
+        if table:
+            argv += ["--params", str(len(table))]
+        rc, out, err, s = run(argv, timeout=300)
+        try:
+            steps = json.loads(out.splitlines()[-1])
+        except (ValueError, IndexError):
+            return self.report("aio", "fail", s, "no report (exit %s): %s" % (rc, err.strip()[-300:]))
+        detail = "; ".join("%s %s%s (%.1f s)" % (x["step"], x["detail"], "" if x["ok"] else " FAILED",
+                                                  x["seconds"]) for x in steps)
+        self.report("aio", "pass" if rc == 0 else "fail", s, detail)
+
+    def pymavlink_scripts(self):
+        """The scripts written for pymavlink (crates/mavstack-python/tests/pymavlink_scripts),
+        each run with pymavlink, then unchanged with mavstack.mavutil in its place: the same
+        lines printed. arm_mode (pymavlink's ArduPilot helpers) on ArduPilot only; signing
+        last, the key removed after it."""
+        scripts_dir = os.path.join(HERE, "..", "crates", "mavstack-python", "tests", "pymavlink_scripts")
+        shim = os.path.join(scripts_dir, "run_with_mavstack.py")
+        names = ["heartbeat.py", "attitude.py", "params.py", "mission.py", "interval.py"]
+        if "ardupilot" in self.name:
+            names += ["arm_mode.py", "signing.py"]
+        env = dict(os.environ, MAVLINK20="1", MAVLINK_DIALECT="ardupilotmega")
+        t0 = time.monotonic()
+        table = getattr(self, "table", None) or self.our_params()[0] or {}
+        # What a script changes is put back after each run, so that both runs meet the same
+        # vehicle: the parameter params.py sets (as it chooses it), the mode arm_mode.py
+        # leaves, the key signing.py sets up.
+        param = "RTL_ALT" if "RTL_ALT" in table else next(
+            (n for n in sorted(table) if table[n][1] == "REAL32"), None)
+        modes = []
+
+        def restore(script):
+            if script == "params.py" and param:
+                self.mavstack("param", "set", self.conn, param, str(table[param][0]), timeout=60)
+            elif script == "arm_mode.py" and modes:
+                self.mavstack("command", self.conn, "mode", modes[0], timeout=60)
+            elif script == "signing.py":
+                self.mavstack("signing", "remove", self.conn, "--key", bytes(range(32)).hex(), "--link-id", "1",
+                              timeout=60)
+
+        same, differ = [], []
+        for script in names:
+            outs = []
+            for shimmed in (False, True):
+                argv = [sys.executable] + ([shim] if shimmed else []) + [os.path.join(scripts_dir, script), self.conn]
+                try:
+                    p = subprocess.run(argv, capture_output=True, text=True, timeout=120, env=env)
+                    outs.append((p.returncode, p.stdout, p.stderr))
+                except subprocess.TimeoutExpired:
+                    outs.append((None, "", "timed out"))
+                if script == "arm_mode.py" and not modes and outs[-1][1].startswith("mode "):
+                    modes.append(outs[-1][1].split()[1])
+                restore(script)
+            (rc1, o1, e1), (rc2, o2, e2) = outs
+            if rc1 == 0 and rc2 == 0 and o1 == o2 and o1.strip():
+                same.append(script[:-3])
+            else:
+                a, b = o1.splitlines(), o2.splitlines()
+                lines = [("%r vs %r" % (x, y)) for x, y in zip(a, b) if x != y][:2]
+                differ.append("%s: pymavlink exit %s, mavstack exit %s%s%s" % (
+                    script[:-3], rc1, rc2, "; " + "; ".join(lines) if lines else "",
+                    "; " + (e1 or e2).strip()[-200:] if rc1 or rc2 else ""))
+        self.report("pymavlink_scripts", "fail" if differ else "pass", time.monotonic() - t0,
+                    "same output: %s%s" % (", ".join(same) or "none", "; differ: " + " | ".join(differ)
+                                           if differ else ""))
 
     def record(self, seconds=10):
         with tempfile.TemporaryDirectory(prefix="fs-record-") as d:
@@ -742,7 +819,7 @@ def compare_plans(sent, got):
 
 
 SCENARIOS = ["probe", "conform", "params", "param_set", "mission", "arm_refused", "signing", "router", "record",
-             "signed_router", "flight", "restart"]
+             "aio", "pymavlink_scripts", "signed_router", "flight", "restart"]
 
 
 def main():
