@@ -50,8 +50,8 @@ pub enum EventsError {
     /// Not JSON.
     #[error("event metadata is not JSON: {0}")]
     Json(String),
-    /// A format version other than 1.
-    #[error("event metadata has version {0}; only version 1 is known")]
+    /// No format version, or one below 1.
+    #[error("event metadata has version {0}; versions from 1 on are known")]
     Version(String),
     /// JSON, but not shaped as the format says.
     #[error("event metadata: {0}")]
@@ -148,6 +148,7 @@ struct EventDef {
     group: String,
     message: String,
     args: Vec<ArgDef>,
+    summary: bool,
 }
 
 /// Event definitions by id, from one or more metadata files.
@@ -168,6 +169,10 @@ pub struct Decoded {
     pub group: String,
     /// The message with its arguments filled in.
     pub text: String,
+    /// A summary event (`"type": "summary"`, PX4's arming check summary): bits for a
+    /// ground station's health display, not a line for a person (its texts come as events
+    /// of their own).
+    pub summary: bool,
 }
 
 /// The members of a JSON object or array, with their keys (an array's are its indexes).
@@ -206,8 +211,10 @@ impl Catalog {
     pub fn from_json(bytes: &[u8]) -> Result<Self, EventsError> {
         let root: Json =
             serde_json::from_slice(bytes).map_err(|e| EventsError::Json(e.to_string()))?;
+        // Later versions add to the format (2, PX4 1.16's: translation hints), as libevents
+        // reads them: any version from 1 on.
         match root.get("version") {
-            Some(v) if v.as_u64() == Some(1) => {}
+            Some(v) if v.as_u64().is_some_and(|v| v >= 1) => {}
             Some(v) => return Err(EventsError::Version(v.to_string())),
             None => return Err(EventsError::Version("(none)".into())),
         }
@@ -296,6 +303,7 @@ impl Catalog {
             group: group.to_owned(),
             message: text_field(e, "message")?.to_owned(),
             args,
+            summary: text_field(e, "type") == Some("summary"),
         })
     }
 
@@ -342,6 +350,7 @@ impl Catalog {
             name: safe(&def.name),
             group: safe(&def.group),
             text: safe(text.trim()),
+            summary: def.summary,
         })
     }
 
@@ -590,6 +599,10 @@ pub fn level_name(log_levels: u8) -> &'static str {
         _ => "disabled",
     }
 }
+
+mod fuzzing;
+#[doc(hidden)]
+pub use fuzzing::fuzz_events;
 
 #[cfg(test)]
 mod tests;

@@ -1,5 +1,5 @@
-//! The seed corpora of the `router_conf`, `link_options`, `link_spec` and `conform_wire`
-//! fuzz targets, replayed on stable.
+//! The seed corpora of the `router_conf`, `link_options`, `link_spec`, `conform_wire` and
+//! `events` fuzz targets, replayed on stable.
 
 use std::path::Path;
 
@@ -28,6 +28,27 @@ fn link_spec_seeds() {
 #[test]
 fn conform_wire_seeds() {
     replay("conform_wire", mavstack::conform::fuzz_wire);
+}
+
+#[cfg(feature = "services")]
+#[test]
+fn events_seeds() {
+    replay("events", mavstack::events::fuzz_events);
+    // The seeds reach past the parsers: a catalog of three events, the same one packed.
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/events");
+    let json = std::fs::read(dir.join("events_json")).unwrap();
+    assert_eq!(
+        mavstack::events::Catalog::from_json(&json).unwrap().len(),
+        3
+    );
+    for packed in ["events_xz", "events_xz_crc64"] {
+        let xz = std::fs::read(dir.join(packed)).unwrap();
+        assert_eq!(
+            mavstack::events::unpack(&xz).unwrap(),
+            json.trim_ascii_end(),
+            "{packed}"
+        );
+    }
 }
 
 /// The MAVLink 1 PROTOCOL_VERSION seed (msgid 44, CRC_EXTRA 217, built with pymavlink's

@@ -132,11 +132,49 @@ fn arrays_serve_as_well_as_objects() {
     );
 }
 
+/// PX4 1.16's `all_events.json` as it is shaped: version 2 with its `translation` hints,
+/// components by id, groups without a `name` (their key is the name), an enum type named
+/// without its namespace, and the arming check summary event (`"type": "summary"`).
+#[test]
+fn px4_1_16_metadata_reads() {
+    let json = serde_json::json!({
+        "version": 2,
+        "translation": {"items": {"components": {}}},
+        "components": {"1": {"namespace": "px4", "enums": {"navigation_mode_group_t": {
+            "type": "uint32_t", "is_bitfield": true, "entries": {"1": {"name": "manual", "description": "Manual"}}}},
+          "event_groups": {"arming_check": {"events": {
+            "13835193": {"name": "check_modes_local_pos", "message": "Navigation error: No valid position estimate",
+                "arguments": [{"name": "modes", "type": "navigation_mode_group_t"},
+                              {"name": "health_component_index", "type": "uint8_t"}]},
+            "11047904": {"name": "commander_arming_check_summary", "type": "summary",
+                "message": "Arming check summary event",
+                "arguments": [{"name": "chunk_idx", "type": "uint8_t"}]}}}}}}
+    });
+    let catalog = Catalog::from_json(json.to_string().as_bytes()).expect("version 2 reads");
+    let e = catalog
+        .decode(0x01d3_1bb9, &[0; 40])
+        .expect("check_modes_local_pos");
+    assert_eq!(
+        (e.group.as_str(), e.text.as_str(), e.summary),
+        (
+            "arming_check",
+            "Navigation error: No valid position estimate",
+            false
+        )
+    );
+    assert!(
+        catalog
+            .decode(0x01a8_93e0, &[0; 40])
+            .expect("summary")
+            .summary
+    );
+}
+
 #[test]
 fn bad_files_say_what_is_wrong() {
     for (json, what) in [
         ("not json", "not JSON"),
-        (r#"{"version": 2, "components": {}}"#, "version 2"),
+        (r#"{"version": 0, "components": {}}"#, "version 0"),
         (r#"{"components": {}}"#, "(none)"),
         (r#"{"version": 1}"#, "no \"components\""),
     ] {
