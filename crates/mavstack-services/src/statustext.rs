@@ -50,17 +50,25 @@ pub struct Line {
 }
 
 /// A `char[N]` text as a string safe to show: cut at the first NUL, bytes that are not ASCII
-/// as U+0080–U+00FF, control characters as U+FFFD.
+/// as U+0080–U+00FF, tabs and line breaks as spaces, other control characters as U+FFFD.
 #[must_use]
 pub fn text_of(bytes: &[u8]) -> String {
     let end = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
     bytes[..end]
         .iter()
-        .map(|&b| {
-            let c = char::from(b);
-            if c.is_control() { '\u{fffd}' } else { c }
+        .map(|&b| match char::from(b) {
+            '\t' | '\n' | '\r' => ' ',
+            c if c.is_control() => '\u{fffd}',
+            c => c,
         })
         .collect()
+}
+
+/// A whole line as shown: without the spaces it ends with (PX4 ends the STATUSTEXT copy of
+/// an event's text with a tab).
+fn finished(mut text: String) -> String {
+    text.truncate(text.trim_end().len());
+    text
 }
 
 /// Chunked texts in progress.
@@ -91,7 +99,7 @@ impl Lines {
             return Some(Line {
                 from,
                 severity: m.severity,
-                text: part,
+                text: finished(part),
             });
         }
         let at = self
@@ -119,7 +127,7 @@ impl Lines {
             return Some(Line {
                 from,
                 severity: p.severity,
-                text: p.text,
+                text: finished(p.text),
             });
         }
         if self.pending.len() == MAX_PENDING {
@@ -134,7 +142,7 @@ impl Lines {
         self.pending.drain(..).map(|p| Line {
             from: p.from,
             severity: p.severity,
-            text: p.text,
+            text: finished(p.text),
         })
     }
 }
@@ -167,6 +175,17 @@ mod tests {
     #[test]
     fn bytes_that_are_not_utf8_and_controls_are_shown_safely() {
         assert_eq!(text_of(b"a\xff\xc3(\x07b\0zz"), "a\u{ff}\u{c3}(\u{fffd}b");
+        assert_eq!(text_of(b"a\tb\r\n\0"), "a b  ");
+    }
+
+    /// PX4 sends the STATUSTEXT copy of an event's text with a tab at its end.
+    #[test]
+    fn a_line_ends_without_its_trailing_tab() {
+        let mut lines = Lines::default();
+        let line = lines
+            .push((1, 1), &chunk(0, 0, b"Arming denied: check failed\t"))
+            .unwrap();
+        assert_eq!(line.text, "Arming denied: check failed");
     }
 
     #[test]

@@ -92,7 +92,8 @@ impl Listening {
 
 impl System {
     /// `said` as lines: STATUSTEXT as it came, events as their text (fetching the metadata
-    /// first when needed), or `event 0x…` with why there is no text.
+    /// first when needed; summary events left out), or `event 0x…` with why there is no
+    /// text; a line said twice (an event and its STATUSTEXT copy) shown once.
     pub(super) async fn said_texts(&mut self, said: Vec<Said>) -> Vec<String> {
         if said.iter().any(|s| matches!(s, Said::Event { .. }))
             && matches!(self.listening.texts, EventTexts::NotFetched)
@@ -110,22 +111,30 @@ impl System {
             };
         }
         let mut why_told = false;
-        said.into_iter()
-            .map(|s| match s {
+        let mut lines: Vec<String> = Vec::with_capacity(said.len());
+        for s in said {
+            let line = match s {
                 Said::Text(text) => text,
                 Said::Event { id, arguments } => match &self.listening.texts {
-                    EventTexts::Fetched(c) => c.decode(id, &arguments).map_or_else(
-                        || format!("event {id:#010x} (not in the vehicle's event metadata)"),
-                        |d| d.text,
-                    ),
+                    EventTexts::Fetched(c) => match c.decode(id, &arguments) {
+                        // Bits for a health display, told again as events of their own.
+                        Some(d) if d.summary => continue,
+                        Some(d) => d.text,
+                        None => format!("event {id:#010x} (not in the vehicle's event metadata)"),
+                    },
                     EventTexts::Unavailable(why) if !why_told => {
                         why_told = true;
                         format!("event {id:#010x} (no event texts: {why})")
                     }
                     _ => format!("event {id:#010x}"),
                 },
-            })
-            .collect()
+            };
+            // PX4 says an event's text again in STATUSTEXT: once is enough.
+            if !lines.contains(&line) {
+                lines.push(line);
+            }
+        }
+        lines
     }
 
     /// COMPONENT_METADATA, then the general metadata file and the events file it names.
