@@ -9,6 +9,7 @@
 #   PX4_SITL_DIR        PX4's build directory (build/px4_sitl_default: bin/px4, etc/)
 #   MAVSTACK            the mavstack binary (default: target/release/mavstack, built if missing)
 #   FLIGHT              the `flight` example (default: target/release/examples/flight, likewise)
+#   SIMS                the simulator's flavours to run (default: "ardupilot px4"; "": none)
 #   ONLY                scenarios to run (comma-separated; default: all; `none`: none, e.g. with BENCH)
 #   BENCH               1: also tests-interop/flight_bench.py against each target (times beside
 #                       MAVProxy and MAVSDK, clean and lossy UDP): target/flight-stacks/bench.md
@@ -130,7 +131,7 @@ else
     echo "px4: skipped (PX4_SITL_DIR is not set)" | tee "$out/px4.skipped"
 fi
 
-for flavour in ardupilot px4; do
+for flavour in ${SIMS-ardupilot px4}; do
     # The simulator as each flavour, refusing PROTOCOL_VERSION and streaming nothing unasked
     # as ArduPilot does for that flavour, with an estimator that settles for 5 s as the flight
     # stacks' do.

@@ -14,8 +14,8 @@ Steps (each recorded, a failure does not stop the rest):
   telemetry  `vehicle.telemetry("ATTITUDE", rate_hz=10)` for 4 s after the first: the rate seen
   arm        `vehicle.arm()`: accepted (then disarmed), or refused with the vehicle's reasons
              (STATUSTEXT, or PX4's EVENT texts) in `.statustext`
-  mode       `vehicle.set_mode()` to a mode both autopilots name (ArduPilot LOITER, PX4
-             HOLD), then back to the one it was in
+  mode       `vehicle.set_mode()` to LOITER (ArduPilot) or HOLD (PX4), then back to the mode
+             it was in (its HEARTBEAT's, by DO_SET_MODE with numbers: `vehicle.command()`)
 """
 import argparse
 import asyncio
@@ -26,7 +26,7 @@ import time
 import mavstack.aio as aio
 
 HOME = (-353632610, 1491652300)
-MODES = {3: ("LOITER", "STABILIZE"), 12: ("HOLD", "POSCTL")}  # MAV_AUTOPILOT → (there, back)
+MODES = {3: "LOITER", 12: "HOLD"}  # by MAV_AUTOPILOT
 
 
 def plan():
@@ -118,11 +118,19 @@ async def session(conn, expected_params):
         await step(results, "arm", arm())
 
         async def mode():
-            there, back = MODES.get(vehicle.autopilot, ("LOITER", "STABILIZE"))
+            # The mode it is in (its HEARTBEAT's custom_mode), to go back to with DO_SET_MODE
+            # by number: PX4's main and sub mode are custom_mode's third and fourth bytes.
+            beats = vehicle.telemetry("HEARTBEAT")
+            try:
+                custom = (await asyncio.wait_for(beats.__anext__(), 5)).custom_mode
+            finally:
+                beats.close()
+            back = ((custom >> 16) & 0xFF, custom >> 24) if vehicle.autopilot == 12 else (custom, 0)
+            there = MODES.get(vehicle.autopilot, "LOITER")
             r1 = await vehicle.set_mode(there)
-            r2 = await vehicle.set_mode(back)
-            return r1.accepted and r2.accepted, "%s %s, %s %s%s" % (
-                there, r1, back, r2, "" if r1.accepted and r2.accepted else " (%s)" % (r1.statustext + r2.statustext))
+            r2 = await vehicle.command(176, 1, float(back[0]), float(back[1]))
+            return r1.accepted and r2.accepted, "%s %s, back to custom mode %d %s%s" % (
+                there, r1, custom, r2, "" if r1.accepted and r2.accepted else " (%s)" % (r1.statustext + r2.statustext))
         await step(results, "mode", mode())
     return results
 
