@@ -100,11 +100,28 @@ def both(script, session=udp_session, **kw):
     return ours
 
 
-@pytest.mark.parametrize("script", ["heartbeat.py", "attitude.py", "mission.py", "interval.py", "params.py"])
+@pytest.mark.parametrize("script", ["heartbeat.py", "attitude.py", "mission.py", "params.py"])
 def test_px4_flavour(script):
     """The scripts that are not ArduPilot's alone, against the vehicle as PX4."""
     out = both(script, vehicle_args=("--autopilot", "px4"))
     assert "None" not in out and "False" not in out.replace("armed False", "")
+
+
+def test_interval_on_the_px4_flavour_stops_as_on_px4():
+    """PX4 (1.16 SITL) answers REQUEST_MESSAGE(MESSAGE_INTERVAL) with DENIED, and so does the
+    simulator as PX4: interval.py sets the rate, then stops without MESSAGE_INTERVAL, with
+    pymavlink and with mavstack's mavutil alike."""
+    outs = []
+    for with_mavstack in (False, True):
+        port = free_port()
+        with Vehicle("udpout:127.0.0.1:%d" % port, "--autopilot", "px4"):
+            cmd = [sys.executable] + ([SHIM] if with_mavstack else []) + [
+                os.path.join(SCRIPTS, "interval.py"), "udpin:127.0.0.1:%d" % port]
+            p = subprocess.run(cmd, capture_output=True, text=True, timeout=90,
+                               env=dict(os.environ, MAVLINK20="1", MAVLINK_DIALECT="ardupilotmega"))
+        outs.append((p.returncode, p.stdout, p.stderr.strip().splitlines()[-1:]))
+    assert outs[0] == outs[1], outs
+    assert outs[0][0] == 1 and outs[0][1] == "ack 511 result 0\n" and outs[0][2] == ["no MESSAGE_INTERVAL"], outs
 
 
 def test_heartbeat():

@@ -5,8 +5,9 @@
 //! MAV_CMD_REQUEST_MESSAGE (512) when its [`StreamScheduler::handle_command`] is called from
 //! the vehicle's [`CommandHandler`], and says when each
 //! message is due ([`StreamScheduler::poll_due`]); the vehicle builds the message itself,
-//! since only it knows the values. REQUEST_MESSAGE(MESSAGE_INTERVAL 244, id) is answered by
-//! the scheduler directly ([`StreamScheduler::poll_transmit`]).
+//! since only it knows the values. REQUEST_MESSAGE(MESSAGE_INTERVAL 244, id) and
+//! MAV_CMD_GET_MESSAGE_INTERVAL (510) are answered by the scheduler directly
+//! ([`StreamScheduler::poll_transmit`]).
 //!
 //! [`StreamServer`] puts a scheduler, its commands and a [`MessageSource`] together into one
 //! [`Service`], ready to run on a node.
@@ -177,8 +178,8 @@ impl StreamScheduler {
         Ok(())
     }
 
-    /// Answers SET_MESSAGE_INTERVAL and REQUEST_MESSAGE; `None` for any other command (so a
-    /// vehicle's handler can try it first and fall through).
+    /// Answers SET_MESSAGE_INTERVAL, REQUEST_MESSAGE and GET_MESSAGE_INTERVAL; `None` for any
+    /// other command (so a vehicle's handler can try it first and fall through).
     pub fn handle_command(&mut self, now: Instant, request: &Request) -> Option<Response> {
         let (p1, p2, p3, p4, p5, p6, p7) = match &request.command {
             Command::Long(c) => (
@@ -211,19 +212,13 @@ impl StreamScheduler {
                 } else {
                     u32::MAX
                 };
-                let interval_us = match self.streams.get(&of) {
-                    None => 0,
-                    Some(s) => s
-                        .interval
-                        .map_or(-1, |d| i32::try_from(d.as_micros()).unwrap_or(i32::MAX)),
-                };
-                self.out.push_back(Outgoing {
-                    target,
-                    message: MavMessage::MessageInterval(MessageInterval {
-                        message_id: u16::try_from(of).unwrap_or(u16::MAX),
-                        interval_us,
-                    }),
-                });
+                self.tell_interval(of, target);
+                Response::done(MavResult::ACCEPTED)
+            }
+            // The older query (deprecated for REQUEST_MESSAGE, still what PX4 answers): the
+            // id in param1, MESSAGE_INTERVAL to the one who asked.
+            MavCmd::GET_MESSAGE_INTERVAL => {
+                self.tell_interval(msg_id, request.from);
                 Response::done(MavResult::ACCEPTED)
             }
             MavCmd::REQUEST_MESSAGE => {
@@ -276,6 +271,23 @@ impl StreamScheduler {
             .filter(|s| s.interval.is_some())
             .map(|s| s.next)
             .min()
+    }
+
+    /// Queues MESSAGE_INTERVAL for message `of` (0 µs: not sent by this scheduler; -1: off).
+    fn tell_interval(&mut self, of: u32, target: Address) {
+        let interval_us = match self.streams.get(&of) {
+            None => 0,
+            Some(s) => s
+                .interval
+                .map_or(-1, |d| i32::try_from(d.as_micros()).unwrap_or(i32::MAX)),
+        };
+        self.out.push_back(Outgoing {
+            target,
+            message: MavMessage::MessageInterval(MessageInterval {
+                message_id: u16::try_from(of).unwrap_or(u16::MAX),
+                interval_us,
+            }),
+        });
     }
 
     /// Replies the scheduler builds itself (MESSAGE_INTERVAL). Call until `None` after

@@ -7,7 +7,8 @@ use core::time::Duration;
 
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::{
-    Attitude, AutopilotVersion, Heartbeat, MavMessage, MavResult, MessageInterval,
+    Attitude, AutopilotVersion, CommandLong, Heartbeat, MavCmd, MavMessage, MavResult,
+    MessageInterval,
 };
 use mavstack_services::command::{
     CommandClient, CommandError, CommandEvent, CommandHandler, Request, Response,
@@ -148,6 +149,28 @@ fn sim_set_interval_request_message_and_query_on_a_clean_link() {
             message_id: 30,
             interval_us: 100_000
         })
+    );
+    // The same by the older MAV_CMD_GET_MESSAGE_INTERVAL (510, what PX4 answers).
+    command(
+        &mut p,
+        mavstack_services::command::Command::Long(CommandLong {
+            command: MavCmd::GET_MESSAGE_INTERVAL,
+            param1: ATTITUDE as f32,
+            ..CommandLong::default()
+        }),
+    )
+    .unwrap();
+    p.drive_for(Duration::from_millis(50));
+    let got: Vec<_> = core::iter::from_fn(|| p.a.subs.poll_delivery())
+        .filter(|d| d.subscription == mi)
+        .map(|d| d.message)
+        .collect();
+    assert_eq!(
+        got,
+        [MavMessage::MessageInterval(MessageInterval {
+            message_id: 30,
+            interval_us: 100_000
+        })]
     );
     // A one-shot request: exactly one message.
     let av = p.a.subs.subscribe(AUTOPILOT_VERSION, None);

@@ -473,7 +473,14 @@ impl CommandHandler for Craft {
         let Params { p, lat, lon, z } = params_of(&request.command);
         match request.command.id() {
             MavCmd::SET_MESSAGE_INTERVAL if self.data_streams_only => done(MavResult::UNSUPPORTED),
-            MavCmd::SET_MESSAGE_INTERVAL | MavCmd::REQUEST_MESSAGE => self
+            // PX4 answers REQUEST_MESSAGE only for messages it has a stream of: not for
+            // MESSAGE_INTERVAL (244), which it gives for GET_MESSAGE_INTERVAL alone.
+            MavCmd::REQUEST_MESSAGE if self.autopilot == Autopilot::Px4 && p[0] == 244.0 => {
+                done(MavResult::DENIED)
+            }
+            MavCmd::SET_MESSAGE_INTERVAL
+            | MavCmd::REQUEST_MESSAGE
+            | MavCmd::GET_MESSAGE_INTERVAL => self
                 .streams
                 .handle_command(now, request)
                 .unwrap_or(done(MavResult::FAILED)),
