@@ -245,7 +245,7 @@ struct Arming {
 
 impl CommandHandler for Arming {
     fn handle_command(&mut self, _now: Instant, request: &Request) -> Response {
-        if request.command.id() == mavstack_dialects::common::MavCmd::COMPONENT_ARM_DISARM {
+        if request.command.id() == MavCmd::COMPONENT_ARM_DISARM {
             self.armed = true;
             Response::done(MavResult::ACCEPTED)
         } else {
