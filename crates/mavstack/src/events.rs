@@ -512,13 +512,15 @@ fn safe(s: &str) -> String {
         .collect()
 }
 
+/// The first bytes of an xz file.
+const XZ_MAGIC: &[u8] = &[0xfd, b'7', b'z', b'X', b'Z', 0];
+
 /// A metadata file as JSON bytes: unpacked when it is xz (as PX4 serves them), as it is
 /// otherwise.
 ///
 /// # Errors
 /// A damaged xz file, or one larger than [`MAX_UNPACKED`] once unpacked.
 pub fn unpack(bytes: &[u8]) -> Result<Vec<u8>, EventsError> {
-    const XZ_MAGIC: &[u8] = &[0xfd, b'7', b'z', b'X', b'Z', 0];
     if !bytes.starts_with(XZ_MAGIC) {
         return Ok(bytes.to_vec());
     }

@@ -1,7 +1,7 @@
 //! The `events` fuzz target's body: event metadata from a stranger (the vehicle serves it)
 //! read, unpacked and used to fill EVENTs, with properties beyond "no panic".
 
-use super::{Catalog, MAX_UNPACKED, events_uri, ftp_path, safe, unpack};
+use super::{Catalog, MAX_UNPACKED, XZ_MAGIC, events_uri, ftp_path, safe, unpack};
 
 /// Fuzzing entry point for event metadata: the input as a metadata file (xz or JSON), its
 /// tail (up to 40 bytes) as an EVENT's arguments. Properties:
@@ -18,7 +18,7 @@ pub fn fuzz_events(data: &[u8]) {
     let json = match unpack(data) {
         Ok(json) => {
             assert!(json.len() <= MAX_UNPACKED, "unpacked {} bytes", json.len());
-            if !data.starts_with(&[0xfd, b'7', b'z', b'X', b'Z', 0]) {
+            if !data.starts_with(XZ_MAGIC) {
                 assert_eq!(json, data, "a file that is not xz was changed");
             }
             json
