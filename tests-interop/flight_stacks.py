@@ -75,10 +75,10 @@ KEY = "a1" * 32
 PERIPHERAL_COMPID = 158  # MAV_COMP_ID_PERIPHERAL
 
 
-def run(argv, timeout=120):
+def run(argv, timeout=120, env=None):
     t = time.monotonic()
     try:
-        p = subprocess.run(argv, capture_output=True, text=True, timeout=timeout)
+        p = subprocess.run(argv, capture_output=True, text=True, timeout=timeout, env=env)
     except subprocess.TimeoutExpired:
         return None, "", "timed out after %d s" % timeout, time.monotonic() - t
     return p.returncode, p.stdout, p.stderr, time.monotonic() - t
@@ -315,8 +315,8 @@ class Runner:
     def pymavlink_scripts(self):
         """The scripts written for pymavlink (crates/mavstack-python/tests/pymavlink_scripts),
         each run with pymavlink, then unchanged with mavstack.mavutil in its place: the same
-        lines printed. arm_mode (pymavlink's ArduPilot helpers) on ArduPilot only; signing
-        last, the key removed after it."""
+        lines printed. arm_mode (pymavlink's ArduPilot helpers) and signing on ArduPilot
+        only; what a script changes is put back after each run."""
         scripts_dir = os.path.join(HERE, "..", "crates", "mavstack-python", "tests", "pymavlink_scripts")
         shim = os.path.join(scripts_dir, "run_with_mavstack.py")
         names = ["heartbeat.py", "attitude.py", "params.py", "mission.py", "interval.py"]
@@ -346,11 +346,7 @@ class Runner:
             outs = []
             for shimmed in (False, True):
                 argv = [sys.executable] + ([shim] if shimmed else []) + [os.path.join(scripts_dir, script), self.conn]
-                try:
-                    p = subprocess.run(argv, capture_output=True, text=True, timeout=120, env=env)
-                    outs.append((p.returncode, p.stdout, p.stderr))
-                except subprocess.TimeoutExpired:
-                    outs.append((None, "", "timed out"))
+                outs.append(run(argv, timeout=120, env=env)[:3])
                 if script == "arm_mode.py" and not modes and outs[-1][1].startswith("mode "):
                     modes.append(outs[-1][1].split()[1])
                 restore(script)
