@@ -59,13 +59,19 @@ class Vehicle:
         self.proc.stderr.close()
 
 
-def run(script, args, with_mavstack):
+def run_script(script, args, with_mavstack):
+    """The script run with pymavlink, or with mavstack's mavutil in its place; its process."""
     cmd = [sys.executable]
     if with_mavstack:
         cmd.append(SHIM)
     cmd += [os.path.join(SCRIPTS, script), *args]
     env = dict(os.environ, MAVLINK20="1", MAVLINK_DIALECT="ardupilotmega")
-    p = subprocess.run(cmd, capture_output=True, text=True, timeout=90, env=env)
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=90, env=env)
+
+
+def run(script, args, with_mavstack):
+    """The script's output; it must succeed."""
+    p = run_script(script, args, with_mavstack)
     who = "mavstack" if with_mavstack else "pymavlink"
     assert p.returncode == 0, "%s with %s failed (%d):\n%s%s" % (script, who, p.returncode, p.stdout, p.stderr)
     return p.stdout
@@ -115,10 +121,7 @@ def test_interval_on_the_px4_flavour_stops_as_on_px4():
     for with_mavstack in (False, True):
         port = free_port()
         with Vehicle("udpout:127.0.0.1:%d" % port, "--autopilot", "px4"):
-            cmd = [sys.executable] + ([SHIM] if with_mavstack else []) + [
-                os.path.join(SCRIPTS, "interval.py"), "udpin:127.0.0.1:%d" % port]
-            p = subprocess.run(cmd, capture_output=True, text=True, timeout=90,
-                               env=dict(os.environ, MAVLINK20="1", MAVLINK_DIALECT="ardupilotmega"))
+            p = run_script("interval.py", ["udpin:127.0.0.1:%d" % port], with_mavstack)
         outs.append((p.returncode, p.stdout, p.stderr.strip().splitlines()[-1:]))
     assert outs[0] == outs[1], outs
     assert outs[0][0] == 1 and outs[0][1] == "ack 511 result 0\n" and outs[0][2] == ["no MESSAGE_INTERVAL"], outs
