@@ -289,3 +289,21 @@ proptest::proptest! {
         let _ = events_uri(&bytes);
     }
 }
+
+/// A Backward Size of 0xFFFFFFFF in the footer (lzma-rs 0.3.0 adds 1 to it unchecked: a
+/// panic with overflow checks, found by the fuzz target) and one pointing before the file's
+/// start are refused as damaged; the file as packed still unpacks.
+#[test]
+fn a_footer_pointing_outside_the_file_is_refused() {
+    let json = br#"{"version": 1, "components": {}}"#;
+    let packed = pack(json);
+    assert_eq!(unpack(&packed).expect("as packed"), json);
+    let at = packed.len() - 8;
+    for backward in [u32::MAX, 1000] {
+        let mut damaged = packed.clone();
+        damaged[at..at + 4].copy_from_slice(&backward.to_le_bytes());
+        let e = unpack(&damaged).expect_err("a footer pointing outside");
+        assert!(e.to_string().contains("stream footer"), "{e}");
+    }
+    assert!(unpack(&packed[..packed.len() - 1]).is_err());
+}
