@@ -1,7 +1,11 @@
 #!/usr/bin/env bash
-# Routers side by side on loopback UDP, in one run of shared/peers/router_bench.py: a sender
+# Routers side by side on loopback UDP, in one run of a router benchmark harness: a sender
 # fans a telemetry mix out to two receivers through each router (rate ladder, CPU per frame,
-# added latency at 1 k frames/s). Measured:
+# added latency at 1 k frames/s). The harness is not part of this repository: $ROUTER_BENCH
+# names its router_bench.py, a Python program run with the test venv's python that takes
+# `--router 'NAME=COMMAND with {in} {out1} {out2}'`, `--preset mavproxy|mavrouter|mavlink-routerd`
+# (with `--python`, `--mavrouter`, `--mavlink-routerd` naming the programs), `--ref NAME`,
+# `--out FILE.json`, `--md FILE.md` and `--quick`. Measured:
 #   mavstack         mavstack router, plain links (one frame per datagram, like every router)
 #   mavstack-pack    the same with pack=true (frames already waiting for a peer share a datagram)
 #   mavstack-v1      pack=true, and output 1 is a version=1 link: every frame converted to MAVLink 1
@@ -14,12 +18,14 @@
 # scripts/router_bench_summary.py also counts frames that arrived converted (their
 # correctness is checked by tests-interop/router_interop.py against pymavlink).
 #
-#   bash scripts/bench-router.sh                       # 3 rounds (about 25 minutes)
-#   bash scripts/bench-router.sh --quick               # 1 round of 1 s steps (about 6 minutes)
+#   ROUTER_BENCH=/path/to/router_bench.py bash scripts/bench-router.sh           # 3 rounds (about 25 minutes)
+#   ROUTER_BENCH=/path/to/router_bench.py bash scripts/bench-router.sh --quick   # 1 round of 1 s steps (about 6 minutes)
 # Results: target/router-bench/{results.json,results.md}.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
+bench="${ROUTER_BENCH:-}"
+[ -f "$bench" ] || { echo "bench-router: set ROUTER_BENCH to the harness's router_bench.py (not part of this repository)" >&2; exit 1; }
 py="$(scripts/setup-peers.sh)"
 cargo build --release --locked -p mavstack-cli >&2
 tools="${ROUTER_TOOLS:-$root/target/router-tools}"
@@ -46,5 +52,5 @@ if [ -n "${MAVLINK_ROUTERD:-}" ]; then
 else
     args+=(--ref mavrouter)
 fi
-"$py" ../shared/peers/router_bench.py "${args[@]}" --out "$out/results.json" --md "$out/results.md" "$@"
+"$py" "$bench" "${args[@]}" --out "$out/results.json" --md "$out/results.md" "$@"
 "$py" scripts/router_bench_summary.py "$out/results.json" | tee -a "$out/results.md"

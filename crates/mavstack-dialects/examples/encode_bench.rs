@@ -1,5 +1,6 @@
-//! Encode throughput, the same work as the peers' encode benchmarks in `shared/peers/`
-//! (`c_bench --encode N [--sign]`, `rust-mavlink-bench --encode N [--sign]`): N messages,
+//! Encode throughput, the same work as the encode benchmarks of the peers'
+//! harness that `scripts/bench-peers.sh` runs (the C library's and rust-mavlink's,
+//! `--encode N [--sign]`; the harness is outside this repository): N messages,
 //! HEARTBEAT, ATTITUDE and GLOBAL_POSITION_INT in turn with the same field values, serialised
 //! as MAVLink 2 frames (signed with key 00..1f, link 0, when `--sign`) into a 1 MiB buffer
 //! that is reused when full. Prints `frames=N bytes=B seconds=S` (S: the encode loop only).
