@@ -1,7 +1,7 @@
 //! The run-time codec: random values round-trip for every message of the `all` dialect, short
 //! and long payloads decode as the protocol says, bad values are refused, and payloads agree
-//! byte for byte with pymavlink 2.4.50 (the python from `MAVSTACK_PYTHON`, default
-//! `/tmp/peers-venv/bin/python`; without pymavlink that test fails with instructions).
+//! byte for byte with pymavlink 2.4.50 (the python from `MAVSTACK_PYTHON`, default the
+//! workspace's `.venv/bin/python`; without pymavlink that test fails with instructions).
 
 mod support;
 

@@ -6,8 +6,8 @@
 //! pymavlink's side comes from `scripts/pymavlink_definitions.py`, which reads its generated
 //! python modules and its XML parser (and checks that they agree with each other and that
 //! pymavlink's XML files are byte-identical to `definitions/`). It runs once for all dialects.
-//! The python is `MAVSTACK_PYTHON` (default `/tmp/peers-venv/bin/python`); without pymavlink
-//! the tests fail with instructions.
+//! The python is `MAVSTACK_PYTHON` (default: the workspace's `.venv/bin/python`, made by
+//! `scripts/setup-peers.sh`); without pymavlink the tests fail with instructions.
 
 mod support;
 
