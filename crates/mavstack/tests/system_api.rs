@@ -5,7 +5,7 @@
 #![cfg(feature = "sim")]
 
 use core::time::Duration;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command as Process};
 
 use mavstack::channel::{FallbackReason, HandshakeResult};
@@ -151,27 +151,33 @@ async fn a_ground_station_finds_handshakes_and_operates_the_simulated_vehicle() 
 /// `tests-interop/lossy_relay.py` between `listen` and `forward`, dropping `loss` each way.
 struct Relay(Child);
 
+/// The peers' python, as the CLI's interop tests find it: `$MAVSTACK_PYTHON` (which
+/// `scripts/test.sh` exports), else the workspace's `.venv/bin/python` (made by
+/// `scripts/setup-peers.sh`). Missing, the relay fails to start and the test with it:
+/// another python is never taken in its place.
+fn peers_python(root: &Path) -> PathBuf {
+    std::env::var_os("MAVSTACK_PYTHON")
+        .filter(|p| !p.is_empty())
+        .map_or_else(|| root.join(".venv/bin/python"), PathBuf::from)
+}
+
 impl Relay {
     fn start(listen: u16, forward: u16, loss: f64) -> Self {
         let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-        let python = std::env::var_os("MAVSTACK_PYTHON").map_or_else(
-            || {
-                let venv = root.join(".venv/bin/python");
-                if venv.exists() {
-                    venv
-                } else {
-                    PathBuf::from("python3")
-                }
-            },
-            PathBuf::from,
-        );
-        let child = Process::new(python)
+        let python = peers_python(&root);
+        let child = Process::new(&python)
             .arg(root.join("tests-interop/lossy_relay.py"))
             .args(["--listen", &format!("127.0.0.1:{listen}")])
             .args(["--forward", &format!("127.0.0.1:{forward}")])
             .args(["--loss", &loss.to_string(), "--seed", "7"])
             .spawn()
-            .expect("python runs lossy_relay.py");
+            .unwrap_or_else(|e| {
+                panic!(
+                    "cannot run the peers' python {} ({e}): run scripts/setup-peers.sh (it makes \
+                     .venv) or set MAVSTACK_PYTHON",
+                    python.display()
+                )
+            });
         Self(child)
     }
 }
