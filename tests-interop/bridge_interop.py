@@ -73,6 +73,8 @@ except ImportError as e:  # a missing peer is a failure, never a skip
     sys.exit(1)
 
 FLEET, VID = "fleet1", "veh-7"
+# How long a wait for something that must come lasts: only what never comes fails.
+DEADLINE = 30
 PREFIX = "mav/%s/%s" % (FLEET, VID)
 
 
@@ -291,7 +293,8 @@ def user_props(props):
 
 def command(bin_):
     broker = Broker()
-    cli = Client(broker, ["replies/#"], "cloud")
+    heartbeats = "%s/1/1/HEARTBEAT" % PREFIX
+    cli = Client(broker, ["replies/#", heartbeats], "cloud")
     vport = free_port()
     vehicle = subprocess.Popen([bin_, "vehicle", "udpout:127.0.0.1:%d" % vport], stdin=subprocess.DEVNULL,
                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -302,12 +305,15 @@ def command(bin_):
         return None
     gcs = M.MAVLink(None, srcSystem=255, srcComponent=190)
     try:
-        time.sleep(1.5)  # the vehicle's first HEARTBEAT teaches the router its route
+        # The vehicle's HEARTBEAT teaches the router its route; published, it has been learned.
+        if not check(cli.wait(lambda t, p: t == heartbeats, DEADLINE) is not None,
+                     "no HEARTBEAT of the vehicle on %s within %d s" % (heartbeats, DEADLINE)):
+            return None
         arm = bytes(M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0).pack(gcs))
         t0 = time.monotonic()
         reply_topic = request(cli, "%s/1/1/@cmd" % PREFIX, arm, "arm-1")
-        got = cli.wait(lambda t, p: t == reply_topic, 5)
-        check(got is not None, "no reply to the ARM request within 5 s")
+        got = cli.wait(lambda t, p: t == reply_topic, DEADLINE)
+        check(got is not None, "no reply to the ARM request within %d s" % DEADLINE)
         summary = []
         if got:
             t, payload, qos, _, props, at = got
@@ -326,18 +332,20 @@ def command(bin_):
         lost = bytes(M.MAVLink_command_long_message(9, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0).pack(gcs))
         t0 = time.monotonic()
         reply_topic = request(cli, "%s/9/1/@cmd" % PREFIX, lost, "lost-1")
-        got = cli.wait(lambda t, p: t == reply_topic, 6)
-        check(got is not None, "no timeout reply for a command to nobody within 6 s")
+        got = cli.wait(lambda t, p: t == reply_topic, DEADLINE)
+        check(got is not None, "no timeout reply for a command to nobody within %d s" % DEADLINE)
         if got:
             waited = got[5] - t0
             check(got[1] == b"timeout" and user_props(got[4]).get("error") == "timeout",
                   "reply %r %r, expected b'timeout' with error=timeout" % (got[1], user_props(got[4])))
-            check(1.5 <= waited <= 4.0, "the timeout came after %.1f s (4 sends 0.5 s apart expected)" % waited)
+            # Only a lower bound: the bridge's timers never fire early, a busy machine only
+            # makes the reply later.
+            check(waited >= 1.5, "the timeout came after %.1f s, before the 4 sends 0.5 s apart" % waited)
             check(getattr(got[4], "CorrelationData", None) == b"lost-1", "timeout reply's correlation data")
             summary.append("no one -> timeout after %.1f s" % waited)
         # Key 1/2, frame to 1/1: refused at once.
         reply_topic = request(cli, "%s/1/2/@cmd" % PREFIX, arm, "bad-1")
-        got = cli.wait(lambda t, p: t == reply_topic, 3)
+        got = cli.wait(lambda t, p: t == reply_topic, DEADLINE)
         check(got is not None and user_props(got[4]).get("error") == "target_mismatch",
               "a key that does not match the target: %r" % ((got and (got[1], user_props(got[4]))),))
         summary.append("mismatched key -> target_mismatch")
