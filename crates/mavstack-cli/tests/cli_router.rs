@@ -60,19 +60,34 @@ fn free_tcp() -> u16 {
         .port()
 }
 
-fn recv_frames(sock: &UdpSocket, wait: Duration) -> Vec<Vec<u8>> {
-    sock.set_read_timeout(Some(wait)).unwrap();
+/// How long a test waits for a frame that must come: long enough for any machine, so that
+/// only a frame that never comes fails the test (and it fails instead of hanging).
+const DEADLINE: Duration = Duration::from_secs(30);
+
+/// The frames that reach `sock`, in order, up to and including the first one equal to `last`.
+/// A test that must see that something did not happen sends `last` after it: whatever the
+/// router sent before `last` has arrived by then.
+fn frames_until(sock: &UdpSocket, last: &[u8]) -> Vec<Vec<u8>> {
+    sock.set_read_timeout(Some(Duration::from_millis(100)))
+        .unwrap();
+    let deadline = Instant::now() + DEADLINE;
     let mut out = Vec::new();
     let mut buf = [0u8; 2048];
-    while let Ok(n) = sock.recv(&mut buf) {
+    while Instant::now() < deadline {
+        let Ok(n) = sock.recv(&mut buf) else {
+            continue;
+        };
         let mut rest = &buf[..n];
         while let Ok(f) = Frame::new_checked(rest) {
             let len = f.frame_len();
             out.push(rest[..len].to_vec());
+            if rest[..len] == *last {
+                return out;
+            }
             rest = &rest[len..];
         }
     }
-    out
+    panic!("the awaited frame did not come in {DEADLINE:?}; before it: {out:?}");
 }
 
 #[test]
@@ -164,18 +179,19 @@ fn mavlink_router_sample_configuration_runs_as_it_is() {
         "1".into(),
     ]);
     let (mut companion, _) = tcp.accept().unwrap();
-    // A vehicle sends into bravo (a UDP server endpoint).
+    // A vehicle sends into bravo (a UDP server endpoint), then a second HEARTBEAT: what the
+    // router sent charlie before the second is there when the second is.
     let vehicle = UdpSocket::bind("127.0.0.1:0").unwrap();
     let hb = frame(&Heartbeat::default(), 1, 0);
+    let next = frame(&Heartbeat::default(), 1, 1);
     vehicle.send_to(&hb, ("127.0.0.1", bravo)).unwrap();
+    vehicle.send_to(&next, ("127.0.0.1", bravo)).unwrap();
     assert_eq!(
-        recv_frames(&gcs, Duration::from_millis(500)),
-        vec![hb.clone()],
-        "charlie (udpout) gets it"
+        frames_until(&gcs, &next),
+        vec![hb.clone(), next],
+        "charlie (udpout) gets it, once"
     );
-    companion
-        .set_read_timeout(Some(Duration::from_secs(2)))
-        .unwrap();
+    companion.set_read_timeout(Some(DEADLINE)).unwrap();
     let mut got = vec![0u8; hb.len()];
     companion.read_exact(&mut got).unwrap();
     assert_eq!(got, hb, "delta (tcp client) gets it");
@@ -208,17 +224,24 @@ fn a_tcp_client_that_vanishes_and_comes_back_is_served_again() {
     for round in 0..3u8 {
         let mut client = TcpStream::connect(("127.0.0.1", port)).unwrap();
         let hb = frame(&Heartbeat::default(), 1, round);
+        let next = frame(&Heartbeat::default(), 1, 100 + round);
         // Half a frame, then the rest: a stream link reassembles it.
         client.write_all(&hb[..7]).unwrap();
         std::thread::sleep(Duration::from_millis(20));
         client.write_all(&hb[7..]).unwrap();
+        client.write_all(&next).unwrap();
         assert_eq!(
-            recv_frames(&listener, Duration::from_millis(500)),
-            vec![hb],
+            frames_until(&listener, &next),
+            vec![hb, next],
             "round {round}"
         );
-        drop(client);
-        std::thread::sleep(Duration::from_millis(100));
+        // The client goes away; the router closes its side once it has seen that.
+        client.shutdown(std::net::Shutdown::Write).unwrap();
+        client.set_read_timeout(Some(DEADLINE)).unwrap();
+        let mut rest = Vec::new();
+        client
+            .read_to_end(&mut rest)
+            .expect("the router closes a client that went away");
     }
     // A router endpoint that is not up yet: the router keeps trying (as mavlink-router does).
     let later = free_tcp();
@@ -231,11 +254,10 @@ fn a_tcp_client_that_vanishes_and_comes_back_is_served_again() {
     server.set_nonblocking(false).unwrap();
     let (mut conn, _) = server.accept().unwrap();
     let hb = frame(&Heartbeat::default(), 2, 0);
+    let next = frame(&Heartbeat::default(), 2, 1);
     conn.write_all(&hb).unwrap();
-    assert_eq!(
-        recv_frames(&listener, Duration::from_millis(1000)),
-        vec![hb]
-    );
+    conn.write_all(&next).unwrap();
+    assert_eq!(frames_until(&listener, &next), vec![hb, next]);
     router2.stop();
     router.stop();
 }
@@ -252,17 +274,36 @@ fn commands_pass_while_another_link_floods_and_bad_datagrams_cost_only_themselve
         "--stats".into(),
         "1".into(),
     ]);
-    let vehicle = UdpSocket::bind("127.0.0.1:0").unwrap();
-    vehicle
-        .send_to(&frame(&Heartbeat::default(), 1, 0), ("127.0.0.1", veh_port))
-        .unwrap();
+    // The ground station's HEARTBEAT, then the vehicle's until one reaches the ground station:
+    // the router knows both links (and the vehicle's system) before the first command.
     let gcs = UdpSocket::bind("127.0.0.1:0").unwrap();
     gcs.send_to(
         &frame(&Heartbeat::default(), 255, 0),
         ("127.0.0.1", gcs_port),
     )
     .unwrap();
-    std::thread::sleep(Duration::from_millis(100));
+    let vehicle = UdpSocket::bind("127.0.0.1:0").unwrap();
+    gcs.set_read_timeout(Some(Duration::from_millis(100)))
+        .unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    let mut buf = [0u8; 65536];
+    let mut seq = 0u8;
+    loop {
+        assert!(
+            Instant::now() < deadline,
+            "no vehicle HEARTBEAT reached the ground station"
+        );
+        vehicle
+            .send_to(
+                &frame(&Heartbeat::default(), 1, seq),
+                ("127.0.0.1", veh_port),
+            )
+            .unwrap();
+        if gcs.recv(&mut buf).is_ok() {
+            break;
+        }
+        seq = seq.wrapping_add(1);
+    }
     let stop = Arc::new(AtomicBool::new(false));
     let flood_sent = Arc::new(AtomicU64::new(0));
     let flooding = {
@@ -288,7 +329,6 @@ fn commands_pass_while_another_link_floods_and_bad_datagrams_cost_only_themselve
     vehicle
         .set_read_timeout(Some(Duration::from_millis(100)))
         .unwrap();
-    let mut buf = [0u8; 65536];
     for i in 0..50u16 {
         if i == 10 {
             let hb = frame(&Heartbeat::default(), 255, 1);
@@ -300,7 +340,7 @@ fn commands_pass_while_another_link_floods_and_bad_datagrams_cost_only_themselve
         }
         let cmd = frame(&command_to(1, 1000 + i), 255, u8::try_from(i).unwrap());
         gcs.send_to(&cmd, ("127.0.0.1", gcs_port)).unwrap();
-        let deadline = Instant::now() + Duration::from_secs(20);
+        let deadline = Instant::now() + DEADLINE;
         let mut found = false;
         while !found && Instant::now() < deadline {
             let Ok(n) = vehicle.recv(&mut buf) else {
@@ -352,23 +392,21 @@ fn two_ground_stations_on_one_udp_port_each_get_answers_at_their_own_address() {
         frame(&Heartbeat::default(), 254, 0),
         frame(&Heartbeat::default(), 255, 0),
     );
+    // On loopback a datagram is in the router's socket when send_to returns: the router reads
+    // a's HEARTBEAT first and knows a when b's comes.
     a.send_to(&ha, ("127.0.0.1", port)).unwrap();
-    std::thread::sleep(Duration::from_millis(50));
     b.send_to(&hb, ("127.0.0.1", port)).unwrap();
-    assert_eq!(
-        recv_frames(&a, Duration::from_millis(300)),
-        vec![hb.clone()],
-        "a sees b"
-    );
+    assert_eq!(frames_until(&a, &hb), vec![hb.clone()], "a sees b");
     a.send_to(&ha, ("127.0.0.1", port)).unwrap();
+    assert_eq!(frames_until(&b, &ha), vec![ha], "b sees a");
+    // b answers after a's frame has gone through the router: anything the router sent back
+    // to a would be there before b's answer.
+    let answer = frame(&Heartbeat::default(), 255, 1);
+    b.send_to(&answer, ("127.0.0.1", port)).unwrap();
     assert_eq!(
-        recv_frames(&b, Duration::from_millis(300)),
-        vec![ha],
-        "b sees a"
-    );
-    assert!(
-        recv_frames(&a, Duration::from_millis(100)).is_empty(),
-        "nothing back to a"
+        frames_until(&a, &answer),
+        vec![answer],
+        "nothing back to a before b's next frame"
     );
     router.stop();
 }
