@@ -20,7 +20,9 @@
 //! **Server** ([`MissionServer`]) stores the three plans. An upload replaces a plan only
 //! when it is complete (atomic); out-of-sequence items are dropped and the expected one is
 //! re-requested; a MISSION_ACK(OPERATION_CANCELLED) or a timeout abandons it and leaves the
-//! stored plan unchanged. Downloads are answered statelessly from the stored plan.
+//! stored plan unchanged. When it asks again for an item that did not come, and when it gives
+//! up, is its [`UploadPacing`]: by the measured round trip, or at fixed times as ArduPilot.
+//! Downloads are answered statelessly from the stored plan.
 
 use alloc::collections::VecDeque;
 use alloc::vec::Vec;
@@ -52,6 +54,48 @@ pub struct MissionConfig {
     pub retries: u8,
     /// How the server answers an item it did not ask for.
     pub stray_items: StrayItems,
+    /// When the server asks again for an item that did not come, and when it gives an
+    /// upload up.
+    pub pacing: UploadPacing,
+}
+
+/// When a [`MissionServer`] asks again for an item that did not come, and when it gives an
+/// upload up.
+///
+/// A ground station that answers every request, the repeated ones too (MAVProxy does), sends
+/// an item twice when the server asked again while the first answer was on its way; the
+/// server takes the first and finds the copy out of sequence ([`StrayItems`]). How soon it
+/// asks again decides how slow a ground station may be before that happens.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum UploadPacing {
+    /// Ask again after the measured round trip (`srtt + 4 × rttvar`, at least 20 ms, at most
+    /// [`MissionConfig::item_timeout`]), backing off to `item_timeout`; give up after
+    /// [`MissionServer::patience`] without an item, saying nothing.
+    #[default]
+    Adaptive,
+    /// Ask again `every` after the last request however long the round trip, and give up
+    /// `give_up_after` without an item, telling the ground station with MISSION_ACK
+    /// MAV_MISSION_OPERATION_CANCELLED. ArduPilot paces its uploads so, with 1 s (plus the
+    /// link's stream slow-down, 0 on a network link) and 8 s.
+    Fixed {
+        /// The time from one request to the next for the same item.
+        every: Duration,
+        /// The longest an upload goes without an item (or its count) before it is given up.
+        give_up_after: Duration,
+    },
+}
+
+impl UploadPacing {
+    /// The wait for an answer to a request sent for the first time.
+    fn first_wait(self, rtt: &Rtt, item_timeout: Duration) -> Duration {
+        match self {
+            Self::Adaptive => rtt.timeout(item_timeout),
+            Self::Fixed {
+                every,
+                give_up_after,
+            } => every.min(give_up_after),
+        }
+    }
 }
 
 /// How a [`MissionServer`] answers an item it did not ask for.
@@ -63,8 +107,8 @@ pub enum StrayItems {
     #[default]
     Reask,
     /// As ArduPilot: during an upload, MISSION_ACK MAV_MISSION_INVALID_SEQUENCE with the
-    /// upload left open (the wanted item is asked for again when the item timeout comes;
-    /// ArduPilot asks about a second later); outside one, MISSION_ACK MAV_MISSION_ERROR, also
+    /// upload left open (the wanted item is asked for again when the [`UploadPacing`] says;
+    /// ArduPilot asks a second after its last request); outside one, MISSION_ACK MAV_MISSION_ERROR, also
     /// to the last item of an upload that ended and whose ACK was lost.
     ArduPilot,
 }
@@ -76,6 +120,7 @@ impl Default for MissionConfig {
             item_timeout: Duration::from_millis(250),
             retries: 5,
             stray_items: StrayItems::Reask,
+            pacing: UploadPacing::Adaptive,
         }
     }
 }
@@ -1049,13 +1094,17 @@ impl MissionServer {
         true
     }
 
-    /// How long an upload may go without an item before it is abandoned: `timeout ×
-    /// (retries + 1)`, 9 s by default (ArduPilot allows about 8 s). Ground stations such as
-    /// MAVProxy never resend an item, so the server's re-requests (which back off from the
-    /// measured round trip to `item_timeout`) are all that moves a lossy upload on.
+    /// How long an upload may go without an item before it is abandoned: with
+    /// [`UploadPacing::Adaptive`] `timeout × (retries + 1)`, 9 s by default; with
+    /// [`UploadPacing::Fixed`] its `give_up_after` (ArduPilot: 8 s). Ground stations such as
+    /// MAVProxy never resend an item, so the server's re-requests are all that moves a lossy
+    /// upload on.
     #[must_use]
     pub fn patience(&self) -> Duration {
-        self.config.timeout * (u32::from(self.config.retries) + 1)
+        match self.config.pacing {
+            UploadPacing::Adaptive => self.config.timeout * (u32::from(self.config.retries) + 1),
+            UploadPacing::Fixed { give_up_after, .. } => give_up_after,
+        }
     }
 
     /// Whether an upload is in progress.
@@ -1116,7 +1165,11 @@ impl MissionServer {
             // 65,535 items), and the list grows as items really arrive.
             items: Vec::with_capacity(usize::from(c.count).min(PREALLOCATED_ITEMS)),
             attempts: 1,
-            deadline: now + self.rtt.timeout(self.config.item_timeout),
+            deadline: now
+                + self
+                    .config
+                    .pacing
+                    .first_wait(&self.rtt, self.config.item_timeout),
             sent: now,
             resent: false,
             progress_at: now,
@@ -1161,7 +1214,11 @@ impl MissionServer {
             self.rtt.sample(r.sent, now);
         }
         r.attempts = 1;
-        r.deadline = now + self.rtt.timeout(self.config.item_timeout);
+        r.deadline = now
+            + self
+                .config
+                .pacing
+                .first_wait(&self.rtt, self.config.item_timeout);
         (r.sent, r.resent) = (now, false);
         r.progress_at = now;
         if r.items.len() < usize::from(r.count) {
@@ -1371,21 +1428,36 @@ impl Service for MissionServer {
     fn handle_timeout(&mut self, now: Instant) {
         let retries = self.config.retries;
         let patience = self.patience();
+        let pacing = self.config.pacing;
         let Some(r) = self.receiving.as_mut().filter(|r| now >= r.deadline) else {
             return;
         };
-        if r.attempts > retries && now.saturating_duration_since(r.progress_at) >= patience {
-            let ty = r.mission_type;
+        let quiet = now.saturating_duration_since(r.progress_at) >= patience;
+        let give_up = match pacing {
+            UploadPacing::Adaptive => r.attempts > retries && quiet,
+            UploadPacing::Fixed { .. } => quiet,
+        };
+        if give_up {
+            let (peer, ty) = (r.peer, r.mission_type);
             self.receiving = None;
+            if let UploadPacing::Fixed { .. } = pacing {
+                let cancelled = MavMissionResult::MAV_MISSION_OPERATION_CANCELLED;
+                self.send(peer, ack(peer, ty, cancelled));
+            }
             self.events
                 .push_back(MissionServerEvent::UploadAbandoned { mission_type: ty });
             return;
         }
         r.attempts = r.attempts.saturating_add(1);
-        let wait = self.rtt.backoff(self.config.item_timeout, r.attempts);
-        r.deadline = (now + wait)
-            .min(r.progress_at + patience)
-            .max(now + Rtt::FLOOR);
+        r.deadline = match pacing {
+            UploadPacing::Adaptive => {
+                let wait = self.rtt.backoff(self.config.item_timeout, r.attempts);
+                (now + wait)
+                    .min(r.progress_at + patience)
+                    .max(now + Rtt::FLOOR)
+            }
+            UploadPacing::Fixed { every, .. } => (now + every).min(r.progress_at + patience),
+        };
         (r.sent, r.resent) = (now, true);
         let (peer, ty) = (r.peer, r.mission_type);
         let seq = u16::try_from(r.items.len()).unwrap_or(u16::MAX);
