@@ -75,6 +75,41 @@ use mavstack_services::{Address, Outgoing, Service};
 use self::flight::{Flight, FlightEvent, HOME_AMSL, Position, Tuning};
 use self::modes::{Behaviour, Mode};
 
+/// The vehicle's clock: the time since it started, which it reads as a flight stack reads
+/// the time since its boot. Every time field it sends comes from here, never from the
+/// driver's [`Instant`] itself, whose epoch is the driver's choice (the transport's clock
+/// counts from the Unix epoch).
+#[derive(Clone, Copy, Debug)]
+struct Boot(Instant);
+
+impl Boot {
+    fn since(self, now: Instant) -> Duration {
+        now.saturating_duration_since(self.0)
+    }
+
+    /// Milliseconds since boot for a `time_boot_ms` field: it wraps after 49.7 days, as
+    /// ArduPilot's and PX4's 32-bit millisecond counters do.
+    fn ms(self, now: Instant) -> u32 {
+        // Truncation is the wrap.
+        self.since(now).as_millis() as u32
+    }
+
+    /// Microseconds since boot for a `time_usec` field.
+    fn us(self, now: Instant) -> u64 {
+        u64::try_from(self.since(now).as_micros()).unwrap_or(u64::MAX)
+    }
+
+    /// What turns the driver's time in nanoseconds into nanoseconds since boot (TIMESYNC's
+    /// [`TimesyncConfig::clock_offset_ns`]): ArduPilot and PX4 answer TIMESYNC with their
+    /// time since boot.
+    fn timesync_offset_ns(self) -> i64 {
+        i64::try_from(self.0.as_micros())
+            .unwrap_or(i64::MAX)
+            .saturating_mul(1_000)
+            .saturating_neg()
+    }
+}
+
 /// Peers that appear later than this after the start get a HEARTBEAT of their own.
 const GREETING_AFTER: Duration = Duration::from_millis(100);
 
@@ -170,6 +205,8 @@ struct Craft {
     data_streams_only: bool,
     /// EVENTs to send (the PX4 flavour says why it refuses in them).
     events: events::Events,
+    /// Its clock, for the time fields of what it sends.
+    boot: Boot,
 }
 
 /// The numeric params of a command: p1–p4, latitude and longitude in degrees (`None` when
@@ -297,8 +334,7 @@ impl Craft {
     /// The message `msg_id` as the craft is now.
     fn message(&self, now: Instant, msg_id: u32) -> Option<MavMessage> {
         let f = &self.flight;
-        let boot_us = now.as_micros();
-        let boot_ms = u32::try_from(boot_us / 1000).unwrap_or(u32::MAX);
+        let (boot_us, boot_ms) = (self.boot.us(now), self.boot.ms(now));
         let here = f.position();
         let [vn, ve, vd] = f.velocity();
         let ground_speed = vn.hypot(ve);
@@ -502,9 +538,9 @@ impl CommandHandler for Craft {
                             done(MavResult::FAILED)
                         }
                         Autopilot::Px4 => {
-                            let boot_ms = u32::try_from(now.as_micros() / 1000).unwrap_or(u32::MAX);
                             let left = self.ready_at.saturating_duration_since(now);
-                            self.events.arm_refused(boot_ms, left.as_secs_f32());
+                            self.events
+                                .arm_refused(self.boot.ms(now), left.as_secs_f32());
                             done(MavResult::TEMPORARILY_REJECTED)
                         }
                     };
@@ -670,6 +706,7 @@ impl Vehicle {
             ready_at: now + config.estimator_settle,
             data_streams_only: config.data_streams_only,
             events: events::Events::default(),
+            boot: Boot(now),
         };
         let mut vehicle = Self {
             own: config.own,
@@ -680,6 +717,7 @@ impl Vehicle {
             missions: MissionServer::new(config.own, mission_config(config.autopilot)),
             timesync: Timesync::new(TimesyncConfig {
                 interval: None,
+                clock_offset_ns: Boot(now).timesync_offset_ns(),
                 ..TimesyncConfig::default()
             }),
             out: VecDeque::new(),
