@@ -66,7 +66,9 @@ use mavstack_services::command::{Command, CommandHandler, CommandServer, Request
 use mavstack_services::ftp::param_pck::TableFile;
 use mavstack_services::ftp::{DirBackend, FtpServer, Overlay, ServerConfig};
 use mavstack_services::log_transfer::{LogServer, LogServerEvent};
-use mavstack_services::mission::{MissionConfig, MissionServer, MissionServerEvent, StrayItems};
+use mavstack_services::mission::{
+    MissionConfig, MissionServer, MissionServerEvent, StrayItems, UploadPacing,
+};
 use mavstack_services::param::{Encoding, Name, ParamServer, ParamServerEvent, Value};
 use mavstack_services::stream::{self, Interval, StreamScheduler, request_message};
 use mavstack_services::timesync::{Timesync, TimesyncConfig};
@@ -167,15 +169,37 @@ const STREAMS: &[(u32, Option<Duration>)] = &[
     (ExtendedSysState::ID, Some(Duration::from_secs(1))),
 ];
 
-/// The mission server's answers to items it did not ask for: the ArduPilot flavour's are
-/// ArduPilot's (INVALID_SEQUENCE during an upload, ERROR outside one).
+/// ArduPilot asks again for a mission item it has not received 1 s after its last request
+/// (`wp_recv_timeout_ms = 1000U + link->get_stream_slowdown_ms()`, the slow-down 0 on a
+/// network link: libraries/GCS_MAVLink/MissionItemProtocol.cpp:407-411, ArduPilot master as
+/// of October 2025).
+const ARDUPILOT_REREQUEST: Duration = Duration::from_secs(1);
+
+/// ArduPilot gives an upload up 8 s after the last item (or count) it received, and sends
+/// MISSION_ACK MAV_MISSION_OPERATION_CANCELLED (`upload_timeout_ms = 8000`:
+/// libraries/GCS_MAVLink/MissionItemProtocol.h:95, used in MissionItemProtocol.cpp:391-404).
+const ARDUPILOT_UPLOAD_TIMEOUT: Duration = Duration::from_secs(8);
+
+/// The mission server as each flavour's autopilot runs it. The ArduPilot flavour's answers to
+/// items it did not ask for are ArduPilot's (INVALID_SEQUENCE during an upload,
+/// MissionItemProtocol.cpp:272-275; ERROR outside one), and so are its timings: a
+/// ground station slower than the measured round trip is not asked twice (MAVProxy answers
+/// both requests, and the copy is refused). The PX4 flavour keeps the round-trip pacing (PX4
+/// asks again after 250 ms).
 fn mission_config(autopilot: Autopilot) -> MissionConfig {
-    let stray_items = match autopilot {
-        Autopilot::Ardupilot => StrayItems::ArduPilot,
-        Autopilot::Px4 => StrayItems::Reask,
+    let (stray_items, pacing) = match autopilot {
+        Autopilot::Ardupilot => (
+            StrayItems::ArduPilot,
+            UploadPacing::Fixed {
+                every: ARDUPILOT_REREQUEST,
+                give_up_after: ARDUPILOT_UPLOAD_TIMEOUT,
+            },
+        ),
+        Autopilot::Px4 => (StrayItems::Reask, UploadPacing::Adaptive),
     };
     MissionConfig {
         stray_items,
+        pacing,
         ..MissionConfig::default()
     }
 }
