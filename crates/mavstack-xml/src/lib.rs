@@ -31,6 +31,11 @@
 //! # Ok::<(), mavstack_xml::Error>(())
 //! ```
 //!
+//! ## Features
+//! - `json`: frames as JSON lines ([`json`]).
+//! - `fuzzing`: for the fuzz targets and the seed-corpus tests only; not a stable API
+//!   (`fuzz_dialect_xml`, `json::fuzz_json_frames`).
+//!
 //! MSRV: Rust 1.95.
 #![forbid(unsafe_code)]
 
@@ -47,7 +52,8 @@ mod xml;
 
 pub use error::{Error, ErrorKind, Location};
 pub use loader::{
-    Builtin, EVENTS_SUPPLEMENT, FileSystem, Loader, PROTOCOL_VERSION_SUPPLEMENT, Source,
+    Builtin, EVENTS_SUPPLEMENT, FileSystem, Loader, PROTOCOL_VERSION_SUPPLEMENT,
+    STANDARD_MODES_SUPPLEMENT, Source,
 };
 pub use model::{
     Deprecation, Dialect, Entry, EntryParam, Enum, Field, FieldType, FileInfo, Message,
@@ -94,6 +100,7 @@ pub fn load(name: &str) -> Result<Dialect, Error> {
 /// full length, and decode from that encoding to the same values (compared as their
 /// encoding, so a NaN equals itself). Errors while loading are the expected outcome; a
 /// broken round trip panics.
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub fn fuzz_dialect_xml(data: &[u8]) {
     struct OneFile<'a>(&'a str);

@@ -6,12 +6,15 @@
 //! ## Supplements
 //! A supplement is a definition file merged into another file of a given name whenever the
 //! dialect does not define the supplement's messages itself. The loaders made by
-//! [`Loader::builtin`] and [`Loader::filesystem`] register two, both merged into
+//! [`Loader::builtin`] and [`Loader::filesystem`] register three, all merged into
 //! `common.xml`, so `common` and every dialect that includes it have their messages:
 //! mavstack's `extras/protocol_version.xml` (PROTOCOL_VERSION, id 300, dropped from the
 //! newest official `common.xml`: the version handshake's reply) and `extras/events.xml` (the
 //! events protocol, ids 410–413, and COMPONENT_METADATA, 397, which the official
-//! `common.xml` mavstack vendors lacks: PX4 says why it refuses a command in EVENT messages).
+//! `common.xml` mavstack vendors lacks: PX4 says why it refuses a command in EVENT messages),
+//! and `extras/standard_modes.xml` (AVAILABLE_MODES, CURRENT_MODE, AVAILABLE_MODES_MONITOR,
+//! ids 435–437, only in the vendored `development.xml`, while the flight stacks send them
+//! with the common set: how a vehicle lists its modes).
 
 use std::collections::{HashMap, HashSet};
 use std::path::{Component, Path, PathBuf};
@@ -90,9 +93,13 @@ pub const PROTOCOL_VERSION_SUPPLEMENT: &str = "extras/protocol_version.xml";
 /// COMPONENT_METADATA) among the built-in files.
 pub const EVENTS_SUPPLEMENT: &str = "extras/events.xml";
 
+/// The path of mavstack's own definition of the standard modes protocol's messages
+/// (AVAILABLE_MODES, CURRENT_MODE, AVAILABLE_MODES_MONITOR) among the built-in files.
+pub const STANDARD_MODES_SUPPLEMENT: &str = "extras/standard_modes.xml";
+
 impl Loader<Builtin> {
-    /// A loader over the built-in definitions, with the PROTOCOL_VERSION and events
-    /// supplements.
+    /// A loader over the built-in definitions, with the PROTOCOL_VERSION, events and
+    /// standard modes supplements.
     #[must_use]
     pub fn builtin() -> Self {
         Self::new(Builtin).with_standard_supplements()
@@ -100,7 +107,8 @@ impl Loader<Builtin> {
 }
 
 impl Loader<FileSystem> {
-    /// A loader over the file system, with the PROTOCOL_VERSION and events supplements.
+    /// A loader over the file system, with the PROTOCOL_VERSION, events and standard modes
+    /// supplements.
     #[must_use]
     pub fn filesystem() -> Self {
         Self::new(FileSystem).with_standard_supplements()
@@ -118,7 +126,11 @@ impl<S: Source> Loader<S> {
     }
 
     fn with_standard_supplements(mut self) -> Self {
-        for name in [PROTOCOL_VERSION_SUPPLEMENT, EVENTS_SUPPLEMENT] {
+        for name in [
+            PROTOCOL_VERSION_SUPPLEMENT,
+            EVENTS_SUPPLEMENT,
+            STANDARD_MODES_SUPPLEMENT,
+        ] {
             let text = builtin::file(name).unwrap_or_default();
             // The built-in supplements are ours and covered by tests; a parse failure here
             // would be a bug in this crate, so it is dropped rather than failing every load.
@@ -258,14 +270,19 @@ impl<S: Source> Loader<S> {
                 .map(|n| n.to_string_lossy().into_owned())
                 .unwrap_or_default();
             for s in &self.supplements {
+                // A message the dialect defines itself exactly as the supplement does (the
+                // vendored development.xml's AVAILABLE_MODES) is no conflict: the
+                // supplement's copy comes first and the file's own is taken as the same.
                 let lacks_all = s.decls.messages.iter().all(|m| {
-                    !defined_ids.contains(&m.id) && !defined_names.contains(m.name.as_str())
+                    let defined =
+                        defined_ids.contains(&m.id) || defined_names.contains(m.name.as_str());
+                    !defined || identical_elsewhere(order, m)
                 });
                 if s.target == file_name && lacks_all {
                     // The supplement's items belong to the file they are merged into, so that
                     // generated code puts them beside that file's own; locations keep the
                     // supplement's path.
-                    merger.add(path, &s.decls)?;
+                    merger.add_supplement(path, &s.decls)?;
                 }
             }
             let dir = path.parent().unwrap_or(Path::new(""));
@@ -317,8 +334,35 @@ impl<S: Source> Loader<S> {
     }
 }
 
+/// Whether every definition of `m`'s id or name in `order` is the same message as `m`
+/// (name, id, wire layout and CRC_EXTRA).
+fn identical_elsewhere(order: &[(PathBuf, Arc<FileDecls>)], m: &xml::MessageDecl) -> bool {
+    let Ok(ours) = layout::layout(m.clone(), Path::new("")) else {
+        return false;
+    };
+    order
+        .iter()
+        .flat_map(|(path, d)| d.messages.iter().map(move |x| (path, x)))
+        .filter(|(_, x)| x.id == m.id || x.name == m.name)
+        .all(|(path, x)| {
+            layout::layout(x.clone(), path).is_ok_and(|theirs| same_message(&ours, &theirs))
+        })
+}
+
+/// Whether two messages are the same on the wire.
+fn same_message(a: &Message, b: &Message) -> bool {
+    a.id == b.id
+        && a.name == b.name
+        && a.crc_extra == b.crc_extra
+        && a.min_len == b.min_len
+        && a.max_len == b.max_len
+}
+
 #[derive(Default)]
 struct Merger {
+    /// Ids of the messages a supplement added: the same message defined again by a file is
+    /// taken as that one.
+    supplied: HashSet<u32>,
     messages: Vec<Message>,
     enums: Vec<Enum>,
     by_id: HashMap<u32, usize>,
@@ -336,6 +380,9 @@ impl Merger {
             let message = layout::layout(m.clone(), owner)?;
             if let Some(&i) = self.by_id.get(&message.id) {
                 let other = &self.messages[i];
+                if self.supplied.contains(&message.id) && same_message(other, &message) {
+                    continue;
+                }
                 return Err(Error::new(
                     message.location.clone(),
                     ErrorKind::DuplicateMessageId {
@@ -363,6 +410,13 @@ impl Merger {
                 .insert(message.name.clone(), self.messages.len());
             self.messages.push(message);
         }
+        Ok(())
+    }
+
+    /// Adds a supplement's `decls` as declarations of the file `owner`.
+    fn add_supplement(&mut self, owner: &Path, decls: &FileDecls) -> Result<(), Error> {
+        self.add(owner, decls)?;
+        self.supplied.extend(decls.messages.iter().map(|m| m.id));
         Ok(())
     }
 

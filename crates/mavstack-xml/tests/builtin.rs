@@ -66,6 +66,11 @@ fn crc_extra_anchors_for_common() {
         ("CURRENT_EVENT_SEQUENCE", 411, 106, 3),
         ("REQUEST_EVENT", 412, 33, 6),
         ("RESPONSE_EVENT_ERROR", 413, 77, 7),
+        // extras/standard_modes.xml: as pymavlink 2.4.50 generates them from the official
+        // development.xml (MAVLink_available_modes_message.crc_extra and its neighbours).
+        ("AVAILABLE_MODES", 435, 134, 46),
+        ("CURRENT_MODE", 436, 193, 9),
+        ("AVAILABLE_MODES_MONITOR", 437, 30, 1),
     ];
     for &(name, id, crc, min) in anchors {
         let m = common

@@ -198,6 +198,9 @@ fn protocol_version_supplement_only_with_the_standard_loaders() {
             (411, "CURRENT_EVENT_SEQUENCE"),
             (412, "REQUEST_EVENT"),
             (413, "RESPONSE_EVENT_ERROR"),
+            (435, "AVAILABLE_MODES"),
+            (436, "CURRENT_MODE"),
+            (437, "AVAILABLE_MODES_MONITOR"),
         ]
     );
     let pv = with.message(300).expect("PROTOCOL_VERSION");
@@ -225,7 +228,7 @@ fn protocol_version_supplement_only_with_the_standard_loaders() {
         .messages
         .iter()
         .map(|m| m.name.as_str())
-        .filter(|n| !n.contains("EVENT") && *n != "COMPONENT_METADATA")
+        .filter(|n| !n.contains("EVENT") && *n != "COMPONENT_METADATA" && !n.contains("_MODE"))
         .collect();
     assert_eq!(names, ["MY_VERSION"]);
     assert!(d.message(410).is_some());

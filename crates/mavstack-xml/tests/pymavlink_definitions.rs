@@ -327,23 +327,34 @@ fn every_builtin_dialect_matches_pymavlink() {
             .get(name)
             .unwrap_or_else(|| panic!("pymavlink has no dialect {name}"));
         let extra = compare_dialect(name, &ours, theirs, &mut problems);
-        // Our only additions: the PROTOCOL_VERSION and events supplements, in every dialect
-        // with common.xml.
-        let includes_common = ours.files.iter().any(|f| f.path.ends_with("common.xml"));
-        let expected: Vec<(u32, String)> = if includes_common {
-            [
-                (300, "PROTOCOL_VERSION"),
-                (397, "COMPONENT_METADATA"),
-                (410, "EVENT"),
-                (411, "CURRENT_EVENT_SEQUENCE"),
-                (412, "REQUEST_EVENT"),
-                (413, "RESPONSE_EVENT_ERROR"),
-            ]
-            .map(|(id, name)| (id, name.to_owned()))
-            .to_vec()
-        } else {
-            Vec::new()
-        };
+        // Our only additions: the PROTOCOL_VERSION, events and standard modes supplements,
+        // in every dialect with common.xml (the standard modes' messages only where the
+        // dialect lacks development.xml, which defines them the same way).
+        let includes = |file: &str| ours.files.iter().any(|f| f.path.ends_with(file));
+        let mut expected: Vec<(u32, String)> = Vec::new();
+        if includes("common.xml") {
+            expected.extend(
+                [
+                    (300, "PROTOCOL_VERSION"),
+                    (397, "COMPONENT_METADATA"),
+                    (410, "EVENT"),
+                    (411, "CURRENT_EVENT_SEQUENCE"),
+                    (412, "REQUEST_EVENT"),
+                    (413, "RESPONSE_EVENT_ERROR"),
+                ]
+                .map(|(id, name)| (id, name.to_owned())),
+            );
+            if !includes("development.xml") {
+                expected.extend(
+                    [
+                        (435, "AVAILABLE_MODES"),
+                        (436, "CURRENT_MODE"),
+                        (437, "AVAILABLE_MODES_MONITOR"),
+                    ]
+                    .map(|(id, name)| (id, name.to_owned())),
+                );
+            }
+        }
         if extra != expected {
             problems.push(format!(
                 "{name}: messages pymavlink lacks: {extra:?}, expected {expected:?}"
