@@ -229,7 +229,7 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
     } else {
         let mut progress = crate::progress::Progress::new("decoding", input_len);
         let mut parse_counts = Counts::default();
-        let stats = crate::log_reader::raw_items(
+        let stats = mavstack_transport::raw::read_items(
             &mut input,
             table,
             |item| handle(item, None, &mut parse_counts),

@@ -54,10 +54,12 @@ use mavstack_transport::{ConnSpec, clock};
 use tokio::sync::mpsc;
 use tokio::time::Instant;
 
-use crate::gcs_cmd::{command_name, result_name, set_param, value_text};
 use crate::link_cmd::runtime;
+use crate::remote::value_text;
 use crate::vehicle_cmd::{Log, say, version_name};
-use crate::{Failure, other};
+use crate::{Failure, fail, other};
+use anyhow::Context as _;
+use mavstack::system::{command_name, result_name};
 use mavstack_sim::Autopilot;
 use mavstack_sim::flight;
 
@@ -577,20 +579,22 @@ impl Peripheral {
 /// Step 9: the rangefinder's telemetry, asked for in signed MAVLink 2, sent in MAVLink 1, seen
 /// signed: the vehicle converts both ways.
 async fn peripheral_stream(timeline: &Timeline, ground: &mut Ground) -> Result<(), Failure> {
-    let mut rangefinder = System::wait(
+    let rangefinder = System::wait(
         &ground.handle,
         Wanted::System(PERIPHERAL.0, Some(PERIPHERAL.1)),
         Duration::from_secs(3),
     )
     .await
-    .map_err(other)?;
+    .map_err(fail)?;
     timeline.say(
         "ground station → SET_MESSAGE_INTERVAL(DISTANCE_SENSOR, 100 ms) to the rangefinder 1/158, signed MAVLink 2",
     );
     let ack = rangefinder
+        .commands()
         .set_message_interval(DistanceSensor::ID, Some(Duration::from_millis(100)))
         .await
-        .map_err(|e| other(format!("demo step failed: the rangefinder's stream: {e}")))?;
+        .context("demo step failed: the rangefinder's stream")
+        .map_err(Failure::Other)?;
     timeline.say(format!(
         "ground station ← COMMAND_ACK {} from the rangefinder",
         result_name(ack.result)
@@ -652,24 +656,28 @@ fn demo_mission() -> Vec<MissionItemInt> {
 /// parameter set, a mission uploaded and read back.
 async fn services(timeline: &Timeline, node: &NodeHandle) -> Result<(), Failure> {
     let since = |began: Instant| began.elapsed().as_secs_f64() * 1000.0;
-    let mut vehicle = System::wait(node, Wanted::System(1, Some(1)), Duration::from_secs(3))
+    let vehicle = System::wait(node, Wanted::System(1, Some(1)), Duration::from_secs(3))
         .await
-        .map_err(other)?;
+        .map_err(fail)?;
     timeline.say("ground station → PARAM_REQUEST_LIST, signed");
     let began = Instant::now();
-    let table = vehicle.params().await.map_err(other)?;
+    let table = vehicle.params().get_all().await.map_err(fail)?;
     timeline.say(format!(
         "ground station ← {} PARAM_VALUEs in {:.0} ms (ArduPilot C-cast encoding)",
         table.len(),
         since(began)
     ));
-    let name = Name::new("WPNAV_SPEED").map_err(other)?;
+    let name = Name::new("WPNAV_SPEED").map_err(fail)?;
     let current = table
         .iter()
         .find(|(n, _)| *n == name)
         .map(|(_, v)| *v)
         .ok_or_else(|| other("demo step failed: no WPNAV_SPEED in the table"))?;
-    let set = set_param(&mut vehicle, name, current, 750.0).await?;
+    let (_, set) = vehicle
+        .params()
+        .set_typed(name, 750.0)
+        .await
+        .map_err(fail)?;
     timeline.say(format!(
         "ground station → PARAM_SET WPNAV_SPEED {} → 750; vehicle confirms {}",
         value_text(current),
@@ -679,17 +687,21 @@ async fn services(timeline: &Timeline, node: &NodeHandle) -> Result<(), Failure>
     let count = items.len();
     let began = Instant::now();
     vehicle
-        .upload_mission(MavMissionType::MISSION, items.clone())
+        .mission()
+        .upload(MavMissionType::MISSION, items.clone())
         .await
-        .map_err(|e| other(format!("demo step failed: mission upload: {e}")))?;
+        .context("demo step failed: mission upload")
+        .map_err(Failure::Other)?;
     timeline.say(format!(
         "ground station → mission of {count} items (MISSION_COUNT, MISSION_ITEM_INT × {count}) accepted in {:.0} ms",
         since(began)
     ));
     let back = vehicle
-        .download_mission(MavMissionType::MISSION)
+        .mission()
+        .download(MavMissionType::MISSION)
         .await
-        .map_err(|e| other(format!("demo step failed: mission download: {e}")))?;
+        .context("demo step failed: mission download")
+        .map_err(Failure::Other)?;
     let same = back.len() == items.len()
         && back.iter().zip(&items).all(|(a, b)| {
             (a.command, a.frame, a.x, a.y, a.z.to_bits())

@@ -1,13 +1,12 @@
 //! `decode --count` for built-in dialects through the generated, typed code: zero-copy
 //! parsing, checksum validation, typed decoding of every frame, no allocation per frame.
 
-use mavstack_core::{MessageSet, MessageTable};
 use std::io::{self, Read};
 
 use mavstack_core::parse::{CrcExtra, Item, Stats};
 use mavstack_core::signing::{self, SecretKey};
-
-use crate::log_reader::raw_items;
+use mavstack_core::{MessageSet, MessageTable};
+use mavstack_transport::raw::read_items;
 
 /// A dense index over a dialect's [`MessageTable`] for ids below 65536 (0: unknown, else
 /// 0x100 | CRC_EXTRA), the rest through the table: one load per frame, inlined into the
@@ -48,7 +47,7 @@ pub(crate) fn count<M: MessageSet>(
 ) -> io::Result<(Stats, u64)> {
     let lookup = DenseIndex::new(MessageTable::of::<M>());
     let mut bad_signature = 0;
-    let stats = raw_items(
+    let stats = read_items(
         input,
         &lookup,
         |item| {

@@ -1,21 +1,21 @@
 //! `mavstack ftp ls|get|put|rm|mkdir|rmdir|mv|crc`: files on a system's MAVFTP server, over
-//! `mavstack::system::System` (the `ftp_*` methods, which drive
-//! `mavstack_services::ftp::FtpClient`).
+//! `mavstack::system::System::ftp()`.
 //!
 //! A download is checked against the server's CRC32 of the file after the transfer: a
 //! mismatch fails the command (the local file is then not written).
 
 use std::path::{Path, PathBuf};
 
+use anyhow::Context as _;
 use clap::Subcommand;
 use mavstack::services::ftp::{EntryKind, crc32};
-use mavstack::system::{FtpPathOp, System};
+use mavstack::system::{Ftp, FtpPathOp, Session};
 use serde_json::json;
 
-use crate::gcs_cmd::{Remote, RemoteArgs, print_lines};
 use crate::link_cmd::runtime;
 use crate::progress::Progress;
-use crate::{Failure, other};
+use crate::remote::{RemoteArgs, close, connect, print_lines, since};
+use crate::{Failure, fail};
 
 #[derive(Debug, Subcommand)]
 pub(crate) enum FtpAction {
@@ -130,17 +130,11 @@ pub(crate) fn ftp(action: &FtpAction) -> Result<(), Failure> {
         _ => None,
     };
     runtime()?.block_on(async {
-        let mut remote = Remote::connect(args).await?;
-        let began = remote.elapsed();
-        let result = run(
-            &mut remote,
-            action,
-            upload.as_deref(),
-            download_to.as_deref(),
-        )
-        .await;
-        let seconds = remote.since(began);
-        remote.close().await?;
+        let session = connect(args).await?;
+        let began = std::time::Instant::now();
+        let result = run(&session, action, upload.as_deref(), download_to.as_deref()).await;
+        let seconds = since(began);
+        close(session).await?;
         let lines = result?;
         print_lines(&lines)?;
         if !args.json {
@@ -152,16 +146,16 @@ pub(crate) fn ftp(action: &FtpAction) -> Result<(), Failure> {
 
 /// One operation; the lines to print.
 async fn run(
-    remote: &mut Remote,
+    session: &Session,
     action: &FtpAction,
     upload: Option<&[u8]>,
     download_to: Option<&Path>,
 ) -> Result<Vec<String>, Failure> {
     let json_out = action.remote().json;
-    let system = &mut remote.system;
+    let ftp: Ftp = session.system().ftp();
     Ok(match action {
         FtpAction::Ls { path, .. } => {
-            let entries = system.ftp_list(path).await.map_err(other)?;
+            let entries = ftp.list(path).await.map_err(fail)?;
             entries
                 .iter()
                 .map(|e| {
@@ -184,12 +178,14 @@ async fn run(
         }
         FtpAction::Get { remote_path, .. } => {
             // The size is known only once the file is open: the bar is drawn for a put.
-            let (data, ours) = read_checked(system, remote_path, |_, _| {})
+            let (data, ours) = ftp
+                .read_checked(remote_path, |_, _| {})
                 .await
-                .map_err(Failure::Other)?;
+                .map_err(fail)?;
             let to = download_to.unwrap_or_else(|| Path::new("."));
             std::fs::write(to, &data)
-                .map_err(|e| other(format!("cannot write {}: {e}", to.display())))?;
+                .with_context(|| format!("cannot write {}", to.display()))
+                .map_err(Failure::Other)?;
             vec![if json_out {
                 json!({"get": remote_path, "to": to.display().to_string(), "bytes": data.len(), "crc32": format!("{ours:08x}")}).to_string()
             } else {
@@ -203,11 +199,9 @@ async fn run(
         FtpAction::Put { remote_path, .. } => {
             let data = upload.unwrap_or_default();
             let mut bar = Progress::new("put", data.len() as u64);
-            let sent = system
-                .ftp_write(remote_path, data, |done, _| bar.set(done))
-                .await;
+            let sent = ftp.write(remote_path, data, |done, _| bar.set(done)).await;
             bar.finish();
-            sent.map_err(other)?;
+            sent.map_err(fail)?;
             vec![if json_out {
                 json!({"put": remote_path, "bytes": data.len(), "crc32": format!("{:08x}", crc32(0, data))}).to_string()
             } else {
@@ -222,7 +216,7 @@ async fn run(
                 FtpAction::Mkdir { .. } => FtpPathOp::Mkdir,
                 _ => FtpPathOp::Rmdir,
             };
-            system.ftp_simple(op, path).await.map_err(other)?;
+            ftp.simple(op, path).await.map_err(fail)?;
             vec![if json_out {
                 json!({op.name(): path}).to_string()
             } else {
@@ -230,7 +224,7 @@ async fn run(
             }]
         }
         FtpAction::Mv { from, to, .. } => {
-            system.ftp_rename(from, to).await.map_err(other)?;
+            ftp.rename(from, to).await.map_err(fail)?;
             vec![if json_out {
                 json!({"mv": from, "to": to}).to_string()
             } else {
@@ -238,7 +232,7 @@ async fn run(
             }]
         }
         FtpAction::Crc { path, .. } => {
-            let crc = system.ftp_crc32(path).await.map_err(other)?;
+            let crc = ftp.crc32(path).await.map_err(fail)?;
             vec![if json_out {
                 json!({"crc": path, "crc32": format!("{crc:08x}")}).to_string()
             } else {
@@ -246,38 +240,4 @@ async fn run(
             }]
         }
     })
-}
-
-/// Downloads `path` and compares it with the server's CRC32 of the file (not for a file
-/// [made at each open](generated_at_open)); returns the bytes and their CRC32.
-///
-/// # Errors
-/// The download's, or a mismatch (`ftp get PATH: CRC32 ... of what arrived, the server's
-/// is ...`).
-pub(crate) async fn read_checked(
-    system: &mut System,
-    path: &str,
-    progress: impl FnMut(u64, u64),
-) -> Result<(Vec<u8>, u32), anyhow::Error> {
-    let data = system.ftp_read(path, progress).await?;
-    let ours = crc32(0, &data);
-    // ArduPilot's `@` files (`@SYS/uarts.txt`, `@PARAM/param.pck`) are made anew at each
-    // open, so a CRC32 asked afterwards is of other contents: not checked.
-    if !generated_at_open(path) {
-        let theirs = system.ftp_crc32(path).await?;
-        if ours != theirs {
-            anyhow::bail!(
-                "ftp get {path}: CRC32 {ours:08x} of what arrived, the server's is {theirs:08x}"
-            );
-        }
-    }
-    Ok((data, ours))
-}
-
-/// Whether a remote file is one a server makes when it is opened, whose CRC32 cannot be
-/// compared with a download: ArduPilot's virtual directories (`@SYS`, `@PARAM`,
-/// `@MISSION`...), but not `@ROMFS`, which holds files built into the firmware.
-fn generated_at_open(path: &str) -> bool {
-    let path = path.trim_start_matches('/');
-    path.starts_with('@') && !path.starts_with("@ROMFS/")
 }

@@ -21,7 +21,8 @@ use mavstack_xml::Dialect;
 use tokio::time::Instant;
 
 use crate::codec_cmd::{Counts, frame_line, parse_key};
-use crate::{Failure, other};
+use crate::{Failure, fail};
+use mavstack::LinkSpec;
 
 /// The options every link command shares.
 #[derive(Debug, Args)]
@@ -43,7 +44,7 @@ pub(crate) struct ListenArgs {
     key: Option<String>,
     /// Also print frames of unknown message ids (`"name":null` and `"payload_hex"`).
     #[arg(long)]
-    keep_unknown: bool,
+    pub(crate) keep_unknown: bool,
     /// A live table of the messages seen, with counts and rates, instead of JSON lines.
     #[arg(long)]
     table: bool,
@@ -120,7 +121,7 @@ async fn open(
     options.file_mode = mode;
     Connection::open_with(spec, protocol, &options)
         .await
-        .map_err(other)
+        .map_err(fail)
 }
 
 fn load_dialect(name: &str) -> Result<Arc<Dialect>, Failure> {
@@ -170,9 +171,13 @@ pub(crate) fn interrupted() -> impl Future<Output = ()> {
     }
 }
 
-/// A connection string, or a bad-input failure naming what is wrong with it.
-pub(crate) fn parse_spec(conn: &str) -> Result<ConnSpec, Failure> {
-    conn.parse().map_err(|e| Failure::Input(anyhow!("{e}")))
+/// A link (a connection string and its link options, the one grammar of every command), or
+/// a bad-input failure naming what is wrong with it. Options that change nothing for a
+/// command that only reads or writes frames (`version`, `secure`, `trusted`, filters) are
+/// accepted and have no effect there; `name` names the link in messages, `key` checks
+/// signatures (`listen`).
+pub(crate) fn parse_link(text: &str, dialect: &Dialect) -> Result<LinkSpec, Failure> {
+    LinkSpec::parse_in(text, &dialect.message_table()).map_err(|e| Failure::Input(e.into()))
 }
 
 /// The longest wait any option gives, in seconds (a year): far enough for any use, near
@@ -338,27 +343,115 @@ impl Table {
     }
 }
 
-pub(crate) fn listen(args: &ListenArgs) -> Result<(), Failure> {
-    let key = parse_key(args.key.as_deref())?;
-    let dialect = load_dialect(&args.dialect.dialect)?;
-    let filter: Vec<u32> = args
-        .filter
-        .iter()
-        .filter(|n| !n.is_empty())
-        .map(|name| {
-            dialect
-                .message_by_name(&name.to_ascii_uppercase())
-                .map(|m| m.id)
-                .ok_or_else(|| {
-                    Failure::Input(anyhow!(
-                        "--filter: no message {name} in dialect {}",
-                        dialect.name
-                    ))
-                })
+/// What `listen` prints, and how much it has printed.
+pub(crate) struct Printer<'a> {
+    args: &'a ListenArgs,
+    dialect: &'a Dialect,
+    key: Option<mavstack_core::signing::SecretKey>,
+    filter: Vec<u32>,
+    sink: io::BufWriter<io::StdoutLock<'static>>,
+    counts: Counts,
+    line: String,
+    table: Option<Table>,
+    printed: u64,
+}
+
+impl<'a> Printer<'a> {
+    pub(crate) fn new(
+        args: &'a ListenArgs,
+        dialect: &'a Dialect,
+        key: Option<mavstack_core::signing::SecretKey>,
+    ) -> Result<Self, Failure> {
+        let filter = args
+            .filter
+            .iter()
+            .filter(|n| !n.is_empty())
+            .map(|name| message_id(dialect, name, "--filter"))
+            .collect::<Result<_, _>>()?;
+        Ok(Self {
+            args,
+            dialect,
+            key,
+            filter,
+            sink: io::BufWriter::with_capacity(1 << 16, io::stdout().lock()),
+            counts: Counts::default(),
+            line: String::with_capacity(4096),
+            table: args.table.then(Table::new),
+            printed: 0,
         })
-        .collect::<Result<_, _>>()?;
-    let rates = args
-        .rate
+    }
+
+    /// Prints (or counts into the table) one frame; whether `--count` is reached.
+    pub(crate) fn frame(
+        &mut self,
+        frame: &Frame<&[u8]>,
+        known: bool,
+        ts: Option<u64>,
+    ) -> Result<bool, Failure> {
+        if self.args.sysid.is_some_and(|s| s != frame.sysid())
+            || (!self.filter.is_empty() && !self.filter.contains(&frame.msg_id()))
+        {
+            return Ok(false);
+        }
+        if let Some(t) = self.table.as_mut() {
+            t.add(frame);
+        } else {
+            self.line.clear();
+            frame_line(
+                &mut self.line,
+                frame,
+                self.dialect.message(frame.msg_id()).filter(|_| known),
+                ts,
+                self.key.as_ref(),
+                &mut self.counts,
+            );
+            self.sink
+                .write_all(self.line.as_bytes())
+                .context("writing output")?;
+        }
+        self.printed += 1;
+        Ok(self.args.count.is_some_and(|c| self.printed >= c))
+    }
+
+    /// Writes out what is buffered (JSON lines), or redraws the table on `tick`.
+    pub(crate) fn flush(&mut self, tick: bool) -> Result<(), Failure> {
+        match self.table.as_mut() {
+            Some(t) if tick => t
+                .draw(self.dialect, &mut self.sink)
+                .context("writing output")?,
+            Some(_) => {}
+            None => self.sink.flush().context("writing output")?,
+        }
+        Ok(())
+    }
+
+    /// The last table and everything buffered.
+    pub(crate) fn finish(&mut self) -> Result<(), Failure> {
+        if let Some(t) = self.table.as_mut() {
+            t.draw(self.dialect, &mut self.sink)
+                .context("writing output")?;
+        }
+        self.sink.flush().context("writing output")?;
+        Ok(())
+    }
+}
+
+/// The id of message `name` in `dialect`, or a bad-input failure naming option `what`.
+fn message_id(dialect: &Dialect, name: &str, what: &str) -> Result<u32, Failure> {
+    dialect
+        .message_by_name(&name.to_ascii_uppercase())
+        .map(|m| m.id)
+        .ok_or_else(|| {
+            Failure::Input(anyhow!(
+                "{what}: no message {name} in dialect {}",
+                dialect.name
+            ))
+        })
+}
+
+/// `--rate`'s `NAME:HZ` items as (message id, Hz).
+fn rates_of(args: &ListenArgs, dialect: &Dialect) -> Result<Vec<(u32, f32)>, Failure> {
+    args.rate
         .iter()
         .filter(|r| !r.is_empty())
         .map(|r| {
@@ -372,43 +465,47 @@ pub(crate) fn listen(args: &ListenArgs) -> Result<(), Failure> {
             if !(0.01..=1000.0).contains(&hz) {
                 return Err(bad());
             }
-            let id = dialect
-                .message_by_name(&name.to_ascii_uppercase())
-                .map(|m| m.id)
-                .ok_or_else(|| {
-                    Failure::Input(anyhow!(
-                        "--rate: no message {name} in dialect {}",
-                        dialect.name
-                    ))
-                })?;
-            Ok((id, hz))
+            Ok((message_id(dialect, name, "--rate")?, hz))
         })
-        .collect::<Result<Vec<_>, Failure>>()?;
-    let mut rate_requests = crate::rate_request::RateRequests::new(&rates);
+        .collect()
+}
+
+/// The signing key to check signatures with: `--key`, else the link's `key` option.
+fn check_key(
+    args_key: Option<&str>,
+    spec: &LinkSpec,
+) -> Result<Option<mavstack_core::signing::SecretKey>, Failure> {
+    if args_key.is_some() {
+        return parse_key(args_key);
+    }
+    Ok(spec
+        .config
+        .signing
+        .as_ref()
+        .map(|s| s.primary_key().clone()))
+}
+
+pub(crate) fn listen(args: &ListenArgs) -> Result<(), Failure> {
+    let dialect = load_dialect(&args.dialect.dialect)?;
+    let rates = rates_of(args, &dialect)?;
     let until = deadline(args.duration)?;
-    let spec = parse_spec(&args.conn)?;
+    let spec = parse_link(&args.conn, &dialect)?;
+    let key = check_key(args.key.as_deref(), &spec)?;
+    if !rates.is_empty() {
+        return crate::listen_rates::listen(args, &dialect, spec, key, &rates, until);
+    }
     let with_ts = matches!(
-        spec,
+        spec.conn,
         ConnSpec::File {
             format: FileFormat::Tlog,
             ..
         }
     );
     runtime()?.block_on(async {
-        let mut conn = open(&spec, &dialect, args.keep_unknown, FileMode::Read).await?;
-        let stdout = io::stdout();
-        let mut sink = io::BufWriter::with_capacity(1 << 16, stdout.lock());
-        let mut counts = Counts::default();
-        let mut line = String::with_capacity(4096);
-        let mut table = args.table.then(Table::new);
-        let mut printed = 0u64;
+        let mut conn = open(&spec.conn, &dialect, args.keep_unknown, FileMode::Read).await?;
+        let mut printer = Printer::new(args, &dialect, key)?;
         let mut batch = Vec::with_capacity(1024);
-        // Rate requests are resent and fall back in steps of a quarter second.
-        let mut redraw = tokio::time::interval(if rates.is_empty() {
-            Duration::from_secs(1)
-        } else {
-            Duration::from_millis(250)
-        });
+        let mut redraw = tokio::time::interval(Duration::from_secs(1));
         let stop = interrupted();
         tokio::pin!(stop);
         'run: loop {
@@ -416,12 +513,7 @@ pub(crate) fn listen(args: &ListenArgs) -> Result<(), Failure> {
                 Wake::Batch => {}
                 Wake::Done => break 'run,
                 Wake::Tick => {
-                    for out in rate_requests.on_tick(std::time::Instant::now()) {
-                        let _ = conn.send(FrameCommand::to_all(out)).await;
-                    }
-                    if let Some(t) = table.as_mut() {
-                        t.draw(&dialect, &mut sink).context("writing output")?;
-                    }
+                    printer.flush(true)?;
                     continue;
                 }
             }
@@ -431,79 +523,48 @@ pub(crate) fn listen(args: &ListenArgs) -> Result<(), Failure> {
                     FrameEvent::Unknown(f) => (f, false),
                     _ => continue,
                 };
-                let frame = received.frame.frame();
-                if known {
-                    for out in rate_requests.on_frame(
-                        std::time::Instant::now(),
-                        frame.sysid(),
-                        frame.compid(),
-                        frame.msg_id(),
-                        frame.payload(),
-                    ) {
-                        let _ = conn.send(FrameCommand::to_all(out)).await;
-                    }
-                }
-                if args.sysid.is_some_and(|s| s != frame.sysid())
-                    || (!filter.is_empty() && !filter.contains(&frame.msg_id()))
-                {
-                    continue;
-                }
-                if let Some(t) = table.as_mut() {
-                    t.add(&frame);
-                } else {
-                    line.clear();
-                    frame_line(
-                        &mut line,
-                        &frame,
-                        dialect.message(frame.msg_id()).filter(|_| known),
-                        with_ts.then(|| received.time.as_micros()),
-                        key.as_ref(),
-                        &mut counts,
-                    );
-                    sink.write_all(line.as_bytes()).context("writing output")?;
-                }
-                printed += 1;
-                if args.count.is_some_and(|c| printed >= c) {
+                let ts = with_ts.then(|| received.time.as_micros());
+                if printer.frame(&received.frame.frame(), known, ts)? {
                     break 'run;
                 }
             }
-            if table.is_none() {
-                sink.flush().context("writing output")?;
-            }
+            printer.flush(false)?;
         }
-        if let Some(t) = table.as_mut() {
-            t.draw(&dialect, &mut sink).context("writing output")?;
-        }
-        sink.flush().context("writing output")?;
+        printer.finish()?;
         let stats = conn.stats();
         if args.stats {
-            let counts = counts_of(&stats.protocol, counts.bad_signature);
+            let counts = counts_of(&stats.protocol, printer.counts.bad_signature);
             eprintln!("{}", counts.json());
         }
-        conn.close().await.map_err(other)?;
+        conn.close().await.map_err(fail)?;
         Ok(())
     })
 }
 
 pub(crate) fn record(args: &RecordArgs) -> Result<(), Failure> {
-    let spec = parse_spec(&args.conn)?;
     let dialect = load_dialect(&args.dialect.dialect)?;
+    let link = parse_link(&args.conn, &dialect)?;
+    let spec = &link.conn;
     let until = deadline(args.duration)?;
     let file = std::fs::File::create(&args.file)
-        .map_err(|e| Failure::Other(anyhow!("cannot create {}: {e}", args.file.display())))?;
+        .with_context(|| format!("cannot create {}", args.file.display()))
+        .map_err(Failure::Other)?;
     let mut writer = tlog::Writer::new(io::BufWriter::with_capacity(1 << 16, file));
     runtime()?.block_on(async {
         // Unknown ids are recorded too: a recorder keeps everything that frames correctly.
-        let mut conn = open(&spec, &dialect, true, FileMode::Read).await?;
-        eprintln!("recording {} to {}", args.conn, args.file.display());
+        let mut conn = open(spec, &dialect, true, FileMode::Read).await?;
+        eprintln!("recording {} to {}", link.redacted(), args.file.display());
         let mut batch = Vec::with_capacity(1024);
         let mut flush = tokio::time::interval(Duration::from_millis(500));
         let mut status = crate::progress::Progress::counter("recording");
         let stop = interrupted();
         tokio::pin!(stop);
         let mut recorded = 0u64;
-        let write_failed =
-            |e: io::Error| Failure::Other(anyhow!("writing {}: {e}", args.file.display()));
+        let write_failed = |e: io::Error| {
+            Failure::Other(
+                anyhow::Error::new(e).context(format!("writing {}", args.file.display())),
+            )
+        };
         'run: loop {
             match next_batch(&mut conn, &mut batch, stop.as_mut(), until, &mut flush).await {
                 Wake::Batch => {}
@@ -531,7 +592,7 @@ pub(crate) fn record(args: &RecordArgs) -> Result<(), Failure> {
         writer.flush().map_err(write_failed)?;
         status.finish();
         eprintln!("recorded {recorded} frames to {}", args.file.display());
-        conn.close().await.map_err(other)?;
+        conn.close().await.map_err(fail)?;
         Ok(())
     })
 }
@@ -542,7 +603,8 @@ fn replay_frames(
     dialect: &Arc<Dialect>,
 ) -> Result<Vec<(Option<u64>, FrameBuf)>, Failure> {
     let data = std::fs::read(&args.file)
-        .map_err(|e| Failure::Input(anyhow!("cannot read {}: {e}", args.file.display())))?;
+        .with_context(|| format!("cannot read {}", args.file.display()))
+        .map_err(Failure::Input)?;
     let is_tlog = !args.raw && FileFormat::from_path(&args.file) == FileFormat::Tlog;
     let mut frames = Vec::new();
     if is_tlog {
@@ -564,7 +626,6 @@ fn replay_frames(
 }
 
 pub(crate) fn replay(args: &ReplayArgs) -> Result<(), Failure> {
-    let spec = parse_spec(&args.conn)?;
     if !(args.speed >= 0.0 && args.speed.is_finite()) {
         return Err(Failure::Input(anyhow!(
             "--speed: {} is not a speed (0 or more)",
@@ -572,6 +633,8 @@ pub(crate) fn replay(args: &ReplayArgs) -> Result<(), Failure> {
         )));
     }
     let dialect = load_dialect(&args.dialect.dialect)?;
+    let link = parse_link(&args.conn, &dialect)?;
+    let spec = &link.conn;
     let frames = replay_frames(args, &dialect)?;
     if frames.is_empty() {
         return Err(Failure::Input(anyhow!(
@@ -580,14 +643,14 @@ pub(crate) fn replay(args: &ReplayArgs) -> Result<(), Failure> {
         )));
     }
     runtime()?.block_on(async {
-        let conn = open(&spec, &dialect, false, FileMode::Write).await?;
+        let conn = open(spec, &dialect, false, FileMode::Write).await?;
         let mut status = crate::progress::Progress::frames("replaying", frames.len() as u64);
         let stop = interrupted();
         tokio::pin!(stop);
         // A server (udpin, tcpin) has no one to send to until a peer shows up.
         let server = matches!(spec, ConnSpec::UdpIn { .. } | ConnSpec::TcpIn { .. });
         if server && conn.peers().is_empty() {
-            eprintln!("waiting for a peer on {}", args.conn);
+            eprintln!("waiting for a peer on {}", link.redacted());
             while conn.peers().is_empty() {
                 tokio::select! {
                     () = tokio::time::sleep(Duration::from_millis(20)) => {}
@@ -617,7 +680,7 @@ pub(crate) fn replay(args: &ReplayArgs) -> Result<(), Failure> {
                 }
                 tokio::select! {
                     r = conn.send(FrameCommand::to_all(*frame)) => {
-                        r.map_err(other)?;
+                        r.map_err(fail)?;
                     }
                     () = &mut stop => break 'run,
                 }
@@ -629,7 +692,7 @@ pub(crate) fn replay(args: &ReplayArgs) -> Result<(), Failure> {
             }
         }
         status.finish();
-        conn.close().await.map_err(other)?;
+        conn.close().await.map_err(fail)?;
         eprintln!("replayed {sent} frames");
         Ok(())
     })

@@ -1,62 +1,17 @@
 //! Reading a log file frame by frame, for the `log` commands: a tlog (a timestamp before each
 //! frame) or a raw stream, chosen by the file name, with a progress bar on a terminal.
 
-use std::io::{self, BufReader, Read};
+use std::io::{self, BufReader};
 use std::path::Path;
 
 use anyhow::{Context as _, anyhow};
-use mavstack_core::parse::{CrcExtra, Item, SliceParser, Stats};
+use mavstack_core::parse::Item;
 use mavstack_core::wire::Frame;
-use mavstack_transport::tlog;
+use mavstack_transport::{raw, tlog};
 use mavstack_xml::Dialect;
 
 use crate::Failure;
 use crate::progress::Progress;
-
-/// Bytes read at a time from a raw stream.
-const CHUNK_LEN: usize = 1 << 20;
-
-/// Parses a raw MAVLink stream read from `input` through one fixed buffer (a file is never
-/// in memory whole), calling `each` for every item and `consumed` with the bytes parsed so
-/// far after each chunk. Returns the parser's counts over the whole stream.
-pub(crate) fn raw_items<L: CrcExtra + Copy>(
-    input: &mut dyn Read,
-    lookup: L,
-    mut each: impl FnMut(Item<'_>),
-    mut consumed: impl FnMut(u64),
-) -> io::Result<Stats> {
-    let mut buf = vec![0u8; CHUNK_LEN];
-    let mut filled = 0;
-    let mut eof = false;
-    let mut total = Stats::default();
-    loop {
-        while !eof && filled < buf.len() {
-            match input.read(&mut buf[filled..]) {
-                Ok(0) => eof = true,
-                Ok(n) => filled += n,
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(e),
-            }
-        }
-        let piece = &buf[..filled];
-        let mut parser = if eof {
-            SliceParser::new(piece, lookup)
-        } else {
-            SliceParser::partial(piece, lookup)
-        };
-        for item in parser.by_ref() {
-            each(item);
-        }
-        total += *parser.stats();
-        consumed(total.bytes);
-        if eof {
-            return Ok(total);
-        }
-        let keep = parser.position();
-        buf.copy_within(keep..filled, 0);
-        filled -= keep;
-    }
-}
 
 pub(crate) use mavstack_core::tlog::is_tlog_path as is_tlog;
 
@@ -131,7 +86,7 @@ pub(crate) fn read_log(
         let total = file.metadata().map_or(0, |m| m.len());
         let mut progress = Progress::new(what, total);
         let mut frames = 0;
-        let stats = raw_items(
+        let stats = raw::read_items(
             &mut file,
             table,
             |item| {

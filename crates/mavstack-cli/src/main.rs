@@ -7,24 +7,26 @@
 //! Architecture: `docs/architecture.md` in the repository.
 
 mod codec_cmd;
+mod command_cmd;
 mod conform_cmd;
 mod demo_cmd;
 mod dialect_cmd;
 mod fast_count;
 mod ftp_cmd;
-mod gcs_cmd;
 mod link_cmd;
+mod listen_rates;
 mod log_cmd;
 mod log_download_cmd;
 mod log_plot;
 mod log_reader;
 mod logging;
+mod mission_cmd;
 mod mission_file;
-mod param_load;
+mod param_cmd;
 mod probe_cmd;
 mod progress;
 mod radio_cmd;
-mod rate_request;
+mod remote;
 mod router_cmd;
 mod signing_cmd;
 mod vehicle_cmd;
@@ -78,16 +80,16 @@ enum Command {
     /// Parameters of a remote system: list (and save), get, set.
     Param {
         #[command(subcommand)]
-        action: gcs_cmd::ParamAction,
+        action: param_cmd::ParamAction,
     },
     /// Mission, fence and rally plans of a remote system: download, upload, clear.
     Mission {
         #[command(subcommand)]
-        action: gcs_cmd::MissionAction,
+        action: mission_cmd::MissionAction,
     },
     /// Send a command (arm, takeoff, mode, any MAV_CMD) and print its acknowledgement.
     #[command(name = "command")]
-    Cmd(gcs_cmd::CommandArgs),
+    Cmd(command_cmd::CommandArgs),
     /// Forward between many links, each with its own MAVLink version and signing, converting
     /// where they differ (runs until interrupted).
     Router(router_cmd::RouterArgs),
@@ -120,9 +122,14 @@ pub(crate) enum Failure {
     Other(anyhow::Error),
 }
 
-/// Any error as a failure (exit code 1), its message kept.
-pub(crate) fn other(e: impl core::fmt::Display) -> Failure {
-    Failure::Other(anyhow::anyhow!("{e}"))
+/// A failure (exit code 1) that is only a message.
+pub(crate) fn other(message: impl core::fmt::Display) -> Failure {
+    Failure::Other(anyhow::anyhow!("{message}"))
+}
+
+/// An error as a failure (exit code 1), its chain of causes kept for the message.
+pub(crate) fn fail(e: impl core::error::Error + Send + Sync + 'static) -> Failure {
+    Failure::Other(anyhow::Error::new(e))
 }
 
 impl From<anyhow::Error> for Failure {
@@ -156,9 +163,9 @@ fn main() -> ExitCode {
         Command::Probe(args) => probe_cmd::probe(&args),
         Command::Radio(args) => radio_cmd::radio(&args),
         Command::Conform(args) => conform_cmd::conform(&args),
-        Command::Param { action } => gcs_cmd::param(action),
-        Command::Mission { action } => gcs_cmd::mission(action),
-        Command::Cmd(args) => gcs_cmd::command(&args),
+        Command::Param { action } => param_cmd::param(action),
+        Command::Mission { action } => mission_cmd::mission(action),
+        Command::Cmd(args) => command_cmd::command(&args),
         Command::Router(args) => router_cmd::router(&args),
         Command::Log { action } => log_cmd::run(action),
         Command::Signing { action } => signing_cmd::signing(&action),

@@ -6,9 +6,9 @@ use clap::Args;
 use mavstack::radio::{RadioBridge, RadioNotice};
 use mavstack_channel::RadioConfig;
 
-use crate::link_cmd::{interrupted, parse_spec, runtime, seconds};
+use crate::link_cmd::{interrupted, runtime, seconds};
 use crate::vehicle_cmd::{say, stderr_log};
-use crate::{Failure, other};
+use crate::{Failure, fail};
 
 #[derive(Debug, Args)]
 pub(crate) struct RadioArgs {
@@ -25,8 +25,13 @@ pub(crate) struct RadioArgs {
 }
 
 pub(crate) fn radio(args: &RadioArgs) -> Result<(), Failure> {
-    let a = parse_spec(&args.conn_a)?;
-    let b = parse_spec(&args.conn_b)?;
+    // The link grammar of every command; a radio carries frames as they are, so only the
+    // connection of each link string is used.
+    let parse = |text: &str| {
+        mavstack::LinkSpec::parse(text, &|_| None).map_err(|e| Failure::Input(e.into()))
+    };
+    let a = parse(&args.conn_a)?.conn;
+    let b = parse(&args.conn_b)?.conn;
     let mut config = RadioConfig::default();
     config.interval = seconds(args.interval, "--interval")?;
     runtime()?.block_on(async {
@@ -34,8 +39,8 @@ pub(crate) fn radio(args: &RadioArgs) -> Result<(), Failure> {
         let notify = move |n: &RadioNotice| say(&log, || n.to_string());
         let radio = RadioBridge::start(&a, &b, config, notify)
             .await
-            .map_err(other)?;
-        radio.run_until(interrupted()).await.map_err(other)?;
+            .map_err(fail)?;
+        radio.run_until(interrupted()).await.map_err(fail)?;
         Ok(())
     })
 }

@@ -12,10 +12,10 @@ use anyhow::anyhow;
 use clap::Subcommand;
 use serde_json::json;
 
-use crate::gcs_cmd::{Remote, RemoteArgs, print_lines};
 use crate::link_cmd::runtime;
+use crate::remote::{RemoteArgs, close, connect, print_lines};
 use crate::vehicle_cmd::secret_key;
-use crate::{Failure, other};
+use crate::{Failure, fail, other};
 
 #[derive(Debug, Subcommand)]
 pub(crate) enum SigningAction {
@@ -51,14 +51,15 @@ pub(crate) fn signing(action: &SigningAction) -> Result<(), Failure> {
         args.key = None;
     }
     runtime()?.block_on(async {
-        let mut remote = Remote::connect(&args).await?;
+        let session = connect(&args).await?;
+        let signing = session.system().signing();
         let check = if setup {
-            remote.system.setup_signing(key, args.link_id).await
+            signing.setup(key, args.link_id).await
         } else {
-            remote.system.remove_signing().await
+            signing.remove().await
         }
-        .map_err(other);
-        remote.close().await?;
+        .map_err(fail);
+        close(session).await?;
         let check = check?;
         let what = if setup { "on" } else { "off" };
         let how = if setup { "signed" } else { "unsigned" };
@@ -68,6 +69,7 @@ pub(crate) fn signing(action: &SigningAction) -> Result<(), Failure> {
                 "asked": check.asked,
                 "answered": check.answered,
                 "proven": check.proven(),
+                "statustext": check.statustext,
             })
             .to_string()
         } else {
@@ -80,8 +82,13 @@ pub(crate) fn signing(action: &SigningAction) -> Result<(), Failure> {
         if check.proven() {
             Ok(())
         } else {
+            let why = if check.statustext.is_empty() {
+                String::new()
+            } else {
+                format!(" (the vehicle said: {})", check.statustext.join("; "))
+            };
             Err(other(format!(
-                "signing {what} not proven: {} of {} requests answered {how}",
+                "signing {what} not proven: {} of {} requests answered {how}{why}",
                 check.answered, check.asked
             )))
         }

@@ -71,7 +71,7 @@ async fn main() -> Result<(), Box<dyn core::error::Error>> {
         Duration::from_secs(5),
     )
     .await?;
-    let mut attitude = vehicle.subscribe::<Attitude>().await;
+    let mut attitude = vehicle.telemetry().subscribe::<Attitude>().await;
     if let Ok(Some(a)) = tokio::time::timeout(Duration::from_secs(3), attitude.recv()).await {
         println!(
             "companion ← ATTITUDE from {}: roll {:.1}°",
@@ -89,13 +89,13 @@ async fn main() -> Result<(), Box<dyn core::error::Error>> {
             )?)
             .start()
             .await?;
-        let mut fc = System::wait(
+        let fc = System::wait(
             &gcs.handle(),
             Wanted::System(1, Some(1)),
             Duration::from_secs(5),
         )
         .await?;
-        let p = fc.param(Name::new("MAV_SYS_ID")?).await?;
+        let p = fc.params().get(Name::new("MAV_SYS_ID")?).await?;
         println!(
             "ground station ← MAV_SYS_ID = {} (through the companion)",
             p.value.as_f64()

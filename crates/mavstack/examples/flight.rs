@@ -34,7 +34,7 @@ fn step(json: &serde_json::Value) {
 
 /// Counts messages `T` from the system for `span`: their rate in Hz.
 async fn rate<T: mavstack::core::Message>(v: &System, span: Duration) -> f64 {
-    let mut samples = v.subscribe::<T>().await;
+    let mut samples = v.telemetry().subscribe::<T>().await;
     let until = Instant::now() + span;
     let mut n = 0u32;
     while let Ok(Some(_)) = tokio::time::timeout_at(until, samples.recv()).await {
@@ -44,7 +44,10 @@ async fn rate<T: mavstack::core::Message>(v: &System, span: Duration) -> f64 {
 }
 
 async fn command(v: &mut System, command: MavCmd, p: [f32; 7]) -> Result<(), SystemError> {
-    v.command(Command::long(command, p), |_| {}).await.map(drop)
+    v.commands()
+        .send_with_progress(Command::long(command, p), |_| {})
+        .await
+        .map(drop)
 }
 
 /// The plan: home, a take-off to 10 m, three waypoints about 40 m apart (item 0 home, as QGC
@@ -76,7 +79,7 @@ async fn until<T: mavstack::core::Message>(
     limit: Duration,
     mut done: impl FnMut(&T) -> bool,
 ) -> bool {
-    let mut samples = v.subscribe::<T>().await;
+    let mut samples = v.telemetry().subscribe::<T>().await;
     let end = Instant::now() + limit;
     while let Ok(Some(s)) = tokio::time::timeout_at(end, samples.recv()).await {
         if done(&s.message) {
@@ -101,8 +104,11 @@ async fn main() -> Result<(), Error> {
     let flavour = v.flavour().ok_or("neither ArduPilot nor PX4")?;
 
     // Telemetry at requested rates, measured over 5 s.
-    let att = v.request_rate(Attitude::ID, 10.0).await?;
-    let gpi = v.request_rate(GlobalPositionInt::ID, 5.0).await?;
+    let att = v.telemetry().request_rate(Attitude::ID, 10.0).await?;
+    let gpi = v
+        .telemetry()
+        .request_rate(GlobalPositionInt::ID, 5.0)
+        .await?;
     let span = Duration::from_secs(5);
     let (att_hz, gpi_hz) = tokio::join!(
         rate::<Attitude>(&v, span),
@@ -129,7 +135,7 @@ async fn main() -> Result<(), Error> {
     // boot); until then it refuses HOME_POSITION. Asked every 5 s.
     let home_by = Instant::now() + Duration::from_secs(120);
     let home = loop {
-        if let Some(home) = v.home_item(Duration::from_secs(5)).await {
+        if let Some(home) = v.mission().home_item(Duration::from_secs(5)).await {
             break home;
         }
         if Instant::now() > home_by {
@@ -139,9 +145,10 @@ async fn main() -> Result<(), Error> {
     step(&serde_json::json!({"step": "home", "ok": true, "t_s": secs()}));
     let convention = Convention::of(v.autopilot());
     let sent = plan(&home);
-    v.upload_mission(MavMissionType::MISSION, plan::to_vehicle(convention, &sent))
+    v.mission()
+        .upload(MavMissionType::MISSION, plan::to_vehicle(convention, &sent))
         .await?;
-    let stored = v.download_mission(MavMissionType::MISSION).await?;
+    let stored = v.mission().download(MavMissionType::MISSION).await?;
     let last = u16::try_from(stored.len().saturating_sub(1))?;
     let back = plan::from_vehicle(convention, &stored, Some(home));
     step(
@@ -155,7 +162,7 @@ async fn main() -> Result<(), Error> {
     } else {
         "GUIDED"
     };
-    v.set_mode(guided).await?;
+    v.modes().set(guided).await?;
     let arm_by = Instant::now() + Duration::from_secs(120);
     let mut refusals = Vec::new();
     loop {
@@ -180,7 +187,7 @@ async fn main() -> Result<(), Error> {
 
     // Take off and fly the mission.
     let reached = std::sync::Arc::new(std::sync::Mutex::new(Vec::<u16>::new()));
-    let mut items_seen = v.subscribe::<MissionItemReached>().await;
+    let mut items_seen = v.telemetry().subscribe::<MissionItemReached>().await;
     let seen = reached.clone();
     let watcher = tokio::spawn(async move {
         while let Some(s) = items_seen.recv().await {
@@ -190,7 +197,7 @@ async fn main() -> Result<(), Error> {
         }
     });
     match flavour {
-        Flavour::Px4 => v.set_mode("AUTO.MISSION").await.map(drop)?,
+        Flavour::Px4 => v.modes().set("AUTO.MISSION").await.map(drop)?,
         _ => {
             command(
                 &mut v,
@@ -202,7 +209,7 @@ async fn main() -> Result<(), Error> {
                 until::<GlobalPositionInt>(&v, Duration::from_secs(60), |p| p.relative_alt > 8_000)
                     .await;
             step(&serde_json::json!({"step": "takeoff", "ok": up, "t_s": secs()}));
-            v.set_mode("AUTO").await.map(drop)?;
+            v.modes().set("AUTO").await.map(drop)?;
         }
     }
     let flown_by = Instant::now() + Duration::from_secs(240);
@@ -229,7 +236,7 @@ async fn main() -> Result<(), Error> {
     } else {
         "RTL"
     };
-    v.set_mode(rtl).await?;
+    v.modes().set(rtl).await?;
     let landed = until::<Heartbeat>(&v, Duration::from_secs(240), |h| {
         h.base_mode.0 & MavModeFlag::SAFETY_ARMED.0 == 0
     })

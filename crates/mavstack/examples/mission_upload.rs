@@ -53,8 +53,7 @@ async fn main() -> Result<(), Box<dyn core::error::Error>> {
         .link(LinkSpec::parse(&format!("udpout:127.0.0.1:{port}"), &none)?)
         .start()
         .await?;
-    let mut target =
-        System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5)).await?;
+    let target = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5)).await?;
     println!(
         "found {} ({:?}) on {}",
         target.target(),
@@ -64,14 +63,15 @@ async fn main() -> Result<(), Box<dyn core::error::Error>> {
 
     let t = tokio::time::Instant::now();
     target
-        .upload_mission(MavMissionType::MISSION, items.clone())
+        .mission()
+        .upload(MavMissionType::MISSION, items.clone())
         .await?;
     println!(
         "uploaded {} items from {name} in {:.0} ms",
         items.len(),
         t.elapsed().as_secs_f64() * 1000.0
     );
-    let back = target.download_mission(MavMissionType::MISSION).await?;
+    let back = target.mission().download(MavMissionType::MISSION).await?;
     let same = back.len() == items.len()
         && back.iter().zip(&items).all(|(a, b)| {
             (a.command, a.frame, a.x, a.y, a.z.to_bits())

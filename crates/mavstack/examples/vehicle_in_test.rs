@@ -31,21 +31,21 @@ async fn check_the_vehicle() -> Result<String, Error> {
         )?)
         .start()
         .await?;
-    let mut v = System::wait(
+    let v = System::wait(
         &gcs.handle(),
         Wanted::System(1, Some(1)),
         Duration::from_secs(5),
     )
     .await?;
     let name = Name::new("RTL_ALT")?;
-    let set = v.set_param(name, Value::F32(3000.0)).await?;
+    let set = v.params().set(name, Value::F32(3000.0)).await?;
     assert_eq!(set.value.as_f64(), 3000.0);
     let arm = Command::Long(CommandLong {
         command: MavCmd::COMPONENT_ARM_DISARM,
         param1: 1.0,
         ..CommandLong::default()
     });
-    let ack = v.command(arm, |_| {}).await?;
+    let ack = v.commands().send_with_progress(arm, |_| {}).await?;
     assert_eq!(ack.result, MavResult::ACCEPTED);
     drop(v);
     gcs.shutdown().await?;

@@ -107,6 +107,13 @@
 //! sans-IO routing core), [`transport`] (connections), [`services`] (the microservices'
 //! state machines), [`sim`] (the vehicle model).
 //!
+//! ## Features
+//! - `services`: remote systems' services ([`system`]), our own ([`serve`]), event metadata.
+//! - `sim`: the simulated vehicle ([`sim_vehicle`], [`sim`]) and `conform` (implies `services`).
+//! - `http`: a live status page and JSON for a node (`status`).
+//! - `fuzzing`: for the fuzz targets and the seed-corpus tests only; not a stable API
+//!   (the `fuzz_*` entry points; enables `mavstack-router`'s too).
+//!
 //! MSRV: Rust 1.95.
 #![forbid(unsafe_code)]
 
@@ -150,6 +157,25 @@ pub fn message_name(id: u32) -> String {
     use mavstack_core::MessageSet as _;
     mavstack_dialects::common::MavMessage::info(id)
         .map_or_else(|| format!("message {id}"), |m| m.name.to_owned())
+}
+
+/// An error and its sources, joined by `: ` (`cannot read x.tlog: Is a directory (os
+/// error 21)`): how an error with its cause chain is shown on one line.
+///
+/// ```
+/// let e = std::io::Error::other("inner");
+/// assert_eq!(mavstack::error_chain(&e), "inner");
+/// ```
+#[must_use]
+pub fn error_chain(e: &dyn ::core::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(s) = source {
+        text.push_str(": ");
+        text.push_str(&s.to_string());
+        source = s.source();
+    }
+    text
 }
 
 pub use mavstack_channel as channel;

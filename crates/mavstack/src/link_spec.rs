@@ -32,6 +32,8 @@ pub struct LinkSpec {
     /// [`mavstack_transport::Link::DEFAULT_MAX_PEERS`]). Other kinds of link refuse the
     /// option.
     pub max_peers: usize,
+    /// The link as written, its key redacted ([`redacted`](Self::redacted)).
+    shown: String,
 }
 
 /// A link string that cannot be used.
@@ -56,8 +58,14 @@ pub enum LinkSpecError {
     },
 }
 
-/// `text` with the value of a `key` option replaced by `***`: link strings appear in errors
-/// and logs, keys never do.
+/// `text` with the value of a `key` option replaced by `<redacted>`: link strings appear in
+/// errors and logs, keys never do.
+///
+/// ```
+/// let key = "ab".repeat(32);
+/// let shown = mavstack::redacted(&format!("udpin:0.0.0.0:14550?name=gcs&key={key}"));
+/// assert_eq!(shown, "udpin:0.0.0.0:14550?name=gcs&key=<redacted>");
+/// ```
 #[must_use]
 pub fn redacted(text: &str) -> String {
     let Some((conn, opts)) = text.split_once('?') else {
@@ -66,7 +74,7 @@ pub fn redacted(text: &str) -> String {
     let opts: Vec<String> = opts
         .split('&')
         .map(|o| match o.split_once('=') {
-            Some(("key", _)) => "key=***".to_owned(),
+            Some(("key", _)) => "key=<redacted>".to_owned(),
             _ => o.to_owned(),
         })
         .collect();
@@ -129,7 +137,22 @@ impl LinkSpec {
             conn,
             config,
             max_peers: max_peers.unwrap_or(mavstack_transport::Link::DEFAULT_MAX_PEERS),
+            shown: redacted(text),
         })
+    }
+
+    /// The link as it was written, with the value of its `key` option (if any) replaced by
+    /// `<redacted>`: how a link appears in errors, logs and JSON.
+    ///
+    /// ```
+    /// use mavstack::LinkSpec;
+    /// let key = "0123456789abcdef".repeat(4);
+    /// let spec = LinkSpec::parse(&format!("tcp:127.0.0.1:5760?key={key}"), &|_| None).unwrap();
+    /// assert_eq!(spec.redacted(), "tcp:127.0.0.1:5760?key=<redacted>");
+    /// ```
+    #[must_use]
+    pub fn redacted(&self) -> &str {
+        &self.shown
     }
 }
 
@@ -176,6 +199,7 @@ fn take_max_peers(opts: &str, conn: &ConnSpec) -> Result<(Option<usize>, String)
 /// a link or to an error, never a panic; a parsed connection writes back to a string that
 /// parses to the same connection; and neither an error nor the redacted text ever shows the
 /// value of a `key` option.
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub fn fuzz_link_spec(data: &[u8]) {
     let text = String::from_utf8_lossy(data);

@@ -28,7 +28,7 @@
 use std::fmt;
 
 use mavstack_dialects::ardupilotmega::{CopterMode, PlaneMode, RoverMode, SubMode, TrackerMode};
-use mavstack_dialects::common::{MavAutopilot, MavModeFlag, MavType};
+use mavstack_dialects::common::{MavAutopilot, MavModeFlag, MavStandardMode, MavType};
 
 /// Whose mode numbers apply.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -217,6 +217,96 @@ pub fn name_of(flavour: Flavour, custom_mode: u32) -> Option<&'static str> {
         .map(|m| m.name)
 }
 
+/// Our own mapping of each flavour's modes to the standard modes (MAV_STANDARD_MODE):
+/// ArduPilot 4.7 lists every mode in AVAILABLE_MODES as non-standard, and vehicles without
+/// AVAILABLE_MODES say nothing at all. (name, standard) by the names of [`modes`]; a mode
+/// the standard forbids for the vehicle type (a fixed wing's position hold) is left out.
+const STANDARD: &[(Flavour, &str, MavStandardMode)] = {
+    use Flavour::{ArduCopter, ArduPlane, ArduRover, ArduSub, Px4};
+    use MavStandardMode as S;
+    &[
+        (ArduCopter, "LOITER", S::POSITION_HOLD),
+        (ArduCopter, "CIRCLE", S::ORBIT),
+        (ArduCopter, "ALT_HOLD", S::ALTITUDE_HOLD),
+        (ArduCopter, "RTL", S::SAFE_RECOVERY),
+        (ArduCopter, "AUTO", S::MISSION),
+        (ArduCopter, "LAND", S::LAND),
+        (ArduPlane, "CIRCLE", S::ORBIT),
+        (ArduPlane, "CRUISE", S::CRUISE),
+        (ArduPlane, "FLY_BY_WIRE_B", S::ALTITUDE_HOLD),
+        (ArduPlane, "RTL", S::SAFE_RECOVERY),
+        (ArduPlane, "AUTO", S::MISSION),
+        (ArduPlane, "TAKEOFF", S::TAKEOFF),
+        (ArduRover, "RTL", S::SAFE_RECOVERY),
+        (ArduRover, "AUTO", S::MISSION),
+        (ArduSub, "POSHOLD", S::POSITION_HOLD),
+        (ArduSub, "ALT_HOLD", S::ALTITUDE_HOLD),
+        (ArduSub, "AUTO", S::MISSION),
+        (Px4, "POSCTL", S::POSITION_HOLD),
+        (Px4, "POSCTL.ORBIT", S::ORBIT),
+        (Px4, "ALTCTL", S::ALTITUDE_HOLD),
+        (Px4, "AUTO.RTL", S::SAFE_RECOVERY),
+        (Px4, "AUTO.MISSION", S::MISSION),
+        (Px4, "AUTO.LAND", S::LAND),
+        (Px4, "AUTO.TAKEOFF", S::TAKEOFF),
+    ]
+};
+
+/// The standard mode that `custom_mode` of a flavour stands for, by our own table.
+///
+/// ```
+/// use mavstack::dialects::common::MavStandardMode;
+/// use mavstack::modes::{Flavour, standard_of};
+/// assert_eq!(standard_of(Flavour::ArduCopter, 6), Some(MavStandardMode::SAFE_RECOVERY));
+/// assert_eq!(standard_of(Flavour::ArduCopter, 4), None); // GUIDED
+/// ```
+#[must_use]
+pub fn standard_of(flavour: Flavour, custom_mode: u32) -> Option<MavStandardMode> {
+    let name = name_of(flavour, custom_mode)?;
+    STANDARD
+        .iter()
+        .find(|(f, n, _)| *f == flavour && *n == name)
+        .map(|&(_, _, s)| s)
+}
+
+/// The mode of a flavour that stands for `standard`, by our own table.
+#[must_use]
+pub fn by_standard(flavour: Flavour, standard: MavStandardMode) -> Option<Mode> {
+    let (_, name, _) = STANDARD
+        .iter()
+        .find(|(f, _, s)| *f == flavour && *s == standard)?;
+    modes(flavour).into_iter().find(|m| m.name == *name)
+}
+
+/// A standard mode's name as people write it: MAV_STANDARD_MODE's without its prefix, in
+/// lower case (`position_hold`, `safe_recovery`); `None` for NON_STANDARD and numbers no
+/// dialect names.
+///
+/// ```
+/// use mavstack::dialects::common::MavStandardMode;
+/// assert_eq!(mavstack::modes::standard_name(MavStandardMode::SAFE_RECOVERY).as_deref(), Some("safe_recovery"));
+/// assert_eq!(mavstack::modes::standard_by_name("Position-Hold"), Some(MavStandardMode::POSITION_HOLD));
+/// ```
+#[must_use]
+pub fn standard_name(standard: MavStandardMode) -> Option<String> {
+    if standard == MavStandardMode::NON_STANDARD {
+        return None;
+    }
+    standard
+        .name()
+        .and_then(|n| n.strip_prefix("MAV_STANDARD_MODE_"))
+        .map(str::to_ascii_lowercase)
+}
+
+/// The standard mode called `name` (as [`standard_name`] writes it; any case, `-` or a
+/// space for `_`).
+#[must_use]
+pub fn standard_by_name(name: &str) -> Option<MavStandardMode> {
+    (1..=u8::MAX)
+        .map(MavStandardMode)
+        .find(|&s| standard_name(s).is_some_and(|n| same(&n, name)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -243,6 +333,19 @@ mod tests {
         assert_eq!(custom("position"), Some(3 << 16));
         assert_eq!(custom("offboard"), Some(6 << 16));
         assert_eq!(custom("guided"), None);
+    }
+
+    #[test]
+    fn every_standard_mapping_names_a_mode_of_its_flavour() {
+        for &(flavour, name, standard) in STANDARD {
+            let mode = by_name(flavour, name).unwrap_or_else(|| panic!("{flavour}: {name}"));
+            assert_eq!(standard_of(flavour, mode.custom_mode), Some(standard));
+            assert_eq!(by_standard(flavour, standard), Some(mode));
+        }
+        assert_eq!(
+            by_standard(Flavour::Px4, MavStandardMode::TAKEOFF).map(|m| m.name),
+            Some("AUTO.TAKEOFF")
+        );
     }
 
     #[test]

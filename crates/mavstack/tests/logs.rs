@@ -45,8 +45,8 @@ fn config() -> SimConfig {
 
 #[tokio::test]
 async fn the_generated_logs_download_whole_and_erase_empties_the_list() {
-    let (vehicle, gcs, mut v) = vehicle_and_system(config()).await;
-    let list = v.log_list().await.expect("list");
+    let (vehicle, gcs, v) = vehicle_and_system(config()).await;
+    let list = v.logs().list().await.expect("list");
     let want: Vec<(u16, u32, u32)> = GENERATED.to_vec();
     assert_eq!(
         list.iter()
@@ -56,7 +56,8 @@ async fn the_generated_logs_download_whole_and_erase_empties_the_list() {
     );
     let mut last = (0, 0);
     let bytes = v
-        .log_download(2, |done, total| {
+        .logs()
+        .download(2, |done, total| {
             assert!(done >= last.0 && done <= total);
             last = (done, total);
         })
@@ -64,10 +65,10 @@ async fn the_generated_logs_download_whole_and_erase_empties_the_list() {
         .expect("download");
     assert_eq!(bytes, generated_log(2).expect("log 2"));
     assert_eq!(last, (123_457, 123_457));
-    let err = v.log_download(9, |_, _| {}).await.expect_err("no log 9");
+    let err = v.logs().download(9, |_, _| {}).await.expect_err("no log 9");
     assert!(matches!(err, SystemError::NoSuchLog { id: 9 }), "{err}");
-    v.log_erase().await.expect("erased");
-    assert!(v.log_list().await.expect("list").is_empty());
+    v.logs().erase().await.expect("erased");
+    assert!(v.logs().list().await.expect("list").is_empty());
     gcs.shutdown().await.expect("gcs stops");
     vehicle.shutdown().await.expect("vehicle stops");
 }
@@ -91,26 +92,27 @@ async fn a_directory_is_served_by_log_download_and_over_mavftp() {
         log_dir: Some(LogDir::new(dir.path()).expect("log dir")),
         ..config()
     };
-    let (vehicle, gcs, mut v) = vehicle_and_system(config).await;
-    let list = v.log_list().await.expect("list");
+    let (vehicle, gcs, v) = vehicle_and_system(config).await;
+    let list = v.logs().list().await.expect("list");
     assert_eq!(
         list.iter().map(|e| (e.id, e.size)).collect::<Vec<_>>(),
         [(1, 1), (2, 90), (3, 91), (4, 200_000)]
     );
     for (id, (name, bytes)) in (1u16..).zip(&files) {
-        let got = v.log_download(id, |_, _| {}).await.expect("download");
+        let got = v.logs().download(id, |_, _| {}).await.expect("download");
         assert_eq!(&got, bytes, "{name} by LOG_DATA");
         let got = v
-            .ftp_read(&format!("/{}", ftp_path(id)), |_, _| {})
+            .ftp()
+            .read(&format!("/{}", ftp_path(id)), |_, _| {})
             .await
             .expect("over MAVFTP");
         assert_eq!(&got, bytes, "{name} over MAVFTP");
     }
-    let listing = v.ftp_list("/APM/LOGS").await.expect("ls");
+    let listing = v.ftp().list("/APM/LOGS").await.expect("ls");
     assert_eq!(listing.len(), 4);
-    v.log_erase().await.expect("erased");
+    v.logs().erase().await.expect("erased");
     assert!(
-        v.ftp_list("/APM/LOGS").await.is_err(),
+        v.ftp().list("/APM/LOGS").await.is_err(),
         "gone over MAVFTP too"
     );
     assert!(dir.path().join("d.bin").exists(), "the files stay on disk");

@@ -40,11 +40,11 @@ async fn vehicle_and_gcs(config: SimConfig) -> (SimVehicle, Node) {
 
 /// The vehicle as a `System` of the ground station, and whether it advertises MAVFTP.
 async fn found(gcs: &Node) -> (System, bool) {
-    let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
+    let v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
         .await
         .expect("the vehicle is found");
     let caps = v
-        .find_capabilities(Duration::from_secs(3))
+        .capabilities(Duration::from_secs(3))
         .await
         .expect("AUTOPILOT_VERSION");
     (v, caps.contains(MavProtocolCapability::FTP))
@@ -60,14 +60,18 @@ async fn params_via_ftp_equal_params_for_both_flavours() {
     for autopilot in [Autopilot::Ardupilot, Autopilot::Px4] {
         let defaults = params::defaults(autopilot);
         let (vehicle, gcs) = vehicle_and_gcs(SimVehicle::config(autopilot, defaults.clone())).await;
-        let (mut v, ftp) = found(&gcs).await;
+        let (v, ftp) = found(&gcs).await;
         assert!(ftp, "{autopilot}");
 
         let t = Instant::now();
-        let listed = v.params().await.expect("PARAM_REQUEST_LIST");
+        let listed = v.params().get_all().await.expect("PARAM_REQUEST_LIST");
         let by_list = t.elapsed();
         let t = Instant::now();
-        let by_ftp_table = v.params_via_ftp().await.expect("param.pck");
+        let by_ftp_table = v
+            .params()
+            .get_all_via_ftp(|_, _| {})
+            .await
+            .expect("param.pck");
         let by_ftp = t.elapsed();
         eprintln!(
             "{autopilot}: {} parameters, list {by_list:?}, ftp {by_ftp:?}",
@@ -79,7 +83,8 @@ async fn params_via_ftp_equal_params_for_both_flavours() {
         );
         assert_eq!(listed.len(), defaults.len());
         let (auto, way) = v
-            .params_by(ParamsVia::Auto, |_, _, _| {})
+            .params()
+            .get_all_via(ParamsVia::Auto, |_, _, _| {})
             .await
             .expect("the table, auto");
         assert_eq!(way, ParamsVia::Ftp, "{autopilot}: advertised, so by MAVFTP");
@@ -92,8 +97,12 @@ async fn params_via_ftp_equal_params_for_both_flavours() {
             .find(|(_, v)| matches!(v, Value::F32(_)))
             .expect("a float parameter");
         let new = Value::F32(old.as_f64() as f32 + 3.0);
-        v.set_param(name, new).await.expect("PARAM_SET");
-        let after = v.params_via_ftp().await.expect("param.pck again");
+        v.params().set(name, new).await.expect("PARAM_SET");
+        let after = v
+            .params()
+            .get_all_via_ftp(|_, _| {})
+            .await
+            .expect("param.pck again");
         let got = after.iter().find(|(n, _)| *n == name).expect("still there");
         assert!(got.1.same_as(new), "{autopilot}: {got:?}");
 
@@ -109,15 +118,20 @@ async fn a_vehicle_without_mavftp_does_not_advertise_it_and_has_no_file() {
         ..SimVehicle::config(Autopilot::Ardupilot, params::defaults(Autopilot::Ardupilot))
     };
     let (vehicle, gcs) = vehicle_and_gcs(config).await;
-    let (mut v, ftp) = found(&gcs).await;
+    let (v, ftp) = found(&gcs).await;
     assert!(!ftp);
     v.set_retries(1);
-    let err = v.params_via_ftp().await.expect_err("nobody answers MAVFTP");
+    let err = v
+        .params()
+        .get_all_via_ftp(|_, _| {})
+        .await
+        .expect_err("nobody answers MAVFTP");
     assert!(matches!(err, SystemError::Ftp { .. }), "{err}");
     // Auto asks nothing of MAVFTP here: the table comes by PARAM_REQUEST_LIST.
     v.set_retries(PATIENT_RETRIES);
     let (table, way) = v
-        .params_by(ParamsVia::Auto, |_, _, _| {})
+        .params()
+        .get_all_via(ParamsVia::Auto, |_, _, _| {})
         .await
         .expect("the table");
     assert_eq!(way, ParamsVia::List);
@@ -140,14 +154,18 @@ async fn a_long_table_comes_whole_both_ways() {
         })
         .collect();
     let (vehicle, gcs) = vehicle_and_gcs(SimVehicle::config(Autopilot::Px4, table.clone())).await;
-    let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
+    let v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
         .await
         .expect("the vehicle is found");
     let t = Instant::now();
-    let listed = v.params().await.expect("PARAM_REQUEST_LIST");
+    let listed = v.params().get_all().await.expect("PARAM_REQUEST_LIST");
     let by_list = t.elapsed();
     let t = Instant::now();
-    let by_ftp_table = v.params_via_ftp().await.expect("param.pck");
+    let by_ftp_table = v
+        .params()
+        .get_all_via_ftp(|_, _| {})
+        .await
+        .expect("param.pck");
     let by_ftp = t.elapsed();
     eprintln!("1000 parameters: list {by_list:?}, ftp {by_ftp:?}");
     assert!(same(&listed, &table));

@@ -93,7 +93,7 @@ async fn a_ground_station_uses_a_companions_own_parameters_missions_and_commands
         .start()
         .await
         .expect("ground station starts");
-    let mut c = System::wait(
+    let c = System::wait(
         &gcs.handle(),
         Wanted::System(1, Some(191)),
         Duration::from_secs(5),
@@ -103,16 +103,18 @@ async fn a_ground_station_uses_a_companions_own_parameters_missions_and_commands
 
     // A dropped operation is cancelled (polled once: its request is on its way), and the
     // next one works.
+    let params = c.params();
     let cut = tokio::select! {
         biased;
-        r = c.params() => Some(r),
+        r = params.get_all() => Some(r),
         () = core::future::ready(()) => None,
     };
     assert!(cut.is_none(), "the list could not finish in one poll");
-    let table = c.params().await.expect("the companion's table");
+    let table = c.params().get_all().await.expect("the companion's table");
     assert_eq!(table.len(), 2);
     let set = c
-        .set_param(exposure, Value::F32(0.02))
+        .params()
+        .set(exposure, Value::F32(0.02))
         .await
         .expect("set confirmed");
     assert_eq!(set.value, Value::F32(0.02));
@@ -138,7 +140,8 @@ async fn a_ground_station_uses_a_companions_own_parameters_missions_and_commands
             ..MissionItemInt::default()
         })
         .collect();
-    c.upload_mission(MavMissionType::MISSION, survey.clone())
+    c.mission()
+        .upload(MavMissionType::MISSION, survey.clone())
         .await
         .expect("upload");
     let stored = served
@@ -152,10 +155,15 @@ async fn a_ground_station_uses_a_companions_own_parameters_missions_and_commands
         command: MavCmd::IMAGE_START_CAPTURE,
         ..CommandLong::default()
     });
-    let ack = c.command(shoot, |_| {}).await.expect("accepted");
+    let ack = c
+        .commands()
+        .send_with_progress(shoot, |_| {})
+        .await
+        .expect("accepted");
     assert_eq!(ack.result, MavResult::ACCEPTED);
     let refused = c
-        .command(
+        .commands()
+        .send_with_progress(
             Command::Long(CommandLong {
                 command: MavCmd::NAV_TAKEOFF,
                 ..CommandLong::default()
@@ -166,7 +174,7 @@ async fn a_ground_station_uses_a_companions_own_parameters_missions_and_commands
     assert!(matches!(
         refused,
         Err(SystemError::Command {
-            source: CommandError::Rejected {
+            reason: CommandError::Rejected {
                 result: MavResult::UNSUPPORTED,
                 ..
             },
@@ -207,7 +215,7 @@ const WAIT: Duration = Duration::from_secs(10);
 /// Reads DISTANCE_SENSOR samples until one says `distance_cm`; returns how many came before
 /// it. Fails after [`WAIT`].
 async fn until_distance(
-    telemetry: &mut mavstack::system::Telemetry<DistanceSensor>,
+    telemetry: &mut mavstack::system::TelemetryStream<DistanceSensor>,
     distance_cm: u16,
 ) -> usize {
     let mut before = 0;
@@ -231,7 +239,7 @@ async fn until_distance(
 
 /// Counts the DISTANCE_SENSOR samples of `within` and returns them with the last distance.
 async fn samples(
-    telemetry: &mut mavstack::system::Telemetry<DistanceSensor>,
+    telemetry: &mut mavstack::system::TelemetryStream<DistanceSensor>,
     within: Duration,
 ) -> (usize, Option<u16>) {
     let mut n = 0;
@@ -274,20 +282,21 @@ async fn a_peripheral_streams_at_the_rate_a_ground_station_sets() {
         .start()
         .await
         .expect("ground station starts");
-    let mut p = System::wait(
+    let p = System::wait(
         &gcs.handle(),
         Wanted::System(1, Some(158)),
         Duration::from_secs(5),
     )
     .await
     .expect("the peripheral is found");
-    let mut range = p.subscribe::<DistanceSensor>().await;
+    let mut range = p.telemetry().subscribe::<DistanceSensor>().await;
     assert_eq!(
         samples(&mut range, Duration::from_millis(300)).await.0,
         0,
         "off until asked for"
     );
     let ack = p
+        .commands()
         .set_message_interval(DistanceSensor::ID, Some(Duration::from_millis(50)))
         .await
         .expect("accepted");
@@ -314,7 +323,8 @@ async fn a_peripheral_streams_at_the_rate_a_ground_station_sets() {
     until_distance(&mut range, 97).await;
     // Off again: once the stop is acknowledged no sample is built (samples already on the
     // way carry 97; one built after the stop would carry 1).
-    p.set_message_interval(DistanceSensor::ID, None)
+    p.commands()
+        .set_message_interval(DistanceSensor::ID, None)
         .await
         .expect("accepted");
     assert_eq!(
@@ -331,12 +341,13 @@ async fn a_peripheral_streams_at_the_rate_a_ground_station_sets() {
     assert_ne!(last, Some(1), "a sample built after the stop");
     // A message the peripheral does not produce is refused.
     let refused = p
+        .commands()
         .set_message_interval(30, Some(Duration::from_millis(100)))
         .await;
     assert!(matches!(
         refused,
         Err(SystemError::Command {
-            source: CommandError::Rejected {
+            reason: CommandError::Rejected {
                 result: MavResult::DENIED,
                 ..
             },

@@ -64,7 +64,7 @@ async fn a_ground_station_finds_handshakes_and_operates_the_simulated_vehicle() 
     .await;
     let mut discovery = Discovery::new(&gcs.handle()).await;
 
-    let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
+    let v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
         .await
         .expect("the vehicle is found");
     assert_eq!((v.target().system, v.target().component), (1, 1));
@@ -80,28 +80,35 @@ async fn a_ground_station_finds_handshakes_and_operates_the_simulated_vehicle() 
         .expect("an event");
     assert!(matches!(appeared, HeartbeatEvent::New(p) if p.address == v.target()));
 
-    let table = v.params().await.expect("the parameter table");
+    let table = v.params().get_all().await.expect("the parameter table");
     assert_eq!(table.len(), params::defaults(Autopilot::Ardupilot).len());
     let name = Name::new("WPNAV_SPEED").expect("name");
     let set = v
-        .set_param(name, Value::F32(640.0))
+        .params()
+        .set(name, Value::F32(640.0))
         .await
         .expect("set confirmed");
     assert_eq!(set.value.as_f64(), 640.0);
-    assert_eq!(v.param(name).await.expect("read").value.as_f64(), 640.0);
+    assert_eq!(
+        v.params().get(name).await.expect("read").value.as_f64(),
+        640.0
+    );
 
     let items = plan(8);
-    v.upload_mission(MavMissionType::MISSION, items.clone())
+    v.mission()
+        .upload(MavMissionType::MISSION, items.clone())
         .await
         .expect("upload");
     let back = v
-        .download_mission(MavMissionType::MISSION)
+        .mission()
+        .download(MavMissionType::MISSION)
         .await
         .expect("download");
     assert!(same_plan(&back, &items), "read back {back:?}");
 
     let ack = v
-        .command(
+        .commands()
+        .send_with_progress(
             Command::Long(CommandLong {
                 command: MavCmd::COMPONENT_ARM_DISARM,
                 param1: 1.0,
@@ -113,7 +120,7 @@ async fn a_ground_station_finds_handshakes_and_operates_the_simulated_vehicle() 
         .expect("arming is accepted");
     assert_eq!(ack.result, MavResult::ACCEPTED);
 
-    let mut attitude = v.subscribe::<Attitude>().await;
+    let mut attitude = v.telemetry().subscribe::<Attitude>().await;
     let sample = tokio::time::timeout(Duration::from_secs(3), attitude.recv())
         .await
         .expect("ATTITUDE streams")
@@ -210,26 +217,32 @@ async fn parameters_and_a_mission_go_through_a_link_that_drops_a_fifth_of_the_da
     .await
     .expect("vehicle starts");
 
-    let mut v = System::wait(
+    let v = System::wait(
         &gcs.handle(),
         Wanted::System(1, Some(1)),
         Duration::from_secs(10),
     )
     .await
     .expect("the vehicle is found through the relay");
-    let table = v.params().await.expect("every parameter despite the loss");
+    let table = v
+        .params()
+        .get_all()
+        .await
+        .expect("every parameter despite the loss");
     assert_eq!(table.len(), params::defaults(Autopilot::Px4).len());
     let items = plan(40);
     let mut sent = Vec::new();
-    v.upload_mission_with_progress(MavMissionType::MISSION, items.clone(), |n, of| {
-        sent.push((n, of));
-    })
-    .await
-    .expect("upload despite the loss");
+    v.mission()
+        .upload_with_progress(MavMissionType::MISSION, items.clone(), |n, of| {
+            sent.push((n, of));
+        })
+        .await
+        .expect("upload despite the loss");
     assert_eq!(sent.last(), Some(&(40, 40)), "{sent:?}");
     let mut got = Vec::new();
     let back = v
-        .download_mission_with_progress(MavMissionType::MISSION, |n, of| got.push((n, of)))
+        .mission()
+        .download_with_progress(MavMissionType::MISSION, |n, of| got.push((n, of)))
         .await
         .expect("download despite the loss");
     assert!(same_plan(&back, &items));
@@ -256,7 +269,7 @@ async fn signing_is_set_up_over_a_secure_link_and_the_list_reports_its_progress(
         .start()
         .await
         .expect("ground station starts");
-    let mut v = System::wait(
+    let v = System::wait(
         &gcs.handle(),
         Wanted::System(1, Some(1)),
         Duration::from_secs(5),
@@ -266,7 +279,8 @@ async fn signing_is_set_up_over_a_secure_link_and_the_list_reports_its_progress(
     assert_eq!(v.link_version().await, Some("2"), "after the handshake");
 
     let check = v
-        .setup_signing(mavstack::core::signing::SecretKey::new([7; 32]), 3)
+        .signing()
+        .setup(mavstack::core::signing::SecretKey::new([7; 32]), 3)
         .await
         .expect("signing set up");
     assert!(
@@ -276,7 +290,8 @@ async fn signing_is_set_up_over_a_secure_link_and_the_list_reports_its_progress(
     assert_eq!(v.link_version().await, Some("signed"));
     let mut seen = Vec::new();
     let table = v
-        .params_with_progress(|got, of| seen.push((got, of)))
+        .params()
+        .get_all_with_progress(|got, of| seen.push((got, of)))
         .await
         .expect("the table, over the signed link");
     let n = table.len();
@@ -293,7 +308,7 @@ async fn signing_is_set_up_over_a_secure_link_and_the_list_reports_its_progress(
     let report = vehicle.node().report().await.expect("report");
     assert!(report.links.iter().any(|l| l.version == "signed"));
     // And off again: the all-zero key, signed with the current one; then unsigned answers.
-    let check = v.remove_signing().await.expect("signing removed");
+    let check = v.signing().remove().await.expect("signing removed");
     assert!(
         check.proven(),
         "an unsigned request was answered: {check:?}"
@@ -367,7 +382,7 @@ async fn a_refused_command_carries_the_statustext_that_says_why() {
         SimVehicle::config(Autopilot::Ardupilot, params::defaults(Autopilot::Ardupilot));
     config.estimator_settle = Duration::from_secs(600);
     let (vehicle, gcs) = vehicle_and_gcs(ProtocolVersionSupport::Answer, config).await;
-    let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
+    let v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
         .await
         .expect("the vehicle is found");
     let arm = Command::Long(CommandLong {
@@ -375,16 +390,20 @@ async fn a_refused_command_carries_the_statustext_that_says_why() {
         param1: 1.0,
         ..CommandLong::default()
     });
-    let error = v.command(arm, |_| {}).await.expect_err("refused");
+    let error = v
+        .commands()
+        .send_with_progress(arm, |_| {})
+        .await
+        .expect_err("refused");
     let SystemError::Command {
-        source, statustext, ..
+        reason, statustext, ..
     } = &error
     else {
         panic!("{error}");
     };
     assert!(
-        matches!(source, CommandError::Rejected { result, .. } if *result == MavResult::FAILED),
-        "{source}"
+        matches!(reason, CommandError::Rejected { result, .. } if *result == MavResult::FAILED),
+        "{reason}"
     );
     assert_eq!(statustext, &["PreArm: Need Position Estimate".to_owned()]);
     assert!(
@@ -405,7 +424,7 @@ async fn a_refusal_explained_in_events_carries_their_texts() {
     let mut config = SimVehicle::config(Autopilot::Px4, params::defaults(Autopilot::Px4));
     config.estimator_settle = Duration::from_secs(600);
     let (vehicle, gcs) = vehicle_and_gcs(ProtocolVersionSupport::Answer, config).await;
-    let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
+    let v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
         .await
         .expect("the vehicle is found");
     let arm = Command::Long(CommandLong {
@@ -414,16 +433,20 @@ async fn a_refusal_explained_in_events_carries_their_texts() {
         ..CommandLong::default()
     });
     for attempt in 0..2 {
-        let error = v.command(arm.clone(), |_| {}).await.expect_err("refused");
+        let error = v
+            .commands()
+            .send_with_progress(arm.clone(), |_| {})
+            .await
+            .expect_err("refused");
         let SystemError::Command {
-            source, statustext, ..
+            reason, statustext, ..
         } = &error
         else {
             panic!("{error}");
         };
         assert!(
-            matches!(source, CommandError::Rejected { result, .. } if *result == MavResult::TEMPORARILY_REJECTED),
-            "{source}"
+            matches!(reason, CommandError::Rejected { result, .. } if *result == MavResult::TEMPORARILY_REJECTED),
+            "{reason}"
         );
         assert_eq!(statustext.len(), 2, "attempt {attempt}: {statustext:?}");
         assert!(
@@ -452,12 +475,19 @@ async fn a_rate_is_asked_with_set_message_interval_and_else_with_request_data_st
             SimVehicle::config(Autopilot::Ardupilot, params::defaults(Autopilot::Ardupilot));
         config.data_streams_only = streams_only;
         let (vehicle, gcs) = vehicle_and_gcs(ProtocolVersionSupport::Answer, config).await;
-        let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
+        let v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
             .await
             .expect("the vehicle is found");
         // Off first, so that only the request can bring it back.
-        v.set_message_interval(Attitude::ID, None).await.ok();
-        let rate = v.request_rate(Attitude::ID, 10.0).await.expect("asked");
+        v.commands()
+            .set_message_interval(Attitude::ID, None)
+            .await
+            .ok();
+        let rate = v
+            .telemetry()
+            .request_rate(Attitude::ID, 10.0)
+            .await
+            .expect("asked");
         assert_eq!(rate.how, want, "data streams only: {streams_only}");
         assert!(rate.arrived, "ATTITUDE came: {rate:?}");
         gcs.shutdown().await.expect("stops");
@@ -474,13 +504,17 @@ async fn a_vehicle_streaming_on_request_sends_only_what_is_asked() {
         SimVehicle::config(Autopilot::Ardupilot, params::defaults(Autopilot::Ardupilot));
     config.streams_on_request = true;
     let (vehicle, gcs) = vehicle_and_gcs(ProtocolVersionSupport::Answer, config).await;
-    let mut v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
+    let v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(5))
         .await
         .expect("the vehicle is found");
-    let mut attitude = v.subscribe::<Attitude>().await;
+    let mut attitude = v.telemetry().subscribe::<Attitude>().await;
     let unasked = tokio::time::timeout(Duration::from_millis(1500), attitude.recv()).await;
     assert!(unasked.is_err(), "ATTITUDE came unasked: {unasked:?}");
-    let rate = v.request_rate(Attitude::ID, 10.0).await.expect("asked");
+    let rate = v
+        .telemetry()
+        .request_rate(Attitude::ID, 10.0)
+        .await
+        .expect("asked");
     assert!(rate.arrived, "{rate:?}");
     let asked = tokio::time::timeout(Duration::from_secs(2), attitude.recv()).await;
     assert!(matches!(asked, Ok(Some(_))), "{asked:?}");

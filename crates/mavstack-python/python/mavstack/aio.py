@@ -63,6 +63,7 @@ __all__ = [
     "ConnectionClosed",
     "ConnectionFailed",
     "Error",
+    "InvalidValueError",
     "Mission",
     "MissionError",
     "MissionItem",
@@ -116,6 +117,10 @@ class UnknownModeError(Error, ValueError):
     """A mode name the vehicle's autopilot does not have; the message lists the known ones."""
 
 
+class InvalidValueError(Error, ValueError):
+    """A value that cannot be sent (NaN, beyond its type's range): nothing was sent."""
+
+
 _KINDS: Dict[str, type[Error]] = {
     "timeout": TimeoutError,
     "closed": ConnectionClosed,
@@ -124,6 +129,7 @@ _KINDS: Dict[str, type[Error]] = {
     "mission": MissionError,
     "command": CommandError,
     "mode": UnknownModeError,
+    "value": InvalidValueError,
 }
 
 Settle = Callable[[bool, Any], None]
