@@ -1,19 +1,98 @@
-"""Shared corpora for the package's tests, all written by pymavlink (tests-interop/make_corpus.py:
+"""What the package's tests share: corpora written by pymavlink (tests-interop/make_corpus.py:
 every message of the dialect with random values, MAVLink 1 and 2, signed frames, garbage,
-unknown ids and bad checksums), and pymavlink's own reading of them, the expectation."""
+unknown ids and bad checksums) and pymavlink's own reading of them, the expectation; tlogs
+written from frames; and for the live tests, free ports, the simulated vehicle (`mavstack
+vehicle`, the workspace's binary) and tests-interop/lossy_relay.py between it and a test."""
 
 import math
 import os
 import struct
 import subprocess
 import sys
+import time
 
 import pytest
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
-MAKE_CORPUS = os.path.join(ROOT, "tests-interop", "make_corpus.py")
+INTEROP = os.path.join(ROOT, "tests-interop")
+MAKE_CORPUS = os.path.join(INTEROP, "make_corpus.py")
 KEY_HEX = "5c" * 16 + "a3" * 16
 KEY = bytes.fromhex(KEY_HEX)
+
+sys.path.insert(0, INTEROP)
+# A free port of 127.0.0.1 for UDP and TCP alike, as the interop scripts pick them (outside the
+# kernel's ephemeral range, so that no socket bound to port 0 takes it in between; at random).
+from scenario import free_port  # noqa: E402
+
+
+def vehicle_binary():
+    """The workspace's `mavstack` binary ($MAVSTACK_BIN, else target/debug, else target/release);
+    missing, the test fails."""
+    env = os.environ.get("MAVSTACK_BIN")
+    if env:
+        return env
+    for profile in ("debug", "release"):
+        path = os.path.join(ROOT, "target", profile, "mavstack")
+        if os.access(path, os.X_OK):
+            return path
+    pytest.fail("no mavstack binary in target/debug or target/release (cargo build -p mavstack-cli), "
+                "nor $MAVSTACK_BIN: the simulated vehicle is needed")
+
+
+class Vehicle:
+    """`mavstack vehicle LINK ARGS...` (the simulated vehicle), stopped on exit."""
+
+    def __init__(self, link, *args):
+        self.proc = subprocess.Popen([vehicle_binary(), "vehicle", link, *args],
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.proc.terminate()
+        try:
+            self.proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+
+
+def wait_tcp_listening(port, proc, deadline=30.0):
+    """Waits until a socket listens on TCP `port` (read from /proc/net/tcp and tcp6: a probe
+    connection would be taken for a client), failing if `proc` exits or `deadline` passes."""
+    local = ":%04X" % port
+    end = time.monotonic() + deadline
+    while time.monotonic() < end:
+        for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+            try:
+                with open(table) as f:
+                    rows = [r.split() for r in f.read().splitlines()[1:]]
+            except FileNotFoundError:
+                continue
+            # Columns: sl, local_address (hex address:port), rem_address, st (0A: LISTEN), ...
+            if any(len(r) > 3 and r[1].endswith(local) and r[3] == "0A" for r in rows):
+                return
+        if proc.poll() is not None:
+            pytest.fail("the process exited (%s) before it listened on TCP port %d" % (proc.returncode, port))
+        time.sleep(0.02)
+    pytest.fail("nothing listened on TCP port %d within %.0f s" % (port, deadline))
+
+
+class Lossy:
+    """tests-interop/lossy_relay.py in front of `port`, dropping `loss` of the datagrams each
+    way (seeded); entered, it gives the port to send to instead."""
+
+    def __init__(self, port, loss=0.2, seed=5):
+        from lossy_relay import LossyRelay
+        self.relay = LossyRelay(("127.0.0.1", 0), ("127.0.0.1", port), loss=loss, seed=seed)
+
+    def __enter__(self):
+        self.relay.start()
+        return self.relay.listen_port
+
+    def __exit__(self, *exc):
+        self.relay.stop()
 
 
 def make_raw(tmp, name, dialect, seed, key=None, frames=2000, **fracs):

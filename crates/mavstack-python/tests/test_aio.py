@@ -14,21 +14,9 @@ import threading
 import pytest
 
 import mavstack.aio as aio
+from conftest import Lossy, Vehicle, free_port
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
 HOME = (-353632610, 1491652300)
-
-
-def vehicle_binary():
-    env = os.environ.get("MAVSTACK_BIN")
-    if env:
-        return env
-    for profile in ("debug", "release"):
-        path = os.path.join(ROOT, "target", profile, "mavstack")
-        if os.access(path, os.X_OK):
-            return path
-    pytest.fail("no mavstack binary in target/debug or target/release (cargo build -p mavstack-cli), "
-                "nor $MAVSTACK_BIN: the simulated vehicle is needed")
 
 
 @pytest.fixture(autouse=True)
@@ -38,49 +26,6 @@ def hang_guard():
     faulthandler.dump_traceback_later(120, exit=True)
     yield
     faulthandler.cancel_dump_traceback_later()
-
-
-def free_udp_port():
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
-
-
-class Vehicle:
-    """`mavstack vehicle udpout:127.0.0.1:PORT ARGS...` sending to `port`, stopped on exit."""
-
-    def __init__(self, port, *args):
-        self.proc = subprocess.Popen([vehicle_binary(), "vehicle", "udpout:127.0.0.1:%d" % port, *args],
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.proc.terminate()
-        try:
-            self.proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-
-
-class Lossy:
-    """tests-interop/lossy_relay.py between the vehicle and `port`: 20 % loss each way."""
-
-    def __init__(self, port, loss=0.2, seed=5):
-        sys.path.insert(0, os.path.join(ROOT, "tests-interop"))
-        from lossy_relay import LossyRelay
-        self.relay = LossyRelay(("127.0.0.1", 0), ("127.0.0.1", port), loss=loss, seed=seed)
-
-    def __enter__(self):
-        self.relay.start()
-        return self.relay.listen_port
-
-    def __exit__(self, *exc):
-        self.relay.stop()
 
 
 def run(coro, timeout=40):
@@ -119,7 +64,7 @@ def same_plan(sent, back, autopilot):
 
 @pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
 def test_a_ground_station_session(autopilot):
-    port = free_udp_port()
+    port = free_port()
 
     async def session():
         async with aio.connect("udpin:127.0.0.1:%d" % port) as gcs:
@@ -186,7 +131,7 @@ def test_a_ground_station_session(autopilot):
         with pytest.raises(aio.ConnectionClosed):
             await vehicle.params.get(name)
 
-    with Vehicle(port, "--autopilot", autopilot):
+    with Vehicle("udpout:127.0.0.1:%d" % port, "--autopilot", autopilot):
         run(session())
 
 
@@ -198,7 +143,7 @@ async def _count(stream):
 
 
 def test_a_refusal_carries_the_statustext_that_explains_it():
-    port = free_udp_port()
+    port = free_port()
 
     async def session():
         async with aio.connect("udpin:127.0.0.1:%d" % port) as gcs:
@@ -208,13 +153,13 @@ def test_a_refusal_carries_the_statustext_that_explains_it():
             assert any("PreArm" in line for line in result.statustext), result.statustext
             assert "PreArm" in repr(result)
 
-    with Vehicle(port, "--estimator-settle", "120"):
+    with Vehicle("udpout:127.0.0.1:%d" % port, "--estimator-settle", "120"):
         run(session())
 
 
 @pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
 def test_params_and_a_50_item_mission_through_20_percent_loss(autopilot):
-    port = free_udp_port()
+    port = free_port()
 
     async def session():
         async with aio.connect("udpin:127.0.0.1:%d" % port) as gcs:
@@ -226,13 +171,13 @@ def test_params_and_a_50_item_mission_through_20_percent_loss(autopilot):
             await vehicle.mission.upload(sent)
             same_plan(sent, await vehicle.mission.download(), autopilot)
 
-    with Lossy(port) as relay_port, Vehicle(relay_port, "--autopilot", autopilot):
+    with Lossy(port) as relay_port, Vehicle("udpout:127.0.0.1:%d" % relay_port, "--autopilot", autopilot):
         run(session(), timeout=50)
 
 
 def test_no_vehicle_is_a_timeout_error_of_both_kinds():
     async def session():
-        async with aio.connect("udpin:127.0.0.1:%d" % free_udp_port()) as gcs:
+        async with aio.connect("udpin:127.0.0.1:%d" % free_port()) as gcs:
             with pytest.raises(aio.TimeoutError, match="no vehicle heard") as e:
                 await gcs.vehicle(timeout=0.2)
             assert isinstance(e.value, builtins.TimeoutError) and isinstance(e.value, aio.Error)
@@ -259,7 +204,7 @@ def test_bad_connection_strings_and_ports_in_use_are_named():
 
 
 def test_cancelled_and_timed_out_operations_are_abandoned_cleanly():
-    port = free_udp_port()
+    port = free_port()
 
     async def session():
         async with aio.connect("udpin:127.0.0.1:%d" % port) as gcs:
@@ -298,14 +243,14 @@ def test_cancelled_and_timed_out_operations_are_abandoned_cleanly():
             with pytest.raises(aio.ConnectionClosed):
                 await other
 
-    with Vehicle(port):
+    with Vehicle("udpout:127.0.0.1:%d" % port):
         run(session())
 
 
 def test_a_served_component_answers_pymavlink():
     """A pymavlink ground station lists and sets the component's parameters and sends it
     commands, answered by an async handler."""
-    port = free_udp_port()
+    port = free_port()
     seen = []
 
     async def handler(request):
@@ -368,7 +313,7 @@ def test_a_served_component_answers_pymavlink():
 
 
 def test_a_served_component_answers_mavstack_aio_with_a_sync_handler():
-    port = free_udp_port()
+    port = free_port()
     calls = []
 
     def handler(request):
@@ -409,7 +354,7 @@ def test_a_served_component_answers_mavstack_aio_with_a_sync_handler():
 def test_many_operations_at_once_complete_in_order():
     """Operations on one vehicle run one after the other; many started together all
     complete, each with its own result."""
-    port = free_udp_port()
+    port = free_port()
 
     async def session():
         async with aio.connect("udpin:127.0.0.1:%d" % port) as gcs:
@@ -418,7 +363,7 @@ def test_many_operations_at_once_complete_in_order():
             values = await asyncio.gather(*(vehicle.params.get(n) for n in names))
             assert values[0::3] == [1] * 4 and len(set(values[1::3])) == 1
 
-    with Vehicle(port):
+    with Vehicle("udpout:127.0.0.1:%d" % port):
         run(session())
 
 
@@ -431,7 +376,7 @@ def test_results_that_come_while_the_loop_drains_are_not_lost():
     rnd = random.Random(1)
 
     async def session():
-        async with aio.connect("udpin:127.0.0.1:%d" % free_udp_port()) as gcs:
+        async with aio.connect("udpin:127.0.0.1:%d" % free_port()) as gcs:
             async def one(timeout):
                 with pytest.raises(aio.TimeoutError):
                     await gcs.vehicle(timeout=timeout)
@@ -448,7 +393,7 @@ def test_results_that_come_while_the_loop_drains_are_not_lost():
 
 def test_the_loop_thread_is_the_only_python_thread():
     """No helper thread in Python: results come through the waker the loop watches."""
-    port = free_udp_port()
+    port = free_port()
 
     async def session():
         before = threading.active_count()
@@ -457,7 +402,7 @@ def test_the_loop_thread_is_the_only_python_thread():
             await asyncio.gather(*(vehicle.params.get("MAV_SYSID") for _ in range(20)))
             assert threading.active_count() == before
 
-    with Vehicle(port):
+    with Vehicle("udpout:127.0.0.1:%d" % port):
         run(session())
 
 
@@ -465,7 +410,7 @@ def test_the_example_runs_and_the_interpreter_exits_cleanly():
     """examples/aio_ground_station.py against the vehicle, in a process of its own: its
     output, and exit status 0 (results arriving while the interpreter finalizes must not
     abort it), also for a process that leaves a busy stream and its connection open."""
-    port = free_udp_port()
+    port = free_port()
     example = os.path.join(os.path.dirname(__file__), "..", "examples", "aio_ground_station.py")
     left_open = (
         "import asyncio, mavstack.aio as aio\n"
@@ -478,7 +423,7 @@ def test_the_example_runs_and_the_interpreter_exits_cleanly():
         "    asyncio.ensure_future(v.params.get_all(via='list'))\n"
         "    print('left open', flush=True)\n"
         "asyncio.run(main())\n" % port)
-    with Vehicle(port):
+    with Vehicle("udpout:127.0.0.1:%d" % port):
         p = subprocess.run([sys.executable, example, "udpin:127.0.0.1:%d" % port],
                            capture_output=True, text=True, timeout=60)
         assert p.returncode == 0, (p.returncode, p.stdout, p.stderr)
@@ -493,7 +438,7 @@ def test_a_signed_link_with_the_key_and_without_it():
     """`key=` signs the link: a vehicle that accepts only signed frames answers; with another
     key its frames are refused and it is never found."""
     key = "5c" * 16 + "a3" * 16
-    port = free_udp_port()
+    port = free_port()
 
     async def session():
         async with aio.connect("udpin:127.0.0.1:%d" % port, key=key) as gcs:
@@ -504,7 +449,7 @@ def test_a_signed_link_with_the_key_and_without_it():
             with pytest.raises(aio.TimeoutError):
                 await gcs.vehicle(timeout=1.5)
 
-    with Vehicle(port, "--sign-key", key):
+    with Vehicle("udpout:127.0.0.1:%d" % port, "--sign-key", key):
         run(session())
 
 
@@ -512,7 +457,7 @@ def test_a_slow_handler_runs_once_and_its_retries_hear_in_progress():
     """A handler slower than the client's retry timeout: the retries are answered IN_PROGRESS
     by the stack (never handed to the handler again), and the final ACK ends the command.
     The handler waits for an event set only after the client has sent the command again."""
-    port = free_udp_port()
+    port = free_port()
     calls = []
 
     async def session():

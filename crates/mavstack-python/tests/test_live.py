@@ -17,15 +17,8 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as apm  # noqa: E402
 
+from conftest import free_port  # noqa: E402
 from mavstack import mavutil  # noqa: E402
-
-
-def free_udp_port():
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 def test_serial_device_with_baud_both_ways():
@@ -64,7 +57,7 @@ def test_bad_connection_strings_are_named():
 
 
 def test_a_blocking_receive_releases_the_gil():
-    conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % free_udp_port())
+    conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % free_port())
     ticks = [0]
     stop = threading.Event()
 
@@ -95,7 +88,7 @@ def test_ctrl_c_interrupts_a_wait_without_timeout():
             conn.wait_heartbeat()
         except KeyboardInterrupt:
             print("interrupted", flush=True)
-    """ % free_udp_port())
+    """ % free_port())
     p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
     assert p.stdout.readline().strip() == "waiting"
     time.sleep(0.3)
@@ -105,7 +98,7 @@ def test_ctrl_c_interrupts_a_wait_without_timeout():
 
 
 def test_sent_and_encoded_messages_decode_in_pymavlink():
-    port = free_udp_port()
+    port = free_port()
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", port))
     rx.settimeout(5)
@@ -167,7 +160,7 @@ def test_tcpin_serves_a_pymavlink_client():
 
 def test_udpbcast_sends_to_the_broadcast_address():
     from pymavlink import mavutil as pm
-    port = free_udp_port()
+    port = free_port()
     listener = pm.mavlink_connection("udpin:0.0.0.0:%d" % port)
     conn = mavutil.mavlink_connection("udpbcast:127.255.255.255:%d" % port, source_system=7, source_component=1)
     try:
@@ -194,7 +187,7 @@ def test_pymavlink_constants():
 
 
 def test_udp_with_input_false_sends():
-    port = free_udp_port()
+    port = free_port()
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", port))
     rx.settimeout(5)
@@ -212,8 +205,8 @@ def test_udp_with_input_false_sends():
 def test_one_thread_receives_while_another_sends():
     """pymavlink's common pattern: a receiving thread, the main thread sending and reading
     the connection's state at the same time."""
-    port = free_udp_port()
-    peer_port = free_udp_port()
+    port = free_port()
+    peer_port = free_port()
     peer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     peer.bind(("127.0.0.1", peer_port))
     peer.settimeout(5)
@@ -262,7 +255,7 @@ def test_flightmode_as_pymavlink_names_it():
     """`flightmode` from HEARTBEATs of ArduPilot's vehicles and PX4, beside pymavlink's
     mode_string_v10 of the same HEARTBEAT."""
     from pymavlink import mavutil as pm
-    port = free_udp_port()
+    port = free_port()
     conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % port)
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     enc = apm.MAVLink(None, srcSystem=1, srcComponent=1)
@@ -293,7 +286,7 @@ def test_flightmode_as_pymavlink_names_it():
 def test_mode_mapping_as_pymavlink():
     """ArduPilot's modes by pymavlink's names (mode_mapping_byname), and set_mode by them."""
     from pymavlink import mavutil as pm
-    port, peer_port = free_udp_port(), free_udp_port()
+    port, peer_port = free_port(), free_port()
     conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % port)
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     tx.bind(("127.0.0.1", peer_port))
@@ -316,7 +309,7 @@ def test_signing_set_up_before_any_peer():
     """setup_signing on a udpin link nobody has spoken to yet: the peer that comes later is
     held to it (its signed frames verified, its unsigned ones refused) and answered signed."""
     key = bytes(range(32))
-    port = free_udp_port()
+    port = free_port()
     conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % port)
     peer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     peer.bind(("127.0.0.1", 0))

@@ -3,13 +3,12 @@ field, and the reader's edges (conditions, bad input)."""
 
 import os
 import random
-import struct
 
 import pytest
 
 import mavstack
 from mavstack import mavutil
-from conftest import KEY, KEY_HEX, make_raw, norm, pymavlink_log, reference, write_tlog
+from conftest import KEY, KEY_HEX, free_port, make_raw, norm, pymavlink_log, reference, write_tlog
 
 
 def facts(m, timestamps=True):
@@ -179,12 +178,7 @@ def test_mavproxy_written_tlog(tmp_path):
     import time
     import pymavlink.dialects.v20.ardupilotmega as apm
 
-    ports = []
-    for _ in range(2):
-        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        s.bind(("127.0.0.1", 0))
-        ports.append(s.getsockname()[1])
-        s.close()
+    ports = [free_port(), free_port()]
     exe = os.path.join(os.path.dirname(sys.executable), "mavproxy.py")
     log_path = str(tmp_path / "mav.tlog")
     env = dict(os.environ, HOME=str(tmp_path))

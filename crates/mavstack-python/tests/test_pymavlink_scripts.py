@@ -14,49 +14,10 @@ import time
 
 import pytest
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
+from conftest import Lossy, Vehicle, free_port, wait_tcp_listening
+
 SCRIPTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "pymavlink_scripts")
 SHIM = os.path.join(SCRIPTS, "run_with_mavstack.py")
-
-
-def vehicle_binary():
-    env = os.environ.get("MAVSTACK_BIN")
-    if env:
-        return env
-    for profile in ("debug", "release"):
-        path = os.path.join(ROOT, "target", profile, "mavstack")
-        if os.access(path, os.X_OK):
-            return path
-    pytest.fail("no mavstack binary in target/debug or target/release (cargo build -p mavstack-cli), "
-                "nor $MAVSTACK_BIN: the simulated vehicle is needed")
-
-
-def free_port(kind=socket.SOCK_DGRAM):
-    s = socket.socket(socket.AF_INET, kind)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
-
-
-class Vehicle:
-    """`mavstack vehicle LINK ARGS...`, stopped on exit."""
-
-    def __init__(self, link, *args):
-        self.proc = subprocess.Popen([vehicle_binary(), "vehicle", link, *args],
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.proc.terminate()
-        try:
-            self.proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-        self.proc.stderr.close()
 
 
 def run_script(script, args, with_mavstack):
@@ -86,16 +47,9 @@ def udp_session(script, vehicle_args=(), with_mavstack=False):
 
 def lossy_session(script, vehicle_args=(), with_mavstack=False, loss=0.2):
     """The same through 20 % loss each way (tests-interop/lossy_relay.py, seeded)."""
-    sys.path.insert(0, os.path.join(ROOT, "tests-interop"))
-    from lossy_relay import LossyRelay
     port = free_port()
-    relay = LossyRelay(("127.0.0.1", 0), ("127.0.0.1", port), loss=loss, seed=3)
-    relay.start()
-    try:
-        with Vehicle("udpout:127.0.0.1:%d" % relay.listen_port, *vehicle_args):
-            return run(script, ["udpin:127.0.0.1:%d" % port], with_mavstack)
-    finally:
-        relay.stop()
+    with Lossy(port, loss=loss, seed=3) as relay_port, Vehicle("udpout:127.0.0.1:%d" % relay_port, *vehicle_args):
+        return run(script, ["udpin:127.0.0.1:%d" % port], with_mavstack)
 
 
 def both(script, session=udp_session, **kw):
@@ -135,8 +89,9 @@ def test_heartbeat():
 def test_heartbeat_over_tcp():
     def tcp_session(script, with_mavstack):
         port = free_port(socket.SOCK_STREAM)
-        with Vehicle("tcpin:127.0.0.1:%d" % port):
-            time.sleep(0.5)
+        with Vehicle("tcpin:127.0.0.1:%d" % port) as vehicle:
+            # pymavlink gives up on a server that is not up yet.
+            wait_tcp_listening(port, vehicle.proc)
             return run(script, ["tcp:127.0.0.1:%d" % port], with_mavstack)
     out = both("heartbeat.py", session=tcp_session)
     assert "heartbeat from 1/1" in out
@@ -186,8 +141,6 @@ def forward_session(script, with_mavstack, loss=0.0):
     """vehicle -> forwarder (argv[1]) -> a pymavlink ground station (argv[2]), and back; with
     `loss`, the vehicle's link goes through lossy_relay.py."""
     from pymavlink import mavutil as pm
-    sys.path.insert(0, os.path.join(ROOT, "tests-interop"))
-    from lossy_relay import LossyRelay
     vport, gport = free_port(), free_port()
     gcs = pm.mavlink_connection("udpin:127.0.0.1:%d" % gport, source_system=250)
     stop = threading.Event()
@@ -200,10 +153,8 @@ def forward_session(script, with_mavstack, loss=0.0):
             time.sleep(0.2)
     # The ground station speaks first: the forwarder's udpout learns nothing else.
     t = threading.Thread(target=ask, daemon=True)
-    relay = LossyRelay(("127.0.0.1", 0), ("127.0.0.1", vport), loss=loss, seed=5)
-    relay.start()
     try:
-        with Vehicle("udpout:127.0.0.1:%d" % relay.listen_port):
+        with Lossy(vport, loss=loss, seed=5) as relay_port, Vehicle("udpout:127.0.0.1:%d" % relay_port):
             t.start()
             return run(script, ["udpin:127.0.0.1:%d" % vport, "udpout:127.0.0.1:%d" % gport],
                        with_mavstack)
@@ -211,7 +162,6 @@ def forward_session(script, with_mavstack, loss=0.0):
         stop.set()
         if t.is_alive():
             t.join()
-        relay.stop()
         gcs.close()
 
 

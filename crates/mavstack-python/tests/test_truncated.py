@@ -2,26 +2,23 @@
 file, and the interpreter lives (a mapped file would have died of SIGBUS). Each case runs in
 a fresh interpreter so that a signal shows as its exit status instead of killing pytest."""
 
-import os
 import signal
-import struct
 import subprocess
 import sys
 import textwrap
 
+from conftest import write_tlog
 
-def write_tlog(path, records):
-    """A tlog of `records` MAVLink 2 HEARTBEATs of 1/1, 1 ms apart, written by pymavlink."""
+
+def write_heartbeats(path, records):
+    """A tlog of `records` MAVLink 2 HEARTBEATs of 1/1 (29 bytes a record), packed by pymavlink."""
     from pymavlink.dialects.v20 import common
     mav = common.MAVLink(None, srcSystem=1, srcComponent=1)
     frames = []
     for seq in range(256):
         mav.seq = seq
         frames.append(common.MAVLink_heartbeat_message(2, 3, 81, 4, 3, 3).pack(mav))
-    t0 = 1_700_000_000_000_000
-    with open(path, "wb") as f:
-        f.write(b"".join(struct.pack(">Q", t0 + 1000 * i) + frames[i % 256]
-                         for i in range(records)))
+    write_tlog(path, (frames[i % 256] for i in range(records)), link_bits=False)
 
 
 def run(code, path):
@@ -37,7 +34,7 @@ def died_of_signal(proc):
 def test_iteration_over_a_log_truncated_midway_raises_oserror_naming_it(tmp_path):
     path = str(tmp_path / "shrinking.tlog")
     records = 150_000  # 4.6 MB: several of the reader's 1 MiB checks
-    write_tlog(path, records)
+    write_heartbeats(path, records)
     proc = run("""
         import os, sys
         from mavstack import mavutil
@@ -66,7 +63,7 @@ def test_iteration_over_a_log_truncated_midway_raises_oserror_naming_it(tmp_path
 
 def test_recv_match_raises_too_and_the_end_of_a_whole_log_is_none(tmp_path):
     path = str(tmp_path / "shrinking.tlog")
-    write_tlog(path, 2000)  # below one check: the end looks at the length
+    write_heartbeats(path, 2000)  # below one check: the end looks at the length
     proc = run("""
         import os, sys
         from mavstack import mavutil
@@ -90,7 +87,7 @@ def test_recv_match_raises_too_and_the_end_of_a_whole_log_is_none(tmp_path):
 
 def test_tables_read_before_the_file_shrank_keep_their_values(tmp_path):
     path = str(tmp_path / "shrinking.tlog")
-    write_tlog(path, 5000)
+    write_heartbeats(path, 5000)
     proc = run("""
         import os, sys
         import pyarrow as pa

@@ -8,7 +8,6 @@ mypy is the test venv's (scripts/setup-peers.sh): missing, the tests fail."""
 import importlib.util
 import inspect
 import os
-import socket
 import subprocess
 import sys
 import textwrap
@@ -16,6 +15,7 @@ import textwrap
 import pytest
 
 import mavstack
+from conftest import Vehicle, free_port
 from mavstack import mavutil
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -30,14 +30,6 @@ def stubgen():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
-
-
-def free_udp_port():
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 def test_committed_stubs_are_what_stubgen_writes():
@@ -90,7 +82,7 @@ def test_stubs_agree_with_the_extension(dialect):
     ids = {name[len("MAVLINK_MSG_ID_"):]: v for name, v in mavstack._native.dialect_constants(dialect)
            if name.startswith("MAVLINK_MSG_ID_")}
     assert {m.name: m.id for m in messages} == ids
-    conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % free_udp_port(), dialect=dialect)
+    conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % free_port(), dialect=dialect)
     try:
         assert isinstance(conn, mavutil.mavlive)
         wrong = []
@@ -178,8 +170,7 @@ def test_tables_example(tlog):
 
 
 def test_live_link_example():
-    from test_pymavlink_scripts import Vehicle
-    port = free_udp_port()
+    port = free_port()
     with Vehicle("udpout:127.0.0.1:%d" % port):
         out = run_example("live_link.py", "udpin:127.0.0.1:%d" % port, "2")
     assert "vehicle 1 " in out and "parameter RTL_ALT = 3000" in out, out
