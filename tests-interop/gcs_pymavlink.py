@@ -24,6 +24,11 @@ Scenarios:
   intervals   SET_MESSAGE_INTERVAL ATTITUDE 50 ms -> ~20 Hz measured; REQUEST_MESSAGE(244, 30) ->
               MESSAGE_INTERVAL 50000; -1 -> ATTITUDE stops; REQUEST_MESSAGE(242) -> HOME_POSITION at
               the SITL home; REQUEST_DATA_STREAM(POSITION, 10 Hz) -> GLOBAL_POSITION_INT ~10 Hz
+  clock       every time field counts from the vehicle's start, as a flight stack's from its boot:
+              ATTITUDE and GLOBAL_POSITION_INT time_boot_ms (8 of each) at most the milliseconds
+              the vehicle has run (+1 s) and rising from one message to the next; GPS_RAW_INT
+              time_usec and TIMESYNC tc1 (the answer to a request) likewise in their units; the
+              same with --autopilot px4
   mission     --autopilot px4: upload take-off, two waypoints, land; arm; DO_SET_MODE AUTO.MISSION;
               MISSION_ITEM_REACHED 0..3 in order, MISSION_CURRENT follows, the vehicle lands at
               the last waypoint and disarms; battery drains
@@ -81,6 +86,8 @@ class Session:
         self.gcs = mavutil.mavlink_connection(
             f"udpin:127.0.0.1:{port}", source_system=255, source_component=190
         )
+        # the vehicle's boot is after this: its time since boot is at most the time since this
+        self.started = time.monotonic()
         self.proc = subprocess.Popen(
             [binary, "vehicle", f"udpout:127.0.0.1:{port}", *vehicle_args],
             stdout=subprocess.DEVNULL,
@@ -378,6 +385,53 @@ def scenario_intervals(binary):
     return "SET_MESSAGE_INTERVAL 20 Hz measured, MESSAGE_INTERVAL, off, HOME_POSITION, data stream"
 
 
+# what the vehicle's time since its start may exceed our time since we started it by (the
+# process start lies between the two)
+CLOCK_SLACK_S = 1.0
+
+
+def scenario_clock(binary):
+    for autopilot in ("ardupilot", "px4"):
+        s = Session(binary, "--autopilot", autopilot)
+        try:
+            def ran(scale):
+                """The time since the vehicle was started, plus the slack, in 1/scale s."""
+                return (time.monotonic() - s.started + CLOCK_SLACK_S) * scale
+
+            boot_ms = {"ATTITUDE": [], "GLOBAL_POSITION_INT": []}
+            deadline = time.monotonic() + 20
+            while time.monotonic() < deadline and min(map(len, boot_ms.values())) < 8:
+                m = s.recv(list(boot_ms), 3.0)
+                if not check(m is not None, f"{autopilot}: no ATTITUDE/GLOBAL_POSITION_INT"):
+                    break
+                limit = ran(1e3)
+                boot_ms[m.get_type()].append(m.time_boot_ms)
+                check(m.time_boot_ms <= limit,
+                      f"{autopilot}: {m.get_type()}.time_boot_ms {m.time_boot_ms}, above the "
+                      f"{limit:.0f} ms the vehicle can have run (1 s slack included)")
+            for name, values in boot_ms.items():
+                check(len(values) >= 8, f"{autopilot}: {len(values)} {name} received, expected 8")
+                check(all(a < b for a, b in zip(values, values[1:])),
+                      f"{autopilot}: {name}.time_boot_ms does not rise: {values}")
+            g = s.recv("GPS_RAW_INT", 5.0)
+            limit = ran(1e6)
+            if check(g is not None, f"{autopilot}: no GPS_RAW_INT"):
+                check(g.time_usec <= limit,
+                      f"{autopilot}: GPS_RAW_INT.time_usec {g.time_usec}, above the {limit:.0f} "
+                      "us the vehicle can have run (1 s slack included)")
+            s.gcs.mav.timesync_send(0, 1234567)
+            t = s.recv("TIMESYNC", 3.0, lambda m: m.ts1 == 1234567 and m.tc1 != 0)
+            limit = ran(1e9)
+            if check(t is not None, f"{autopilot}: no answer to TIMESYNC"):
+                check(t.tc1 <= limit,
+                      f"{autopilot}: TIMESYNC tc1 {t.tc1}, above the {limit:.0f} ns the vehicle "
+                      "can have run (1 s slack included)")
+        finally:
+            s.close()
+    return ("ATTITUDE, GLOBAL_POSITION_INT, GPS_RAW_INT and TIMESYNC times count from the "
+            "vehicle's start and rise (ardupilot, px4)")
+
+
 def scenario_mission(binary):
     s = Session(binary, "--autopilot", "px4")
     try:
@@ -656,6 +710,7 @@ def main():
         "waypoints": scenario_waypoints,
         "commands": scenario_commands,
         "intervals": scenario_intervals,
+        "clock": scenario_clock,
         "mission": scenario_mission,
         "cli_params": scenario_cli_params,
         "cli_params_lossy": lambda b: scenario_cli_params(b, loss=0.2),

@@ -14,6 +14,9 @@
 //!   air, an unsupported command, land and disarm;
 //! - `intervals`: SET_MESSAGE_INTERVAL with the rate measured, MESSAGE_INTERVAL, turning a
 //!   stream off, REQUEST_MESSAGE(HOME_POSITION), REQUEST_DATA_STREAM;
+//! - `clock`: the time fields count from the vehicle's start (ATTITUDE and
+//!   GLOBAL_POSITION_INT `time_boot_ms` below the milliseconds it has run and rising,
+//!   GPS_RAW_INT `time_usec`, the TIMESYNC answer's `tc1`), both flavours;
 //! - `mission`: a PX4-flavoured vehicle flies an uploaded mission (items reached in order,
 //!   lands at the last waypoint, disarms, battery drained);
 //! - `cli_*`: our ground-station commands against a pymavlink vehicle, clean and lossy.
@@ -63,6 +66,13 @@ fn commands() {
 #[test]
 fn intervals() {
     scenario("intervals");
+}
+
+/// Issue 39: the vehicle sent `time_boot_ms` 4294967295 in every frame (it read the
+/// transport's Unix-epoch clock as its time since boot).
+#[test]
+fn time_fields_count_from_the_vehicles_start() {
+    scenario("clock");
 }
 
 #[test]
