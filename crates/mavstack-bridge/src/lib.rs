@@ -41,12 +41,20 @@
 //! let ground = BridgeSpec::parse("mqtt://127.0.0.1:1883?fleet=demo&vid=*").unwrap();
 //! assert_eq!(ground.side, Side::Ground(vec![]));
 //! ```
+//!
+//! ## Features
+//! - `mqtt` (default): MQTT 5 links, through rumqttc.
+//! - `tls`: `mqtts://` links (MQTT over TLS, through native-tls).
+//! - `zenoh`: Zenoh links, through the zenoh crate.
+//! - `fuzzing`: for the fuzz targets and the seed-corpus tests only; not a stable API
+//!   (`fuzzing::fuzz_bridge`).
 #![forbid(unsafe_code)]
 
 pub mod checksum;
 pub mod command;
 #[cfg(any(feature = "mqtt", feature = "zenoh"))]
 mod driver;
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub mod fuzzing;
 pub mod keys;

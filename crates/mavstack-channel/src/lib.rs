@@ -131,6 +131,8 @@
 //!
 //! ## Features
 //! - `std` (default): links `std` for host conveniences; nothing in the crate needs it.
+//! - `fuzzing`: for the fuzz targets and the seed-corpus tests only; not a stable API
+//!   (`fuzz_channel`).
 //!
 //! MSRV: Rust 1.95.
 #![no_std]
@@ -173,6 +175,7 @@ pub use stats::{LinkStats, RejectionCounts};
 /// running a handshake, and a radio each take `data` in pieces the data itself chooses, with
 /// time advancing, and everything they emit is drained. Never panics, unless a state machine
 /// stops taking input after its queues were drained (a bug).
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub fn fuzz_channel(data: &[u8]) {
     use mavstack_core::signing::SecretKey;

@@ -3,7 +3,7 @@
 
 mod util;
 
-use mavstack_channel::{Channel, Config, Event, GroundPolicy, Role, fuzz_channel};
+use mavstack_channel::{Channel, Config, Event, GroundPolicy, Role};
 use mavstack_core::wire::Version;
 use mavstack_dialects::common::Heartbeat;
 use proptest::prelude::*;
@@ -12,11 +12,13 @@ use util::{T0, frame};
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(256))]
 
+    #[cfg(feature = "fuzzing")]
     #[test]
     fn arbitrary_bytes_never_panic_the_channel(data in proptest::collection::vec(any::<u8>(), 0..2048)) {
-        fuzz_channel(&data);
+        mavstack_channel::fuzz_channel(&data);
     }
 
+    #[cfg(feature = "fuzzing")]
     #[test]
     fn arbitrary_bytes_around_valid_frames_never_panic(
         noise in proptest::collection::vec(any::<u8>(), 0..300),
@@ -25,7 +27,7 @@ proptest! {
         let hb = frame(Version::V2, 0, 1, 1, &Heartbeat::default());
         let cut = cut.min(noise.len());
         let data = [&[0x40u8][..], &noise[..cut], &hb, &noise[cut..], &hb].concat();
-        fuzz_channel(&data);
+        mavstack_channel::fuzz_channel(&data);
     }
 
     #[test]
@@ -62,14 +64,15 @@ proptest! {
     }
 }
 
+#[cfg(feature = "fuzzing")]
 #[test]
 fn fuzz_entry_point_handles_edge_inputs() {
-    fuzz_channel(&[]);
-    fuzz_channel(&[0xff; 4096]);
-    fuzz_channel(&[0xfd; 1000]);
-    fuzz_channel(&[0xfe; 1000]);
+    mavstack_channel::fuzz_channel(&[]);
+    mavstack_channel::fuzz_channel(&[0xff; 4096]);
+    mavstack_channel::fuzz_channel(&[0xfd; 1000]);
+    mavstack_channel::fuzz_channel(&[0xfe; 1000]);
     let hb = frame(Version::V2, 0, 1, 1, &Heartbeat::default());
     let mut data = vec![0x3f];
     data.extend(hb.iter().cycle().take(63));
-    fuzz_channel(&data.repeat(20));
+    mavstack_channel::fuzz_channel(&data.repeat(20));
 }

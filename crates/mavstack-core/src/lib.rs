@@ -32,6 +32,8 @@
 //! - `serde`: serde support for generated messages, including arrays longer than 32.
 //! - `testing`: [`testing`], the in-memory test network of the sans-IO crates' tests (for
 //!   dev-dependencies; implies `std`).
+//! - `fuzzing`: for the fuzz targets and the seed-corpus tests only; not a stable API
+//!   (the `fuzz_*` entry points and `fuzz_seeds`; implies `std`).
 //!
 //! MSRV: Rust 1.95 (the toolchain CI builds with).
 #![no_std]
@@ -64,7 +66,7 @@ pub use table::MessageTable;
 ///
 /// # Panics
 /// If the folder cannot be read or holds fewer than `at_least` seeds.
-#[cfg(feature = "std")]
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 #[must_use]
 pub fn fuzz_seeds(target: &str, at_least: usize) -> std::vec::Vec<std::vec::Vec<u8>> {
@@ -91,6 +93,7 @@ pub fn fuzz_seeds(target: &str, at_least: usize) -> std::vec::Vec<std::vec::Vec<
 /// Fuzzing entry point for the parsers: runs `data` through the slice parser and, split at
 /// every byte boundary the data itself chooses, through the streaming deframer and through
 /// the slice parser piece by piece, and checks that all find the same frames. Never panics unless they disagree (a bug).
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub fn fuzz_deframer(data: &[u8]) {
     // A small fixed dialect: HEARTBEAT, COMMAND_LONG and one id above 255.
@@ -190,6 +193,7 @@ pub fn fuzz_deframer(data: &[u8]) {
 /// over the same signed bytes. A frame that is not in the form `emit` writes (MAVLink 2
 /// trailing zeros, compat flags or unknown incompat flags) re-serialises to that form: same
 /// header fields, same payload once zero-extended. Panics when the property breaks.
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub fn fuzz_frame(data: &[u8]) {
     let Ok(frame) = wire::Frame::new_checked(data) else {

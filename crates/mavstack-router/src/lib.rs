@@ -28,6 +28,8 @@
 //!
 //! ## Features
 //! - `std` (default): links `std` (host conveniences only).
+//! - `fuzzing`: for the fuzz targets and the seed-corpus tests only; not a stable API
+//!   (`fuzz_router`, `fuzz_link_options`).
 //!
 //! MSRV: Rust 1.95.
 #![no_std]
@@ -64,6 +66,7 @@ pub use stats::{Conversions, Counters, DropReason, Drops, LinkMode, LinkStatus};
 
 /// Fuzzing entry point for link options: any text is parsed (message names resolve to
 /// nothing) and either gives a link or an error naming an option; never a panic.
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub fn fuzz_link_options(data: &[u8]) {
     let text = alloc::string::String::from_utf8_lossy(data);
@@ -86,6 +89,7 @@ pub fn fuzz_link_options(data: &[u8]) {
 /// key, other links no signed frames; and no frame goes back to the only link it came in on
 /// (a frame is known by its seq, sysid, compid and message id, which conversions keep: one
 /// written to link L whose header is in L's input and in no other link's input came back).
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub fn fuzz_router(data: &[u8]) {
     use mavstack_channel::SigningConfig;
@@ -176,6 +180,7 @@ pub fn fuzz_router(data: &[u8]) {
 
 /// Whether `input` holds a MAVLink 1 or 2 header with this seq, sysid, compid and message
 /// id anywhere (lengths and checksums aside: more than the router accepts, never less).
+#[cfg(feature = "fuzzing")]
 fn carries(input: &[u8], (seq, sysid, compid, msg_id): (u8, u8, u8, u32)) -> bool {
     let id = msg_id.to_le_bytes();
     input.windows(10).any(|w| {

@@ -11,9 +11,7 @@ use mavstack_core::wire::{self, Frame, FrameHeader, MAX_FRAME_LEN, Version};
 use mavstack_dialects::common::{
     Attitude, CommandAck, CommandLong, Heartbeat, MavMessage, ProtocolVersion, SysStatus,
 };
-use mavstack_router::{
-    LinkConfig, LinkId, MessageTable, Router, RouterConfig, VersionMode, fuzz_router,
-};
+use mavstack_router::{LinkConfig, LinkId, MessageTable, Router, RouterConfig, VersionMode};
 use proptest::prelude::*;
 
 const T0: Instant = Instant::from_secs(1_767_225_600);
@@ -168,15 +166,17 @@ proptest! {
         let _ = SysStatus::default();
     }
 
+    #[cfg(feature = "fuzzing")]
     #[test]
     fn arbitrary_bytes_never_panic_the_router(data in prop::collection::vec(any::<u8>(), 0..4096)) {
-        fuzz_router(&data);
+        mavstack_router::fuzz_router(&data);
     }
 }
 
+#[cfg(feature = "fuzzing")]
 #[test]
 fn fuzz_seed_corpus_replays() {
     for seed in mavstack_core::fuzz_seeds("router", 4) {
-        fuzz_router(&seed);
+        mavstack_router::fuzz_router(&seed);
     }
 }

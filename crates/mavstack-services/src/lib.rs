@@ -77,6 +77,8 @@
 //! - `std` (default): links the standard library; nothing in the crate needs it. Without it
 //!   the crate is `no_std` and needs only `alloc` (for its tables and queues).
 //! - `json`: mission plans as JSON ([`mission_json`]; with `std`).
+//! - `fuzzing`: for the fuzz targets and the seed-corpus tests only; not a stable API
+//!   (the `fuzz_*` entry points and `HEAP_BOUND`).
 //!
 //! # Example
 //!
@@ -127,6 +129,7 @@ extern crate std;
 
 pub mod command;
 pub mod ftp;
+#[cfg(feature = "fuzzing")]
 mod fuzzing;
 pub mod heartbeat;
 pub mod log_transfer;
@@ -142,6 +145,7 @@ pub mod stream;
 pub mod timesync;
 pub mod wpl;
 
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub use fuzzing::{HEAP_BOUND, fuzz_services};
 

@@ -168,6 +168,7 @@ fn item(v: &Json, seq: usize) -> Result<MissionItemInt, String> {
 /// Fuzzing entry point: any bytes, as text, parse to items or an error naming the item,
 /// never a panic; what parses is written back to a document that reads back to itself
 /// (the written form is a fixed point).
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub fn fuzz_mission_json(data: &[u8]) {
     let text = String::from_utf8_lossy(data);

@@ -17,7 +17,7 @@
 //! ```
 
 use alloc::format;
-use alloc::string::{String, ToString};
+use alloc::string::String;
 use alloc::vec::Vec;
 use core::fmt::Write as _;
 
@@ -184,8 +184,11 @@ fn item(line: &str, seq: u16) -> Result<MissionItemInt, String> {
 
 /// Fuzzing entry point: any bytes, as text, parse to items or a line-numbered error, never a
 /// panic; what parses writes back to text that parses to the same items.
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub fn fuzz_wpl(data: &[u8]) {
+    use alloc::string::ToString as _;
+
     let text = String::from_utf8_lossy(data);
     match parse(&text) {
         Ok(items) => {

@@ -4,6 +4,7 @@
 use mavstack_dialects::common::{MavCmd, MavFrame};
 use mavstack_services::wpl::{self, WplError};
 
+#[cfg(feature = "fuzzing")]
 #[test]
 fn wpl_seeds() {
     for seed in mavstack_core::fuzz_seeds("wpl", 4) {
@@ -11,7 +12,7 @@ fn wpl_seeds() {
     }
 }
 
-#[cfg(feature = "json")]
+#[cfg(all(feature = "json", feature = "fuzzing"))]
 #[test]
 fn mission_file_seeds() {
     for seed in mavstack_core::fuzz_seeds("mission_file", 4) {

@@ -15,6 +15,10 @@
 //! [`ParamServer`]: mavstack_services::param::ParamServer
 //! [`MissionServer`]: mavstack_services::mission::MissionServer
 //! [`StreamScheduler`]: mavstack_services::stream::StreamScheduler
+//!
+//! ## Features
+//! - `fuzzing`: for the fuzz targets and the seed-corpus tests only; not a stable API
+//!   (`params::fuzz_param_file`).
 
 pub mod events;
 pub mod flight;

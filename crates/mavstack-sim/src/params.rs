@@ -153,6 +153,7 @@ pub fn load(path: &str) -> Result<Vec<(Name, Value)>, ParamFileError> {
 
 /// Fuzzing entry point: any bytes, as text, parse to a table or a line-numbered error,
 /// never a panic; every value parsed is finite and names are unique.
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub fn fuzz_param_file(data: &[u8]) {
     let text = String::from_utf8_lossy(data);

@@ -77,6 +77,10 @@
 //! - Errors name the thing that failed, in one line: `cannot bind udp 127.0.0.1:14550:
 //!   address in use`, `cannot open serial /dev/ttyX: no such file`.
 //!
+//! ## Features
+//! - `fuzzing`: for the fuzz targets and the seed-corpus tests only; not a stable API
+//!   (`tlog::fuzz_tlog`).
+//!
 //! MSRV: Rust 1.95.
 #![forbid(unsafe_code)]
 

@@ -428,6 +428,7 @@ impl<R: Read> Iterator for Reader<R> {
 /// over frames not in one piece in the log, and only those); every record is a whole frame
 /// with a sound header and a right checksum when its id is known; every input byte is read;
 /// and the same log with the damage cut out gives the records between the damage unchanged.
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub fn fuzz_tlog(data: &[u8]) {
     /// Hands the input over in pieces of 1 to 64 bytes, sizes cycling through the input.

@@ -467,6 +467,7 @@ pub fn encode_object(
 /// whatever encodes must be a frame with the right checksum (and signature) whose JSON line
 /// encodes again to a frame with the same JSON line (a line is a fixed point of decode ∘
 /// encode). Never panics unless that fails.
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub fn fuzz_json_frames(data: &[u8]) {
     static COMMON: std::sync::OnceLock<Option<Dialect>> = std::sync::OnceLock::new();
@@ -504,6 +505,7 @@ pub fn fuzz_json_frames(data: &[u8]) {
 }
 
 /// The JSON line of a frame [`encode_object`] wrote, checking what it must hold.
+#[cfg(feature = "fuzzing")]
 fn line_of(bytes: &[u8], dialect: &Dialect, key: Option<&SecretKey>) -> String {
     let frame = Frame::new_checked(bytes).expect("encode_object writes a frame");
     assert_eq!(frame.frame_len(), bytes.len(), "the frame's length");

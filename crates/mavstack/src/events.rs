@@ -628,7 +628,9 @@ pub fn level_name(log_levels: u8) -> &'static str {
     }
 }
 
+#[cfg(feature = "fuzzing")]
 mod fuzzing;
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub use fuzzing::fuzz_events;
 

@@ -136,6 +136,7 @@ impl core::error::Error for ConfError {}
 
 /// Fuzzing entry point: any bytes, as text, parse to a configuration or a positioned error,
 /// never a panic; every link string produced parses as a link.
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub fn fuzz_router_conf(data: &[u8]) {
     let text = String::from_utf8_lossy(data);

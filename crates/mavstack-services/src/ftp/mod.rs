@@ -7,6 +7,7 @@ pub mod backend;
 pub mod client;
 #[cfg(feature = "std")]
 pub mod dir;
+#[cfg(feature = "fuzzing")]
 mod fuzzing;
 pub mod overlay;
 pub mod param_pck;
@@ -23,6 +24,7 @@ pub use payload::{
 };
 pub use server::{FtpServer, ServerConfig};
 
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub use fuzzing::fuzz_ftp;
 

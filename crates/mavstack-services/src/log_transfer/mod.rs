@@ -32,11 +32,13 @@
 //!   (a short chunk, or count 0, inside the range asked) ends the log there.
 
 mod client;
+#[cfg(feature = "fuzzing")]
 mod fuzzing;
 mod server;
 mod store;
 
 pub use client::{ClientConfig, LogClient, LogError, LogEvent, LogOutput, StartError};
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub use fuzzing::fuzz_log_transfer;
 pub use server::{LogServer, LogServerEvent, ServerConfig};

@@ -286,6 +286,7 @@ impl Report {
 
 /// Fuzzing entry: `data` as the wire of a vehicle-role run, read and graded; never panics,
 /// and every rule gets a verdict with evidence.
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub fn fuzz_wire(data: &[u8]) {
     let verdicts = vehicle::fuzz_grade(data);
@@ -294,6 +295,7 @@ pub fn fuzz_wire(data: &[u8]) {
 }
 
 /// The verdicts [`fuzz_wire`] checks, for tests of the graders on crafted input.
+#[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 #[must_use]
 pub fn fuzz_grade_for_tests(data: &[u8]) -> Vec<Verdict> {

@@ -1192,6 +1192,7 @@ impl Facts<'_> {
 /// (the first byte sets the piece size and whether they alternate links; pieces 100 ms
 /// apart), our MAVLink 2 frame and the
 /// three handshake requests after pieces 0, 1 and 2, AUTOPILOT_VERSION after piece 3.
+#[cfg(feature = "fuzzing")]
 pub(super) fn fuzz_grade(data: &[u8]) -> Vec<Verdict> {
     let key = SecretKey::new([7; 32]);
     let mut wire = Wire::new(

@@ -1102,5 +1102,6 @@ fn a_link_id_without_a_key_is_an_error() {
         err.as_deref(),
         Some("line 1: UartEndpoint \"fc\": SigningLinkId without a SigningKey")
     );
+    #[cfg(feature = "fuzzing")]
     fuzz_router_conf(text.as_bytes());
 }
