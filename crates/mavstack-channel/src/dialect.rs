@@ -8,7 +8,7 @@
 //! SETUP_SIGNING, PROTOCOL_VERSION) are always known.
 
 use mavstack_core::MessageTable;
-use mavstack_core::message::Message;
+use mavstack_core::message::{Message, MessageInfo};
 use mavstack_dialects::common::{
     AutopilotVersion, CommandAck, CommandInt, CommandLong, MavCmd, MavMessage, ProtocolVersion,
     RadioStatus, SetupSigning,
@@ -22,24 +22,27 @@ pub(crate) fn common_table() -> MessageTable {
     MessageTable::of::<MavMessage>()
 }
 
-/// The CRC_EXTRA of the messages the channel reads itself.
-pub(crate) const fn builtin_crc_extra(id: u32) -> Option<u8> {
-    match id {
-        CommandLong::ID => Some(CommandLong::CRC_EXTRA),
-        CommandInt::ID => Some(CommandInt::CRC_EXTRA),
-        CommandAck::ID => Some(CommandAck::CRC_EXTRA),
-        AutopilotVersion::ID => Some(AutopilotVersion::CRC_EXTRA),
-        RadioStatus::ID => Some(RadioStatus::CRC_EXTRA),
-        SetupSigning::ID => Some(SetupSigning::CRC_EXTRA),
-        ProtocolVersion::ID => Some(ProtocolVersion::CRC_EXTRA),
-        _ => None,
-    }
-}
+/// The entries of the messages the channel reads itself, as generated (sorted by id).
+static BUILTIN_ENTRIES: [MessageInfo; 7] = [
+    CommandInt::INFO,
+    CommandLong::INFO,
+    CommandAck::INFO,
+    RadioStatus::INFO,
+    AutopilotVersion::INFO,
+    SetupSigning::INFO,
+    ProtocolVersion::INFO,
+];
+
+/// The messages the channel reads itself, as a table. Out of order entries fail the build.
+static BUILTINS: MessageTable = match MessageTable::new(&BUILTIN_ENTRIES) {
+    Ok(table) => table,
+    Err(_) => panic!("BUILTIN_ENTRIES is not sorted by id"),
+};
 
 /// The CRC_EXTRA of `id` in `table`, completed with the messages the channel reads itself.
 #[inline]
 pub(crate) fn crc_extra_with_builtins(table: &MessageTable, id: u32) -> Option<u8> {
-    table.crc_extra(id).or_else(|| builtin_crc_extra(id))
+    table.crc_extra(id).or_else(|| BUILTINS.crc_extra(id))
 }
 
 /// How a command was encoded.
@@ -102,6 +105,31 @@ impl CommandRequest {
 mod tests {
     use super::*;
 
+    /// The built-in entries are the `common` dialect's own, for exactly the messages the
+    /// channel decodes.
+    #[test]
+    fn builtins_are_the_common_entries_of_the_messages_read() {
+        let common = common_table();
+        for entry in BUILTINS.entries() {
+            assert_eq!(common.info(entry.id), Some(entry), "{}", entry.name);
+        }
+        let names = BUILTINS.entries().iter().map(|m| m.name);
+        assert!(
+            names.eq([
+                "COMMAND_INT",
+                "COMMAND_LONG",
+                "COMMAND_ACK",
+                "RADIO_STATUS",
+                "AUTOPILOT_VERSION",
+                "SETUP_SIGNING",
+                "PROTOCOL_VERSION",
+            ]),
+            "{:?}",
+            BUILTINS.entries()
+        );
+    }
+
+    /// The CRC_EXTRAs pymavlink's `common` gives these ids.
     #[test]
     fn builtins_complete_any_table() {
         let nothing = MessageTable::empty();

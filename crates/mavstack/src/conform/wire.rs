@@ -7,18 +7,16 @@ use std::collections::HashMap;
 use mavstack_core::parse::{Deframer, Item};
 use mavstack_core::signing::{self, SecretKey};
 use mavstack_core::time::Instant;
-use mavstack_core::wire::{Frame, STX_V1, Version};
-use mavstack_core::{Crc16, Message as _, MessageTable};
+use mavstack_core::wire::{Frame, Version};
+use mavstack_core::{Message as _, MessageTable};
 use mavstack_dialects::common::{MissionCount, ProtocolVersion};
 
 use crate::router::LinkId;
 
-/// The message id the C library writes for PROTOCOL_VERSION in a MAVLink 1 frame (300 mod
-/// 256, which is MISSION_COUNT's id).
-pub(crate) const V1_PROTOCOL_VERSION_ID: u32 = 300 % 256;
-
-/// PROTOCOL_VERSION's CRC_EXTRA (the checksum seed of that bogus MAVLink 1 frame).
-const PROTOCOL_VERSION_CRC_EXTRA: u8 = 217;
+/// The message id the C library writes for PROTOCOL_VERSION in a MAVLink 1 frame: its id
+/// (300) cut to MAVLink 1's 8 bits, which is MISSION_COUNT's id (44). The checksum of that
+/// bogus frame is seeded with PROTOCOL_VERSION's CRC_EXTRA.
+const V1_PROTOCOL_VERSION_ID: u32 = ProtocolVersion::ID % 256;
 
 /// One frame received.
 #[derive(Clone, Debug)]
@@ -147,14 +145,17 @@ impl Wire {
     }
 
     fn take(&mut self, t: f64, bytes: &[u8], unknown: bool) {
-        let frame = Frame::new_unchecked(bytes);
+        // The deframer hands over whole frames only: this check never fails.
+        let Ok(frame) = Frame::new_checked(bytes) else {
+            return;
+        };
         let mut v1_protocol_version = false;
         let mut unchecked = unknown;
         if unknown && frame.msg_id() == V1_PROTOCOL_VERSION_ID {
             unchecked = false;
-            if crc_with(&frame, MissionCount::CRC_EXTRA) {
+            if frame.check_crc(MissionCount::CRC_EXTRA) {
                 // A genuine MISSION_COUNT.
-            } else if frame.version() == Version::V1 && crc_with(&frame, PROTOCOL_VERSION_CRC_EXTRA)
+            } else if frame.version() == Version::V1 && frame.check_crc(ProtocolVersion::CRC_EXTRA)
             {
                 v1_protocol_version = true;
             } else {
@@ -182,21 +183,75 @@ impl Wire {
     }
 }
 
-/// Whether `frame`'s checksum is right for `crc_extra`.
-fn crc_with(frame: &Frame<&[u8]>, crc_extra: u8) -> bool {
-    let bytes = frame.as_bytes();
-    let header = if bytes[0] == STX_V1 { 6 } else { 10 };
-    let end = header + frame.payload_len();
-    if bytes.len() < end + 2 {
-        return false;
-    }
-    let mut crc = Crc16::of_prefix(&bytes[1..], end - 1);
-    crc.update_byte(crc_extra);
-    crc.value().to_le_bytes() == [bytes[end], bytes[end + 1]]
-}
-
 /// PROTOCOL_VERSION's values from a frame (a genuine one, or the bogus MAVLink 1 one, whose
 /// payload has the same layout).
 pub(crate) fn protocol_version(seen: &Seen) -> ProtocolVersion {
     ProtocolVersion::decode(&seen.payload)
+}
+
+#[cfg(test)]
+mod tests {
+    use mavstack_dialects::common::MavMessage;
+
+    use super::*;
+
+    /// MISSION_COUNT (count 5, to 255/190) as pymavlink 2.4.50 packs it, from 1/1, seq 0:
+    /// MAVLink 1, and MAVLink 2 (mission_type 0 truncated).
+    const MISSION_COUNT_V1: [u8; 12] = [
+        0xfe, 0x04, 0x00, 0x01, 0x01, 0x2c, 0x05, 0x00, 0xff, 0xbe, 0x54, 0xcb,
+    ];
+    const MISSION_COUNT_V2: [u8; 16] = [
+        0xfd, 0x04, 0x00, 0x00, 0x00, 0x01, 0x01, 0x2c, 0x00, 0x00, 0x05, 0x00, 0xff, 0xbe, 0xd5,
+        0x04,
+    ];
+
+    /// The C library's PROTOCOL_VERSION forced into MAVLink 1 (id 44, checksum seeded with
+    /// PROTOCOL_VERSION's CRC_EXTRA), after a HEARTBEAT: the `fake_protocol_version` seed of
+    /// the `conform_wire` fuzz target, written with pymavlink's x25crc, without the target's
+    /// first byte (how it cuts the input).
+    fn fake_protocol_version() -> Vec<u8> {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../fuzz/corpus/conform_wire/fake_protocol_version"
+        );
+        let seed = std::fs::read(path).expect("the seed is checked in");
+        seed[1..].to_vec()
+    }
+
+    fn read(bytes: &[u8]) -> Wire {
+        let mut wire = Wire::new(Instant::ZERO, MessageTable::of::<MavMessage>(), None);
+        wire.feed(LinkId::new(0), Instant::ZERO, bytes, true);
+        wire
+    }
+
+    /// Id 44 is MISSION_COUNT, or in MAVLink 1 the bogus PROTOCOL_VERSION: each frame's
+    /// checksum says which, and one that fits neither is counted as bad.
+    #[test]
+    fn id_44_is_told_apart_by_its_checksum() {
+        let wire = read(&fake_protocol_version());
+        assert_eq!(wire.bad_crc, 0);
+        let ids: Vec<(u32, bool, bool)> = wire
+            .frames
+            .iter()
+            .map(|f| (f.msg_id, f.v1_protocol_version, f.unchecked))
+            .collect();
+        assert_eq!(ids, [(0, false, false), (44, true, false)]);
+        assert_eq!(protocol_version(&wire.frames[1]).version, 200);
+
+        for genuine in [&MISSION_COUNT_V1[..], &MISSION_COUNT_V2[..]] {
+            let wire = read(genuine);
+            assert_eq!(wire.bad_crc, 0);
+            assert_eq!(wire.frames.len(), 1);
+            let seen = &wire.frames[0];
+            assert!(seen.is::<MissionCount>() && !seen.unchecked, "{seen:?}");
+            assert_eq!(seen.decode::<MissionCount>().count, 5);
+        }
+
+        // A payload byte changed: neither checksum holds.
+        let mut damaged = fake_protocol_version();
+        let last = damaged.len() - 3;
+        damaged[last] ^= 1;
+        let wire = read(&damaged);
+        assert_eq!((wire.frames.len(), wire.bad_crc), (1, 1));
+    }
 }
