@@ -29,7 +29,7 @@ pub(crate) struct CommandArgs {
     /// With `--int`: the MAV_FRAME of params 5–7.
     #[arg(long, default_value_t = 6)]
     frame: u8,
-    /// With `disarm`: force it even in the air (param2 = 21196).
+    /// With `arm`: past the pre-arm checks; with `disarm`: even in the air (param2 = 21196).
     #[arg(long)]
     force: bool,
 }
@@ -51,7 +51,8 @@ pub(crate) fn command(args: &CommandArgs) -> Result<(), Failure> {
         for (i, p) in args.params.iter().enumerate() {
             params.push(number(p, &format!("param{}", i + 1))?);
         }
-        if args.force && args.name.eq_ignore_ascii_case("disarm") {
+        let arming = ["arm", "disarm"].iter().any(|a| a.eq_ignore_ascii_case(&args.name));
+        if args.force && arming {
             params.push(mavstack::system::FORCE_DISARM);
         }
     }

@@ -103,7 +103,7 @@ pub(crate) fn conform(args: &ConformArgs) -> Result<(), Failure> {
     if args.json {
         println!("{}", report_json(&report));
     } else {
-        print_table(&report, &args.conn);
+        print_table(&report, &mavstack::redacted(&args.conn));
     }
     if report.conforms() {
         Ok(())

@@ -12,6 +12,7 @@ mod conform_cmd;
 mod demo_cmd;
 mod dialect_cmd;
 mod fast_count;
+mod fly_cmd;
 mod ftp_cmd;
 mod link_cmd;
 mod listen_rates;
@@ -90,6 +91,12 @@ enum Command {
     /// Send a command (arm, takeoff, mode, any MAV_CMD) and print its acknowledgement.
     #[command(name = "command")]
     Cmd(command_cmd::CommandArgs),
+    /// A vehicle's flight modes (AVAILABLE_MODES where offered, else the autopilot's
+    /// table), the current one marked.
+    Modes(fly_cmd::ModesArgs),
+    /// Fly a vehicle: takeoff, land, rtl, hold, goto, velocity; progress on stderr, done
+    /// when it is there.
+    Fly(fly_cmd::FlyArgs),
     /// Forward between many links, each with its own MAVLink version and signing, converting
     /// where they differ (runs until interrupted).
     Router(router_cmd::RouterArgs),
@@ -166,6 +173,8 @@ fn main() -> ExitCode {
         Command::Param { action } => param_cmd::param(action),
         Command::Mission { action } => mission_cmd::mission(action),
         Command::Cmd(args) => command_cmd::command(&args),
+        Command::Modes(args) => fly_cmd::modes(&args),
+        Command::Fly(args) => fly_cmd::fly(&args),
         Command::Router(args) => router_cmd::router(&args),
         Command::Log { action } => log_cmd::run(action),
         Command::Signing { action } => signing_cmd::signing(&action),

@@ -193,7 +193,8 @@ fn report(key: (u8, u8), s: &System, asked: HandshakeMethod) -> String {
 
 pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
     let mut spec =
-        LinkSpec::parse(&args.conn, &|_| None).map_err(|e| Failure::Input(anyhow!("{e}")))?;
+        LinkSpec::parse(&args.conn, &|_| None).map_err(|e| Failure::Input(e.into()))?;
+    let shown = spec.redacted().to_owned();
     let wait = seconds(args.timeout, "--timeout")?;
     if args.method == Method::RequestMessageOther && args.other_id < 256 {
         return Err(Failure::Input(anyhow!(
@@ -258,7 +259,7 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
             node.shutdown().await.map_err(other)?;
             return Err(Failure::Other(anyhow!(
                 "no system found on {} within {} s",
-                args.conn,
+                shown,
                 args.timeout
             )));
         }

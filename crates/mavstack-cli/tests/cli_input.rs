@@ -142,3 +142,46 @@ fn log_summary_counts_timestamps_that_go_back_and_does_not_panic() {
     let obj: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
     assert_eq!(obj["time_backward_steps"], 0, "{obj}");
 }
+
+/// A file argument that is a directory: the error says what the operating system said.
+#[test]
+fn a_directory_for_a_file_gives_the_os_error() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().to_str().expect("utf-8");
+    for args in [
+        vec!["decode", path],
+        vec!["decode", "--count", path],
+        vec!["log", "summary", path],
+        vec!["replay", path, NOWHERE],
+    ] {
+        let out = mavstack(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_ne!(out.status.code(), Some(0), "{args:?}");
+        assert!(
+            err.contains(&format!("cannot read {path}: Is a directory (os error 21)")),
+            "{args:?}: {err}"
+        );
+    }
+}
+
+/// Every command that reads or writes frames on a link takes the link options all link
+/// commands take (here `name` and `max_peers`), as `router` and `vehicle` do.
+#[test]
+fn link_commands_take_link_options() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("out.tlog");
+    let out = out.to_str().expect("utf-8");
+    let link = "udpin:127.0.0.1:0?name=x&max_peers=4";
+    for args in [
+        vec!["listen", link, "--duration", "0.2"],
+        vec!["record", link, out, "--duration", "0.2"],
+        vec!["probe", link, "--timeout", "0.2"],
+        vec!["conform", link, "--timeout", "0.2"],
+        vec!["param", "list", link, "--timeout", "0.2"],
+    ] {
+        let got = mavstack(&args);
+        let err = String::from_utf8_lossy(&got.stderr);
+        assert_ne!(got.status.code(), Some(2), "{args:?}: {err}");
+        assert!(!err.contains("bad port"), "{args:?}: {err}");
+    }
+}

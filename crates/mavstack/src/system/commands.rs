@@ -354,8 +354,8 @@ impl Commands {
     }
 
     /// The command `name` asks for with `params` (params 1–7 in order; NaN for "not
-    /// given"): a MAV_CMD name or number, or a shortcut: `arm`, `disarm [21196]` (the
-    /// number forces it), `takeoff [HEIGHT]` (above home on every autopilot: PX4, which
+    /// given"): a MAV_CMD name or number, or a shortcut: `arm [21196]`, `disarm [21196]`
+    /// (the number forces it: arming past the checks, disarming in the air), `takeoff [HEIGHT]` (above home on every autopilot: PX4, which
     /// reads an altitude above mean sea level, gets home's altitude added, asked for first
     /// when not known), `land`, `rtl`, `mission-start [FIRST [LAST]]`.
     ///
@@ -378,8 +378,9 @@ impl Commands {
         let shortcut = name.to_ascii_lowercase();
         let (id, p) = match shortcut.as_str() {
             "arm" => {
-                at_most(0)?;
-                (MavCmd::COMPONENT_ARM_DISARM, [1., 0., 0., 0., 0., 0., 0.])
+                at_most(1)?;
+                let magic = given(0).unwrap_or(0.0);
+                (MavCmd::COMPONENT_ARM_DISARM, [1., magic, 0., 0., 0., 0., 0.])
             }
             "disarm" => {
                 at_most(1)?;

@@ -72,8 +72,10 @@ pub enum SystemError {
     },
     /// A mode name the system does not have (or a system whose modes are not known: `known`
     /// is empty).
-    #[error("unknown mode {name:?}{}", known_modes(known))]
+    #[error("unknown {}mode {name:?}{}", whose(autopilot), known_modes(known))]
     UnknownMode {
+        /// Whose modes were looked in (`PX4`, `ArduPilot Copter`), when known.
+        autopilot: Option<String>,
         /// The name asked for.
         name: String,
         /// The names the system has.
@@ -145,6 +147,10 @@ fn said(lines: &[String]) -> String {
     } else {
         format!(" ({})", lines.join("; "))
     }
+}
+
+fn whose(autopilot: &Option<String>) -> String {
+    autopilot.as_ref().map_or_else(String::new, |a| format!("{a} "))
 }
 
 fn known_modes(known: &[String]) -> String {

@@ -1,7 +1,8 @@
 //! [`System`]: a remote MAVLink system as a ground station or companion sees it, through a
 //! [`Node`](crate::Node) (feature `services`), with one handle per microservice in
 //! MAVSDK's plugin shape: [`params`](System::params), [`mission`](System::mission),
-//! [`commands`](System::commands), [`modes`](System::modes),
+//! [`commands`](System::commands), [`modes`](System::modes), [`action`](System::action),
+//! [`offboard`](System::offboard), [`manual_control`](System::manual_control),
 //! [`telemetry`](System::telemetry), [`ftp`](System::ftp), [`logs`](System::logs) and
 //! [`signing`](System::signing).
 //!
@@ -43,14 +44,17 @@ use mavstack_services::param::Encoding;
 use tokio::sync::watch;
 use tokio::task::AbortHandle;
 
+mod action;
 mod commands;
 mod connect;
 mod discovery;
 mod error;
 mod ftp;
 mod logs;
+mod manual;
 mod mission;
 mod modes;
+mod offboard;
 mod params;
 mod rates;
 mod run;
@@ -59,6 +63,9 @@ mod signing;
 mod state;
 mod telemetry;
 
+pub use action::{
+    Action, GOTO_RADIUS_M, MAX_HEIGHT_M, TAKEOFF_REACHED, distance_m,
+};
 pub use commands::{
     CommandOutcome, Commands, FORCE_DISARM, SHORTCUTS, command_id, command_name, result_name,
     to_int,
@@ -68,8 +75,12 @@ pub use discovery::Discovery;
 pub use error::SystemError;
 pub use ftp::{Ftp, FtpPathOp};
 pub use logs::{FTP_LOG_DIRS, Logs, LogsVia, ftp_log_path};
+pub use manual::{ManualControl, ManualSession, Sticks};
 pub use mission::Mission;
 pub use modes::{Mode, Modes};
+pub use offboard::{
+    MAX_RATE_HZ, MAX_SPEED, MIN_RATE_HZ, Offboard, OffboardSession, Setpoint, quaternion,
+};
 pub use params::{
     AUTO_FTP_RETRIES, CAPABILITIES_WAIT, Change, LoadReport, Params, ParamsVia, typed_value,
 };
@@ -268,6 +279,24 @@ impl System {
     #[must_use]
     pub fn modes(&self) -> Modes {
         Modes::new(self.clone())
+    }
+
+    /// Flying it: takeoff, land, return home, hold, goto.
+    #[must_use]
+    pub fn action(&self) -> Action {
+        Action::new(self.clone())
+    }
+
+    /// Offboard control: a setpoint stream (PX4 OFFBOARD, ArduPilot GUIDED).
+    #[must_use]
+    pub fn offboard(&self) -> Offboard {
+        Offboard::new(self.clone())
+    }
+
+    /// Manual control: sticks as MANUAL_CONTROL at a rate.
+    #[must_use]
+    pub fn manual_control(&self) -> ManualControl {
+        ManualControl::new(self.clone())
     }
 
     /// Its telemetry: typed streams, rates, home and position.

@@ -194,6 +194,7 @@ impl Modes {
             return Ok(m.clone());
         }
         Err(SystemError::UnknownMode {
+            autopilot: self.system.flavour().map(|f| f.to_string()),
             name: name.to_owned(),
             known: list.iter().map(|m| m.name.clone()).collect(),
         })
@@ -274,6 +275,7 @@ impl Modes {
             .system
             .flavour()
             .ok_or_else(|| SystemError::UnknownMode {
+                autopilot: None,
                 name: format!("custom mode {custom_mode}"),
                 known: Vec::new(),
             })?;

@@ -102,16 +102,18 @@ pub struct LoadReport {
 /// ```
 ///
 /// # Errors
-/// [`SystemError::Invalid`]: NaN or a value beyond ±3.4e38 for a REAL32, a NaN for an
+/// [`SystemError::Invalid`]: NaN or a value beyond ±3.4e38 for a REAL32, NaN for an
 /// integer, or a type PARAM_SET cannot carry.
 pub fn typed_value(name: Name, current: Value, value: f64) -> Result<Value, SystemError> {
-    if value.is_nan() {
-        return Err(SystemError::Invalid(format!("{name}: NaN is not a value")));
-    }
-    // A REAL32 holds what f32 holds: no infinity (an integer type clamps instead).
+    // A REAL32 holds what f32 holds: no infinity, no NaN (an integer type clamps instead).
     if current.param_type() == MavParamType::REAL32 && !(value as f32).is_finite() {
         return Err(SystemError::Invalid(format!(
-            "{name}: {value} is not a REAL32 value (beyond ±3.4e38)"
+            "{name}: {value} is not a REAL32 value (beyond ±3.4e38, or not a number)"
+        )));
+    }
+    if value.is_nan() {
+        return Err(SystemError::Invalid(format!(
+            "{name}: NaN is not a value of its type"
         )));
     }
     Value::F32(value as f32)
