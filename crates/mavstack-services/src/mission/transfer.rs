@@ -1,0 +1,93 @@
+//! The client's transfer states, as types: an upload's and a download's phases, each
+//! consumed by value as the transfer moves on.
+
+use alloc::vec::Vec;
+
+use mavstack_core::time::Instant;
+use mavstack_dialects::common::MissionItemInt;
+
+/// An upload's phase.
+#[derive(Debug)]
+pub enum Upload {
+    /// MISSION_COUNT (or the last item) sent; waiting for a request for item `next`.
+    AwaitingRequest(AwaitingRequest),
+    /// Every item sent; waiting for MISSION_ACK.
+    AwaitingAck(AwaitingAck),
+}
+
+/// Waiting for the vehicle to request an item.
+#[derive(Debug)]
+pub struct AwaitingRequest {
+    pub(super) items: Vec<MissionItemInt>,
+    /// The last item sent (`None`: only MISSION_COUNT so far).
+    pub(super) last: Option<u16>,
+    pub(super) attempts: u8,
+    pub(super) deadline: Instant,
+}
+
+/// Waiting for the final MISSION_ACK.
+#[derive(Debug)]
+pub struct AwaitingAck {
+    pub(super) items: Vec<MissionItemInt>,
+    /// The last item sent (`None`: only MISSION_COUNT so far).
+    pub(super) last: Option<u16>,
+    pub(super) attempts: u8,
+    pub(super) deadline: Instant,
+}
+
+/// A download's phase.
+#[derive(Debug)]
+pub enum Download {
+    /// MISSION_REQUEST_LIST sent.
+    AwaitingCount(AwaitingCount),
+    /// Items `0..seq` received; item `seq` requested.
+    AwaitingItem(AwaitingItem),
+}
+
+/// Waiting for MISSION_COUNT.
+#[derive(Debug)]
+pub struct AwaitingCount {
+    pub(super) attempts: u8,
+    pub(super) deadline: Instant,
+}
+
+/// Waiting for item `seq`.
+#[derive(Debug)]
+pub struct AwaitingItem {
+    /// The item requested.
+    pub seq: u16,
+    pub(super) count: u16,
+    pub(super) items: Vec<MissionItemInt>,
+    pub(super) attempts: u8,
+    pub(super) deadline: Instant,
+}
+
+impl AwaitingRequest {
+    /// How many items the upload has.
+    #[must_use]
+    pub fn count(&self) -> usize {
+        self.items.len()
+    }
+
+    /// How many items have gone out (the vehicle asked for them).
+    #[must_use]
+    pub fn sent(&self) -> usize {
+        self.last.map_or(0, |l| usize::from(l) + 1)
+    }
+}
+
+impl AwaitingAck {
+    /// How many items the upload has (all sent).
+    #[must_use]
+    pub fn count(&self) -> usize {
+        self.items.len()
+    }
+}
+
+impl AwaitingItem {
+    /// How many items the plan has.
+    #[must_use]
+    pub fn count(&self) -> u16 {
+        self.count
+    }
+}
