@@ -63,12 +63,17 @@ __all__ = [
     "ConnectionClosed",
     "ConnectionFailed",
     "Error",
+    "Home",
     "InvalidValueError",
+    "ManualControl",
     "Mission",
     "MissionError",
     "MissionItem",
+    "Mode",
+    "Offboard",
     "ParamError",
     "Params",
+    "Position",
     "Server",
     "SystemInfo",
     "Telemetry",
@@ -179,6 +184,130 @@ async def _call(start: Callable[[_native.AioWaker, Settle], _native.AioOp]) -> A
 def _wake(fut: asyncio.Future[None]) -> None:
     if not fut.done():
         fut.set_result(None)
+
+
+class Mode(NamedTuple):
+    """A flight mode of a vehicle (``await vehicle.modes()``)."""
+
+    name: str
+    """Its name, as the vehicle gives it (AVAILABLE_MODES) or as the autopilot's table has it."""
+    standard: Optional[str]
+    """The standard mode it is (``position_hold``, ``safe_recovery``...), or None."""
+    custom_mode: int
+    """The autopilot's number for it (HEARTBEAT's ``custom_mode``)."""
+    selectable: bool
+    """Whether a user may select it (failsafe-only modes are not)."""
+
+
+class Position(NamedTuple):
+    """Where a vehicle is (``await vehicle.position()``)."""
+
+    lat_deg: float
+    lon_deg: float
+    height_m: float
+    """Height above home."""
+    alt_m: float
+    """Altitude above mean sea level."""
+
+
+class Home(NamedTuple):
+    """A vehicle's home (``await vehicle.home()``)."""
+
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    """Altitude above mean sea level."""
+
+
+class Offboard:
+    """A setpoint stream (``async with vehicle.offboard(rate_hz=20) as ob``). The stream is
+    the library's, on the runtime's thread: a loop busy elsewhere does not starve it. Each
+    ``set_*`` replaces the setpoint sent from the next tick on; leaving the block holds
+    position."""
+
+    def __init__(self, native: Any) -> None:
+        self._native = native
+
+    @property
+    def sent(self) -> int:
+        """How many setpoints went out so far."""
+        return int(self._native.sent)
+
+    def set_velocity_ned(self, north: float, east: float, down: float,
+                         yaw_deg: Optional[float] = None) -> None:
+        """Velocity north, east, down (m/s), facing ``yaw_deg`` when given."""
+        self._native.set("velocity_ned", [north, east, down, yaw_deg])
+
+    def set_position_ned(self, north_m: float, east_m: float, down_m: float,
+                         yaw_deg: Optional[float] = None) -> None:
+        """Position north, east, down of the vehicle's local origin (m; down < 0 is up)."""
+        self._native.set("position_ned", [north_m, east_m, down_m, yaw_deg])
+
+    def set_velocity_body(self, forward: float, right: float, down: float,
+                          yaw_rate_dps: float = 0.0) -> None:
+        """Velocity in the body frame (m/s), turning at ``yaw_rate_dps``."""
+        self._native.set("velocity_body", [forward, right, down, yaw_rate_dps])
+
+    def set_attitude(self, roll_deg: float, pitch_deg: float, yaw_deg: float,
+                     thrust: float) -> None:
+        """Attitude (degrees) and thrust (0-1)."""
+        self._native.set("attitude", [roll_deg, pitch_deg, yaw_deg, thrust])
+
+    async def stop(self) -> None:
+        """Ends the stream and holds position (also what leaving the block does)."""
+        await _call(lambda lp, s: self._native.stop(lp, s))
+
+
+class _OffboardBlock:
+    def __init__(self, vehicle: Vehicle, rate_hz: float,
+                 first: Tuple[str, List[Optional[float]]]) -> None:
+        self._vehicle = vehicle
+        self._rate = rate_hz
+        self._first = first
+        self._ob: Optional[Offboard] = None
+
+    async def __aenter__(self) -> Offboard:
+        v, kind, values = self._vehicle, self._first[0], self._first[1]
+        native = await _call(
+            lambda lp, s: v._native.offboard(self._rate, kind, values, lp, s))
+        self._ob = Offboard(native)
+        return self._ob
+
+    async def __aexit__(self, *exc: object) -> None:
+        if self._ob is not None:
+            await self._ob.stop()
+
+
+class ManualControl:
+    """MANUAL_CONTROL at a rate (``async with vehicle.manual_control(rate_hz=20) as mc``),
+    sent by the library while the block is open."""
+
+    def __init__(self, native: Any) -> None:
+        self._native = native
+
+    def set(self, x: float, y: float, z: float, r: float, buttons: int = 0) -> None:
+        """Sticks: ``x`` forward, ``y`` right, ``r`` yaw in -1..1; ``z`` throttle in 0..1
+        (0.5 holds height in position modes)."""
+        self._native.set(x, y, z, r, buttons)
+
+    def close(self) -> None:
+        """Stops the stream."""
+        self._native.close()
+
+
+class _ManualBlock:
+    def __init__(self, vehicle: Vehicle, rate_hz: float) -> None:
+        self._vehicle = vehicle
+        self._rate = rate_hz
+        self._mc: Optional[ManualControl] = None
+
+    async def __aenter__(self) -> ManualControl:
+        self._mc = ManualControl(self._vehicle._native.manual_control(self._rate))
+        return self._mc
+
+    async def __aexit__(self, *exc: object) -> None:
+        if self._mc is not None:
+            self._mc.close()
 
 
 class SystemInfo(NamedTuple):
@@ -421,18 +550,91 @@ class Vehicle:
 
     async def arm(self, force: bool = False) -> CommandResult:
         """MAV_CMD_COMPONENT_ARM_DISARM with 1 (``force``: 21196, past the checks)."""
-        return await self.command(400, 1, 21196 if force else 0)
+        t = await _call(lambda lp, s: self._native.arm(force, lp, s))
+        return _command_result(t)
 
     async def disarm(self, force: bool = False) -> CommandResult:
-        """MAV_CMD_COMPONENT_ARM_DISARM with 0."""
-        return await self.command(400, 0, 21196 if force else 0)
+        """MAV_CMD_COMPONENT_ARM_DISARM with 0 (``force``: even in the air)."""
+        t = await _call(lambda lp, s: self._native.disarm(force, lp, s))
+        return _command_result(t)
 
     async def set_mode(self, name: str) -> CommandResult:
-        """Switches to a mode by the autopilot's name (ArduPilot ``GUIDED``, ``RTL``; PX4
-        ``AUTO.MISSION``, ``mission``, ``Hold``); :class:`UnknownModeError` lists the known
-        ones."""
+        """Switches to a mode by the vehicle's name (ArduPilot ``GUIDED``, ``RTL``; PX4
+        ``AUTO.MISSION``, ``mission``, ``Hold``) or a standard name (``position_hold``,
+        ``safe_recovery``, ``mission``, ``land``, ``takeoff``...), and waits until the
+        vehicle reports it; :class:`UnknownModeError` lists the known ones."""
         t = await _call(lambda lp, s: self._native.set_mode(name, lp, s))
         return _command_result(t)
+
+    async def modes(self) -> List[Mode]:
+        """Its modes: from AVAILABLE_MODES where the vehicle offers them, else the
+        autopilot's table."""
+        t = await _call(lambda lp, s: self._native.modes(lp, s))
+        return [Mode(*m) for m in t]
+
+    async def mode(self) -> Optional[Mode]:
+        """The mode it is in (CURRENT_MODE, else HEARTBEAT)."""
+        t = await _call(lambda lp, s: self._native.mode(lp, s))
+        return None if t is None else Mode(*t)
+
+    @property
+    def armed(self) -> bool:
+        """Whether its latest HEARTBEAT says armed."""
+        return bool(self._native.armed)
+
+    @property
+    def in_air(self) -> bool:
+        """Whether it is in the air (EXTENDED_SYS_STATE, else armed and above home)."""
+        return bool(self._native.in_air)
+
+    async def takeoff(self, height_m: float,
+                      progress: Optional[Progress] = None) -> None:
+        """Takes off to ``height_m`` above home (whatever the autopilot's convention) and
+        returns once it reports 95 % of it; raises :class:`CommandError` (with the
+        vehicle's reasons) when refused, :class:`InvalidValueError` when not armed or the
+        height is not a number (nothing sent)."""
+        await _call(lambda lp, s: self._native.takeoff(float(height_m), progress, lp, s))
+
+    async def land(self, wait: bool = True) -> None:
+        """Lands where it is; with ``wait``, returns once landed and disarmed."""
+        await _call(lambda lp, s: self._native.fly("land", wait, lp, s))
+
+    async def return_home(self, wait: bool = True) -> None:
+        """Returns home (RTL, Return); with ``wait``, returns once landed and disarmed."""
+        await _call(lambda lp, s: self._native.fly("return_home", wait, lp, s))
+
+    async def hold(self) -> None:
+        """Holds position (LOITER, Hold)."""
+        await _call(lambda lp, s: self._native.fly("hold", False, lp, s))
+
+    async def goto(self, lat_deg: float, lon_deg: float, height_m: float,
+                   yaw_deg: Optional[float] = None, wait: bool = True) -> None:
+        """Goes to a point at ``height_m`` above home; with ``wait``, returns within 1.5 m
+        of it."""
+        await _call(lambda lp, s: self._native.goto(
+            float(lat_deg), float(lon_deg), float(height_m),
+            None if yaw_deg is None else float(yaw_deg), wait, lp, s))
+
+    async def position(self) -> Optional[Position]:
+        """Where it is (GLOBAL_POSITION_INT, asked for if none came yet)."""
+        t = await _call(lambda lp, s: self._native.position(lp, s))
+        return None if t is None else Position(*t)
+
+    async def home(self) -> Optional[Home]:
+        """Its home (HOME_POSITION, asked for if none came yet)."""
+        t = await _call(lambda lp, s: self._native.home(lp, s))
+        return None if t is None else Home(*t)
+
+    def offboard(self, rate_hz: float = 20.0) -> _OffboardBlock:
+        """``async with vehicle.offboard(rate_hz=20) as ob``: a setpoint stream (zero
+        velocity at first), PX4 OFFBOARD or ArduPilot GUIDED once setpoints flow; leaving
+        the block holds position."""
+        return _OffboardBlock(self, rate_hz, ("velocity_ned", [0.0, 0.0, 0.0, None]))
+
+    def manual_control(self, rate_hz: float = 20.0) -> _ManualBlock:
+        """``async with vehicle.manual_control(rate_hz=20) as mc``: MANUAL_CONTROL (centred
+        sticks at first) while the block is open."""
+        return _ManualBlock(self, rate_hz)
 
     def telemetry(self, name: str, rate_hz: Optional[float] = None) -> Telemetry:
         """Messages ``name`` from the vehicle from now on (``async for``); with ``rate_hz``

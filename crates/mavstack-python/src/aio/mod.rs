@@ -415,6 +415,7 @@ pub(super) fn param_name(name: &str) -> PyResult<Name> {
     Name::new(name).map_err(|e| PyValueError::new_err(format!("parameter name {name:?}: {e}")))
 }
 
+mod flying;
 mod link;
 mod serve;
 mod vehicle;
@@ -432,6 +433,8 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<AioLink>()?;
     m.add_class::<AioVehicle>()?;
     m.add_class::<AioStream>()?;
+    m.add_class::<flying::AioOffboard>()?;
+    m.add_class::<flying::AioManual>()?;
     m.add_class::<AioServer>()?;
     Ok(())
 }

@@ -116,7 +116,38 @@ pub(crate) struct AioVehicle {
     pub(super) system: System,
 }
 
+/// A mode as Python builds it: (name, standard name or None, custom_mode, selectable).
+type ModeTuple = (String, Option<String>, u32, bool);
+
+fn mode_tuple(m: &mavstack::system::Mode) -> ModeTuple {
+    (m.name.clone(), m.standard_name(), m.custom_mode, m.selectable)
+}
+
 impl AioVehicle {
+    /// `arm` or `disarm` (forced with 21196) through the library's command names.
+    fn named_command(
+        &self,
+        name: &'static str,
+        force: bool,
+        waker: PyRef<'_, AioWaker>,
+        settle: Py<PyAny>,
+    ) -> PyResult<Op> {
+        let params = if force {
+            vec![mavstack::system::FORCE_DISARM]
+        } else {
+            Vec::new()
+        };
+        self.run(waker, settle, move |system| async move {
+            let commands = system.commands();
+            let command = commands.build(name, &params).await.map_err(system_error)?;
+            let outcome = commands
+                .outcome(command, |_| {})
+                .await
+                .map_err(system_error)?;
+            Ok(build(outcome_tuple(outcome)?))
+        })
+    }
+
     /// Runs `f` on the vehicle's `System` until the connection closes.
     fn run<F, Fut>(&self, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>, f: F) -> PyResult<Op>
     where
@@ -388,6 +419,170 @@ impl AioVehicle {
             let set = system.modes().set(&name).await.map(drop);
             Ok(build(mode_outcome(set)?))
         })
+    }
+
+    /// Arms it (`force`: past the checks); settles with the command's outcome.
+    fn arm(&self, force: bool, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
+        self.named_command("arm", force, waker, settle)
+    }
+
+    /// Disarms it (`force`: even in the air); settles with the command's outcome.
+    fn disarm(&self, force: bool, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
+        self.named_command("disarm", force, waker, settle)
+    }
+
+    /// Its modes: `(name, standard or None, custom_mode, selectable)` each (AVAILABLE_MODES
+    /// where offered, else the autopilot's table).
+    fn modes(&self, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
+        self.run(waker, settle, move |system| async move {
+            let list: Vec<ModeTuple> = system.modes().list().await.iter().map(mode_tuple).collect();
+            Ok(build(list))
+        })
+    }
+
+    /// The mode it is in (`None` before a HEARTBEAT came).
+    fn mode(&self, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
+        self.run(waker, settle, move |system| async move {
+            Ok(build(system.modes().current().await.as_ref().map(mode_tuple)))
+        })
+    }
+
+    /// Takes off to `height` m above home and settles once it is there; `progress(height)`.
+    #[pyo3(signature = (height, progress, waker, settle))]
+    fn takeoff(
+        &self,
+        height: f32,
+        progress: Option<Py<PyAny>>,
+        waker: PyRef<'_, AioWaker>,
+        settle: Py<PyAny>,
+    ) -> PyResult<Op> {
+        let mut progress = progress_fn(&waker.inner, progress);
+        self.run(waker, settle, move |system| async move {
+            system
+                .action()
+                .takeoff(height, |h| progress(f64::from(h).max(0.0) as u64, u64::from(height.max(0.0) as u32)))
+                .await
+                .map_err(system_error)?;
+            Ok(build(()))
+        })
+    }
+
+    /// `land`, `return_home`, `hold`: settles once the vehicle reports the mode; `land` and
+    /// `return_home` with `wait` settle once it has landed and disarmed.
+    #[pyo3(signature = (what, wait, waker, settle))]
+    fn fly(&self, what: &str, wait: bool, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
+        let what = match what {
+            "land" | "return_home" | "hold" => what.to_owned(),
+            other => return Err(PyValueError::new_err(format!("no action {other:?}"))),
+        };
+        self.run(waker, settle, move |system| async move {
+            let action = system.action();
+            match what.as_str() {
+                "land" => action.land().await,
+                "return_home" => action.return_home().await,
+                _ => action.hold().await,
+            }
+            .map_err(system_error)?;
+            if wait && what != "hold" {
+                action
+                    .wait_landed(Duration::from_secs(600), |_| {})
+                    .await
+                    .map_err(system_error)?;
+            }
+            Ok(build(()))
+        })
+    }
+
+    /// Goes to a point at `height` m above home (facing `yaw` when given); with `wait`,
+    /// settles once within 1.5 m of it.
+    #[pyo3(signature = (lat, lon, height, yaw, wait, waker, settle))]
+    #[allow(clippy::too_many_arguments)]
+    fn goto(
+        &self,
+        lat: f64,
+        lon: f64,
+        height: f32,
+        yaw: Option<f32>,
+        wait: bool,
+        waker: PyRef<'_, AioWaker>,
+        settle: Py<PyAny>,
+    ) -> PyResult<Op> {
+        self.run(waker, settle, move |system| async move {
+            system
+                .action()
+                .goto(lat, lon, height, yaw, wait, |_| {})
+                .await
+                .map_err(system_error)?;
+            Ok(build(()))
+        })
+    }
+
+    /// Where it is: `(lat, lon, height above home, altitude)`, or `None`.
+    fn position(&self, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
+        self.run(waker, settle, move |system| async move {
+            let p = system.telemetry().position(Duration::from_secs(3)).await;
+            Ok(build(p.map(|p| (p.lat_deg, p.lon_deg, p.height_m, p.alt_m))))
+        })
+    }
+
+    /// Its home: `(lat, lon, altitude)`, or `None`.
+    fn home(&self, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
+        self.run(waker, settle, move |system| async move {
+            let h = system.telemetry().home(Duration::from_secs(3)).await;
+            Ok(build(h.map(|h| {
+                (
+                    f64::from(h.latitude) * 1e-7,
+                    f64::from(h.longitude) * 1e-7,
+                    f64::from(h.altitude) / 1000.0,
+                )
+            })))
+        })
+    }
+
+    /// Whether its latest HEARTBEAT says armed.
+    #[getter]
+    fn armed(&self) -> bool {
+        self.system.armed()
+    }
+
+    /// Whether it is in the air.
+    #[getter]
+    fn in_air(&self) -> bool {
+        self.system.telemetry().in_air()
+    }
+
+    /// Starts an offboard stream at `rate_hz` with a first setpoint (see `AioOffboard.set`);
+    /// settles with an `AioOffboard` once the vehicle is in OFFBOARD or GUIDED.
+    #[pyo3(signature = (rate_hz, kind, values, waker, settle))]
+    fn offboard(
+        &self,
+        rate_hz: f32,
+        kind: &str,
+        values: Vec<Option<f32>>,
+        waker: PyRef<'_, AioWaker>,
+        settle: Py<PyAny>,
+    ) -> PyResult<Op> {
+        let first = flying::setpoint(kind, &values)?;
+        self.run(waker, settle, move |system| async move {
+            let session = system
+                .offboard()
+                .start(rate_hz, first)
+                .await
+                .map_err(system_error)?;
+            let native = flying::AioOffboard::new(session);
+            Ok(Box::new(move |py: Python<'_>| Ok(Py::new(py, native)?.into_any())) as Build)
+        })
+    }
+
+    /// Sends MANUAL_CONTROL at `rate_hz` until the returned `AioManual` is closed.
+    fn manual_control(&self, rate_hz: f32) -> PyResult<flying::AioManual> {
+        let _entered = runtime()?.enter();
+        let session = self
+            .system
+            .manual_control()
+            .start(rate_hz)
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        Ok(flying::AioManual::new(session))
     }
 
     /// Messages `name` from the vehicle, from now on; with `rate_hz`, the vehicle is asked

@@ -74,10 +74,14 @@ fn check_height(what: &str, height: f32) -> Result<(), SystemError> {
 /// A point a vehicle can be sent to.
 pub(super) fn check_point(what: &str, lat: f64, lon: f64) -> Result<(), SystemError> {
     if !(lat.is_finite() && (-90.0..=90.0).contains(&lat)) {
-        return Err(invalid(format!("{what}: latitude {lat} is not within ±90°")));
+        return Err(invalid(format!(
+            "{what}: latitude {lat} is not within ±90°"
+        )));
     }
     if !(lon.is_finite() && (-180.0..=180.0).contains(&lon)) {
-        return Err(invalid(format!("{what}: longitude {lon} is not within ±180°")));
+        return Err(invalid(format!(
+            "{what}: longitude {lon} is not within ±180°"
+        )));
     }
     Ok(())
 }
@@ -136,7 +140,7 @@ impl Action {
                 "takeoff: height {height_m} m is not above home"
             )));
         }
-        if !self.armed() {
+        if !self.system.armed_soon().await {
             return Err(invalid("takeoff: the vehicle is not armed (arm it first)"));
         }
         let said_before = self.system.said_count();
@@ -290,7 +294,7 @@ impl Action {
         if yaw_deg.is_some_and(|y| !y.is_finite()) {
             return Err(invalid("goto: yaw is not a number"));
         }
-        if !self.armed() {
+        if !self.system.armed_soon().await {
             return Err(invalid("goto: the vehicle is not armed"));
         }
         let said_before = self.system.said_count();
@@ -368,9 +372,13 @@ impl Action {
             })
             .await;
         if !there || !self.armed() {
-            let left = self.system.telemetry().last_position().map_or(f64::NAN, |p| {
-                distance_m(p.lat_deg, p.lon_deg, lat_deg, lon_deg)
-            });
+            let left = self
+                .system
+                .telemetry()
+                .last_position()
+                .map_or(f64::NAN, |p| {
+                    distance_m(p.lat_deg, p.lon_deg, lat_deg, lon_deg)
+                });
             return Err(SystemError::NotDone {
                 what: format!("goto: {left:.1} m from the point"),
                 statustext: self.system.said_since(said_before).await,

@@ -380,7 +380,10 @@ impl Commands {
             "arm" => {
                 at_most(1)?;
                 let magic = given(0).unwrap_or(0.0);
-                (MavCmd::COMPONENT_ARM_DISARM, [1., magic, 0., 0., 0., 0., 0.])
+                (
+                    MavCmd::COMPONENT_ARM_DISARM,
+                    [1., magic, 0., 0., 0., 0., 0.],
+                )
             }
             "disarm" => {
                 at_most(1)?;

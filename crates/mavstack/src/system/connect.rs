@@ -160,9 +160,9 @@ impl System {
     /// MAVLink 2 handshake (REQUEST_MESSAGE(300)) there: whatever its outcome, the link goes
     /// on in the version it settles on ([`handshake`](Self::handshake) tells).
     ///
-    /// A vehicle that answers requests is found in one round trip: a HEARTBEAT is asked of
-    /// everyone on the node's links at once (MAV_CMD_REQUEST_MESSAGE to the broadcast
-    /// address), rather than waiting up to a second for the next one.
+    /// A vehicle that answers requests is found in one round trip: its HEARTBEAT is asked
+    /// for at once (MAV_CMD_REQUEST_MESSAGE to the wanted system, or to component 1 of any
+    /// system), rather than waiting up to a second for the next one.
     ///
     /// # Errors
     /// [`SystemError::NotFound`], [`SystemError::Stopped`].
@@ -172,7 +172,7 @@ impl System {
         wait: Duration,
     ) -> Result<Self, SystemError> {
         let mut frames = node.subscribe().await;
-        ask_everyone_for_heartbeats(node).await;
+        ask_for_heartbeats(node, wanted).await;
         let deadline = tokio::time::Instant::now() + wait;
         let found = tokio::time::timeout_at(deadline, async {
             while let Some(incoming) = frames.recv().await {
@@ -261,12 +261,19 @@ impl System {
     }
 }
 
-/// Sends MAV_CMD_REQUEST_MESSAGE(HEARTBEAT) to every system on every link of `node` (where
-/// a peer is known: a UDP server link has none until one sends).
-async fn ask_everyone_for_heartbeats(node: &NodeHandle) {
+/// Sends MAV_CMD_REQUEST_MESSAGE(HEARTBEAT) to the wanted system (any system's autopilot,
+/// component 1, when any will do; other components, such as companions, are not asked) on
+/// every link of `node` where a peer is known (a UDP server link has none until one sends).
+async fn ask_for_heartbeats(node: &NodeHandle, wanted: Wanted) {
+    /// MAV_COMP_ID_AUTOPILOT1.
+    const AUTOPILOT: u8 = 1;
+    let (target_system, target_component) = match wanted {
+        Wanted::AnyAutopilot => (0, AUTOPILOT),
+        Wanted::System(s, c) => (s, c.unwrap_or(0)),
+    };
     let request = MavMessage::CommandLong(CommandLong {
-        target_system: 0,
-        target_component: 0,
+        target_system,
+        target_component,
         command: MavCmd::REQUEST_MESSAGE,
         param1: 0.0,
         ..CommandLong::default()

@@ -150,7 +150,9 @@ fn said(lines: &[String]) -> String {
 }
 
 fn whose(autopilot: &Option<String>) -> String {
-    autopilot.as_ref().map_or_else(String::new, |a| format!("{a} "))
+    autopilot
+        .as_ref()
+        .map_or_else(String::new, |a| format!("{a} "))
 }
 
 fn known_modes(known: &[String]) -> String {

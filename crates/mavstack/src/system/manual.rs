@@ -41,7 +41,12 @@ impl Sticks {
     /// # Errors
     /// [`SystemError::Invalid`] naming the stick.
     pub fn check(&self) -> Result<(), SystemError> {
-        for (name, v, low) in [("x", self.x, -1.0), ("y", self.y, -1.0), ("r", self.r, -1.0), ("z", self.z, 0.0)] {
+        for (name, v, low) in [
+            ("x", self.x, -1.0),
+            ("y", self.y, -1.0),
+            ("r", self.r, -1.0),
+            ("z", self.z, 0.0),
+        ] {
             if !(v.is_finite() && (low..=1.0).contains(&v)) {
                 return Err(SystemError::Invalid(format!(
                     "manual control: {name} {v} is not within {low}-1"

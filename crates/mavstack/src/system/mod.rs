@@ -63,9 +63,7 @@ mod signing;
 mod state;
 mod telemetry;
 
-pub use action::{
-    Action, GOTO_RADIUS_M, MAX_HEIGHT_M, TAKEOFF_REACHED, distance_m,
-};
+pub use action::{Action, GOTO_RADIUS_M, MAX_HEIGHT_M, TAKEOFF_REACHED, distance_m};
 pub use commands::{
     CommandOutcome, Commands, FORCE_DISARM, SHORTCUTS, command_id, command_name, result_name,
     to_int,
@@ -96,6 +94,9 @@ use state::State;
 /// upload over a link that drops 20 % each way fails about once in 150 (with the services'
 /// default 3, about once in two).
 pub const PATIENT_RETRIES: u8 = 10;
+
+/// How long a check that the vehicle is armed waits for a HEARTBEAT that says so.
+const ARMED_WAIT: Duration = Duration::from_millis(2500);
 
 /// How often [`System::capabilities`] asks again for AUTOPILOT_VERSION.
 const CAPABILITIES_RESEND: Duration = Duration::from_millis(500);
@@ -389,6 +390,12 @@ impl System {
             self.wait_state(left.min(CAPABILITIES_RESEND), |s| s.capabilities.is_some())
                 .await;
         }
+    }
+
+    /// Whether it is armed, waiting up to [`ARMED_WAIT`] for a HEARTBEAT that says so (an
+    /// arming just acknowledged shows in the next HEARTBEAT, up to a second later).
+    async fn armed_soon(&self) -> bool {
+        self.armed() || self.wait_state(ARMED_WAIT, |s| s.armed() == Some(true)).await
     }
 
     /// Whether its latest HEARTBEAT says it is armed (`false` before one came).

@@ -101,7 +101,9 @@ impl Setpoint {
             if v.is_finite() {
                 Ok(())
             } else {
-                Err(SystemError::Invalid(format!("setpoint: {name} {v} is not a number")))
+                Err(SystemError::Invalid(format!(
+                    "setpoint: {name} {v} is not a number"
+                )))
             }
         };
         let speed = |name: &str, v: f32| {
@@ -316,7 +318,11 @@ impl Offboard {
     /// [`SystemError::Invalid`] (a rate out of range, a bad setpoint, a vehicle not armed:
     /// nothing sent); those of [`Modes::set`](super::Modes::set) (the stream is stopped
     /// again, nothing held).
-    pub async fn start(&self, rate_hz: f32, first: Setpoint) -> Result<OffboardSession, SystemError> {
+    pub async fn start(
+        &self,
+        rate_hz: f32,
+        first: Setpoint,
+    ) -> Result<OffboardSession, SystemError> {
         if !(rate_hz.is_finite() && (MIN_RATE_HZ..=MAX_RATE_HZ).contains(&rate_hz)) {
             return Err(SystemError::Invalid(format!(
                 "offboard: rate {rate_hz} Hz is not within {MIN_RATE_HZ}-{MAX_RATE_HZ} Hz \
@@ -324,7 +330,7 @@ impl Offboard {
             )));
         }
         first.check()?;
-        if !self.system.armed() {
+        if !self.system.armed_soon().await {
             return Err(SystemError::Invalid(
                 "offboard: the vehicle is not armed (arm it and take off first)".to_owned(),
             ));
