@@ -49,6 +49,11 @@ Scenarios (in this order, each independent of the ones before but the flight, la
                and through `mavstack router 'CONN2?key=K&link_id=2' 'udpout:...?trusted=true'`
                `mavstack param get` from an unsigned ground link is answered; the router's
                vehicle link counts signed frames in and out; signing removed at the end
+  modes, takeoff_goto, offboard, manual
+               mavstack.aio's flying API (tests-interop/flight_flying.py, whose docstring says
+               what each checks): the vehicle's modes set by name and by standard name; take
+               off 10 m, goto 30 m north, land; offboard velocity and position setpoints; sticks
+               in a position mode
   restart      (with --restart CMD, a command that kills the vehicle and starts it again; last)
                `mavstack listen CONN --rate ATTITUDE:4` running while the vehicle is restarted:
                it keeps running (a TCP link reconnects), hears the new instance's HEARTBEAT
@@ -311,6 +316,29 @@ class Runner:
         detail = "; ".join("%s %s%s (%.1f s)" % (x["step"], x["detail"], "" if x["ok"] else " FAILED",
                                                   x["seconds"]) for x in steps)
         self.report("aio", "pass" if rc == 0 else "fail", s, detail)
+
+    def flying(self, scenario):
+        """One scenario of tests-interop/flight_flying.py (mavstack.aio's flying API)."""
+        argv = [sys.executable, os.path.join(HERE, "flight_flying.py"), self.conn, scenario]
+        rc, out, err, s = run(argv, timeout=600)
+        try:
+            steps = json.loads(out.splitlines()[-1])
+        except (ValueError, IndexError):
+            return self.report(scenario, "fail", s, "no report (exit %s): %s" % (rc, err.strip()[-300:]))
+        detail = "; ".join("%s %s%s" % (x["step"], x["detail"], "" if x["ok"] else " FAILED") for x in steps)
+        self.report(scenario, "pass" if rc == 0 else "fail", s, detail)
+
+    def modes(self):
+        self.flying("modes")
+
+    def takeoff_goto(self):
+        self.flying("takeoff_goto")
+
+    def offboard(self):
+        self.flying("offboard")
+
+    def manual(self):
+        self.flying("manual")
 
     def pymavlink_scripts(self):
         """The scripts written for pymavlink (crates/mavstack-python/tests/pymavlink_scripts),
@@ -824,7 +852,8 @@ def compare_plans(sent, got):
 
 
 SCENARIOS = ["probe", "conform", "params", "param_set", "mission", "arm_refused", "signing", "router", "record",
-             "aio", "pymavlink_scripts", "signed_router", "flight", "restart"]
+             "aio", "pymavlink_scripts", "signed_router", "modes", "takeoff_goto", "offboard", "manual",
+             "flight", "restart"]
 
 
 def main():
