@@ -19,10 +19,11 @@
 //!
 //! ## A ground station
 //!
-//! System 255 ([`Node::ground_station`]: a GCS HEARTBEAT every second, links that run the
-//! MAVLink 2 handshake when the vehicle still speaks MAVLink 1); then the first autopilot heard, its parameters, a
-//! mission, and its attitude as it streams (the `ground_station` and `mission_upload`
-//! examples run this against the simulated vehicle):
+//! [`system::System::connect`] opens a ground station's link (system 255, a GCS HEARTBEAT
+//! every second, the MAVLink 2 handshake when the vehicle still speaks MAVLink 1) and finds
+//! the first autopilot heard; its handles then give its parameters, a mission, its
+//! attitude as it streams, and flying it (the `ground_station`, `mission_upload` and
+//! `offboard` examples run this against the simulated vehicle):
 //!
 //! ```no_run
 //! # async fn run() -> Result<(), Box<dyn core::error::Error>> {
@@ -30,18 +31,17 @@
 //! use mavstack::dialects::common::{Attitude, MavMissionType};
 //! use mavstack::services::wpl;
 //! use mavstack::system::{System, Wanted};
-//! use mavstack::{LinkSpec, Node};
-//! let none = |_: &str| None;
-//! let gcs = Node::ground_station(255, 190)
-//!     .link(LinkSpec::parse("udpin:0.0.0.0:14550", &none)?)
-//!     .start()
-//!     .await?;
-//! let mut vehicle = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(10)).await?;
-//! let table = vehicle.params().await?;
+//! use mavstack::LinkSpec;
+//! let spec = LinkSpec::parse("udpin:0.0.0.0:14550", &|_| None)?;
+//! let session = System::connect(spec, Wanted::AnyAutopilot, Duration::from_secs(10)).await?;
+//! let vehicle = session.system();
+//! let table = vehicle.params().get_all().await?;
 //! println!("{} parameters from {}", table.len(), vehicle.target());
 //! let plan = wpl::parse(&std::fs::read_to_string("survey.waypoints")?)?;
-//! vehicle.upload_mission(MavMissionType::MISSION, plan).await?;
-//! let mut attitude = vehicle.subscribe::<Attitude>().await;
+//! vehicle.mission().upload_plan(MavMissionType::MISSION, &plan, |_, _| {}).await?;
+//! vehicle.action().arm().await?;
+//! vehicle.action().takeoff(10.0, |_| {}).await?;
+//! let mut attitude = vehicle.telemetry().subscribe::<Attitude>().await;
 //! while let Some(a) = attitude.recv().await {
 //!     println!("roll {:.2} rad", a.message.roll);
 //! }
