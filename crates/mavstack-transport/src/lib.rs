@@ -31,7 +31,8 @@
 //!   with the caller's `MessageTable`, as events; frames to send as commands.
 //! - [`Connection`] (async) and [`blocking::Connection`]: open a link, drive a protocol on
 //!   it, talk to it.
-//! - [`tlog`]: tlog [`tlog::Reader`] and [`tlog::Writer`] for recording and replaying.
+//! - [`tlog`]: tlog [`tlog::Reader`] and [`tlog::Writer`] for recording and replaying;
+//!   [`raw`]: [`raw::read_items`], the reading of a raw capture to its end.
 //! - [`clock`]: the time the driver gives protocols: monotonic, in microseconds since the
 //!   Unix epoch.
 //!
@@ -94,6 +95,7 @@ pub mod error;
 pub mod frame;
 mod link;
 pub mod protocol;
+pub mod raw;
 pub mod tlog;
 mod udp_io;
 
