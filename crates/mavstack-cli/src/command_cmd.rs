@@ -51,7 +51,9 @@ pub(crate) fn command(args: &CommandArgs) -> Result<(), Failure> {
         for (i, p) in args.params.iter().enumerate() {
             params.push(number(p, &format!("param{}", i + 1))?);
         }
-        let arming = ["arm", "disarm"].iter().any(|a| a.eq_ignore_ascii_case(&args.name));
+        let arming = ["arm", "disarm"]
+            .iter()
+            .any(|a| a.eq_ignore_ascii_case(&args.name));
         if args.force && arming {
             params.push(mavstack::system::FORCE_DISARM);
         }

@@ -111,11 +111,19 @@ pub(crate) fn modes(args: &ModesArgs) -> Result<(), Failure> {
                 .map(|m| {
                     format!(
                         "{} {:<24} {:<14} {:>10}{}",
-                        if Some(m.custom_mode) == current { "*" } else { " " },
+                        if Some(m.custom_mode) == current {
+                            "*"
+                        } else {
+                            " "
+                        },
                         m.name,
                         m.standard_name().unwrap_or_default(),
                         m.custom_mode,
-                        if m.selectable { "" } else { "  (not selectable)" }
+                        if m.selectable {
+                            ""
+                        } else {
+                            "  (not selectable)"
+                        }
                     )
                 })
                 .collect()
@@ -163,7 +171,9 @@ pub(crate) fn fly(args: &FlyArgs) -> Result<(), Failure> {
                 height,
                 yaw,
             } => action
-                .goto(*lat, *lon, *height, *yaw, true, |left| show("to go", left, "m"))
+                .goto(*lat, *lon, *height, *yaw, true, |left| {
+                    show("to go", left, "m")
+                })
                 .await
                 .map(|()| format!("at {lat}, {lon}, {height} m above home")),
             Fly::Velocity {
@@ -200,7 +210,10 @@ async fn velocity(
         .map_err(|_| SystemError::Invalid(format!("--for {seconds}: not a number of seconds")))?;
     let start = system.telemetry().last_position();
     let session = system.offboard().start(VELOCITY_RATE_HZ, setpoint).await?;
-    eprintln!("offboard: {} m/s north, {} m/s east, {} m/s down", ned[0], ned[1], ned[2]);
+    eprintln!(
+        "offboard: {} m/s north, {} m/s east, {} m/s down",
+        ned[0], ned[1], ned[2]
+    );
     tokio::time::sleep(for_).await;
     let sent = session.sent();
     session.stop().await?;

@@ -6,12 +6,13 @@
 
 use std::io::Read as _;
 
+use core::time::Duration;
 use mavstack_core::wire::{FrameHeader, Version, emit_message};
 use mavstack_dialects::common::Heartbeat;
 use std::net::UdpSocket;
 use std::process::{Child, Command, Stdio};
 use std::thread;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 const KEY: &str = "00112233445566778899aabbccddeeff0123456789abcdef0011223344556677";
 
@@ -118,13 +119,31 @@ fn no_command_prints_a_signing_key() {
             names_link: false,
             ..gcs(&["conform", "LINK"])
         },
-        case(&["-v", "listen", &link(), "--duration", "1", "--stats"], false),
         case(
-            &["-v", "listen", &link(), "--duration", "1", "--rate", "ATTITUDE:4"],
+            &["-v", "listen", &link(), "--duration", "1", "--stats"],
             false,
         ),
         case(
-            &["-v", "record", &link(), &format!("{tlog}.out"), "--duration", "1"],
+            &[
+                "-v",
+                "listen",
+                &link(),
+                "--duration",
+                "1",
+                "--rate",
+                "ATTITUDE:4",
+            ],
+            false,
+        ),
+        case(
+            &[
+                "-v",
+                "record",
+                &link(),
+                &format!("{tlog}.out"),
+                "--duration",
+                "1",
+            ],
             true,
         ),
         case(&["-v", "replay", &tlog, &link()], true),
