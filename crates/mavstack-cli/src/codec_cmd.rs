@@ -3,7 +3,7 @@
 use std::io::{self, BufRead, Read, Write};
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context as _, anyhow};
+use anyhow::Context as _;
 use clap::Args;
 use mavstack_core::parse::{Item, Stats};
 use mavstack_core::signing::{self, SecretKey};
@@ -77,7 +77,8 @@ fn open_input(file: Option<&Path>) -> Result<(Box<dyn Read>, u64), Failure> {
     match file {
         Some(path) => {
             let f = std::fs::File::open(path)
-                .map_err(|e| Failure::Input(anyhow!("cannot read {}: {e}", path.display())))?;
+                .with_context(|| format!("cannot read {}", path.display()))
+                .map_err(Failure::Input)?;
             let len = f.metadata().map_or(0, |m| m.len());
             Ok((Box::new(f), len))
         }
@@ -86,7 +87,7 @@ fn open_input(file: Option<&Path>) -> Result<(Box<dyn Read>, u64), Failure> {
 }
 
 pub(crate) fn parse_key(key: Option<&str>) -> Result<Option<SecretKey>, Failure> {
-    key.map(|k| SecretKey::from_hex(k).map_err(|e| Failure::Input(anyhow!("--key: {e}"))))
+    key.map(|k| crate::vehicle_cmd::secret_key(k, "--key"))
         .transpose()
 }
 
@@ -124,9 +125,11 @@ pub(crate) fn frame_line(
 pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
     let key = parse_key(args.key.as_deref())?;
     let (mut input, input_len) = open_input(args.file.as_deref())?;
-    let cannot = |e: io::Error| match &args.file {
-        Some(path) => Failure::Input(anyhow!("cannot read {}: {e}", path.display())),
-        None => Failure::Input(anyhow!("cannot read stdin: {e}")),
+    let cannot = |e: io::Error| {
+        Failure::Input(anyhow::Error::new(e).context(match &args.file {
+            Some(path) => format!("cannot read {}", path.display()),
+            None => "cannot read stdin".to_owned(),
+        }))
     };
     let is_tlog =
         args.tlog || (!args.raw && args.file.as_deref().is_some_and(crate::log_reader::is_tlog));
@@ -261,14 +264,16 @@ pub(crate) fn encode(args: &EncodeArgs) -> Result<(), Failure> {
     let input: Box<dyn BufRead> = match &args.file {
         Some(path) => Box::new(io::BufReader::new(
             std::fs::File::open(path)
-                .map_err(|e| Failure::Input(anyhow!("cannot read {}: {e}", path.display())))?,
+                .with_context(|| format!("cannot read {}", path.display()))
+                .map_err(Failure::Input)?,
         )),
         None => Box::new(io::stdin().lock()),
     };
     let mut sink: Box<dyn Write> = match &args.output {
-        Some(path) => Box::new(io::BufWriter::new(std::fs::File::create(path).map_err(
-            |e| Failure::Other(anyhow!("cannot create {}: {e}", path.display())),
-        )?)),
+        Some(path) => Box::new(io::BufWriter::new(
+            std::fs::File::create(path)
+                .with_context(|| format!("cannot create {}", path.display()))?,
+        )),
         None => Box::new(io::BufWriter::new(io::stdout().lock())),
     };
     let name = args
@@ -288,11 +293,12 @@ pub(crate) fn encode(args: &EncodeArgs) -> Result<(), Failure> {
         if line.trim().is_empty() {
             continue;
         }
-        let at = |e: String| Failure::Input(anyhow!("{name}:{}: {e}", n + 1));
-        let obj: serde_json::Map<String, Json> =
-            serde_json::from_str(&line).map_err(|e| at(format!("not a JSON object: {e}")))?;
+        let at = |e: anyhow::Error| Failure::Input(e.context(format!("{name}:{}", n + 1)));
+        let obj: serde_json::Map<String, Json> = serde_json::from_str(&line)
+            .context("not a JSON object")
+            .map_err(at)?;
         let len = json::encode_object(&obj, &dialect, &defaults, key.as_ref(), &mut seq, &mut buf)
-            .map_err(|e| at(e.to_string()))?;
+            .map_err(|e| at(e.into()))?;
         sink.write_all(&buf[..len]).context("writing output")?;
     }
     sink.flush().context("writing output")?;

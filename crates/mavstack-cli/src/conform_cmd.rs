@@ -11,7 +11,7 @@ use serde_json::json;
 
 use crate::link_cmd::{runtime, seconds};
 use crate::vehicle_cmd::secret_key;
-use crate::{Failure, other};
+use crate::{Failure, fail, other};
 
 /// The side graded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -57,8 +57,7 @@ pub(crate) struct ConformArgs {
 }
 
 pub(crate) fn conform(args: &ConformArgs) -> Result<(), Failure> {
-    let spec =
-        LinkSpec::parse(&args.conn, &|_| None).map_err(|e| Failure::Input(anyhow!("{e}")))?;
+    let spec = LinkSpec::parse(&args.conn, &|_| None).map_err(|e| Failure::Input(e.into()))?;
     let timeout = seconds(args.timeout, "--timeout")?;
     let key = args
         .key
@@ -73,7 +72,7 @@ pub(crate) fn conform(args: &ConformArgs) -> Result<(), Failure> {
     let report = runtime()?.block_on(async {
         match args.role {
             RoleArg::Vehicle => {
-                let node = Node::builder().link(spec).start().await.map_err(other)?;
+                let node = Node::builder().link(spec).start().await.map_err(fail)?;
                 let options = VehicleOptions {
                     timeout,
                     key,
@@ -83,7 +82,7 @@ pub(crate) fn conform(args: &ConformArgs) -> Result<(), Failure> {
                     ..VehicleOptions::default()
                 };
                 let report = grade_vehicle(&node.handle(), &options).await;
-                node.shutdown().await.map_err(other)?;
+                node.shutdown().await.map_err(fail)?;
                 Ok::<_, Failure>(report)
             }
             RoleArg::Gcs => {
@@ -96,7 +95,7 @@ pub(crate) fn conform(args: &ConformArgs) -> Result<(), Failure> {
                     },
                     ..GcsOptions::default()
                 };
-                grade_ground_station(spec, &options).await.map_err(other)
+                grade_ground_station(spec, &options).await.map_err(fail)
             }
         }
     })?;

@@ -278,11 +278,11 @@ fn forged_command() -> Result<Vec<u8>, Failure> {
         ..CommandLong::default()
     };
     let mut buf = [0u8; MAX_FRAME_LEN];
-    let len = emit_message(&header, &command, &mut buf).map_err(other)?;
+    let len = emit_message(&header, &command, &mut buf).map_err(fail)?;
     let future =
         signing::timestamp_from_unix_micros(clock::now().as_micros()) + 100 * 24 * 3600 * 100_000;
     let wrong = SecretKey::new([0x42; 32]);
-    let len = signing::append_signature(&mut buf, len, 1, future, &wrong).map_err(other)?;
+    let len = signing::append_signature(&mut buf, len, 1, future, &wrong).map_err(fail)?;
     Ok(buf[..len].to_vec())
 }
 
@@ -305,17 +305,17 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
     // The vehicle: MAVLink 1 until a MAVLink 2 frame, MAVLink 2 capable, a secure link
     // (think USB) so it accepts SETUP_SIGNING.
     let any_port = |scheme: &str| -> Result<ConnSpec, Failure> {
-        format!("{scheme}:127.0.0.1:0").parse().map_err(other)
+        format!("{scheme}:127.0.0.1:0").parse().map_err(fail)
     };
     let radio_link =
-        LinkSpec::parse("udpin:127.0.0.1:0?secure=true&name=radio", &|_| None).map_err(other)?;
+        LinkSpec::parse("udpin:127.0.0.1:0?secure=true&name=radio", &|_| None).map_err(fail)?;
     // Its legacy rangefinder's link: MAVLink 1 only; trusted (wired to the vehicle), so the
     // rangefinder's frames may be signed onto the signed radio link.
     let peripheral_link = LinkSpec::parse(
         "udpin:127.0.0.1:0?version=1&trusted=true&name=peripheral",
         &|_| None,
     )
-    .map_err(other)?;
+    .map_err(fail)?;
     let vehicle = SimVehicle::start_logged(
         Node::builder().link(radio_link).link(peripheral_link),
         SimVehicle::config(
@@ -325,7 +325,7 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
         timeline.log(),
     )
     .await
-    .map_err(other)?;
+    .map_err(fail)?;
     let bound = |i: usize| {
         vehicle
             .node()
@@ -342,12 +342,12 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
     let radio_log = timeline.log();
     let radio = RadioBridge::start(
         &any_port("udpin")?,
-        &format!("udpout:{vehicle_addr}").parse().map_err(other)?,
+        &format!("udpout:{vehicle_addr}").parse().map_err(fail)?,
         radio_config,
         move |n: &RadioNotice| say(&radio_log, || n.to_string()),
     )
     .await
-    .map_err(other)?;
+    .map_err(fail)?;
     let radio_a_addr =
         radio.local_addrs()[0].ok_or_else(|| other("the radio's socket has no address"))?;
     timeline.say(format!(
@@ -369,10 +369,10 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
         }
     });
     let gcs = Node::ground_station(255, 190)
-        .link(LinkSpec::parse(&format!("udpout:{radio_a_addr}"), &|_| None).map_err(other)?)
+        .link(LinkSpec::parse(&format!("udpout:{radio_a_addr}"), &|_| None).map_err(fail)?)
         .start()
         .await
-        .map_err(other)?;
+        .map_err(fail)?;
     let handle = gcs.handle();
     let frames = gcs.subscribe().await;
     let events = handle.events().await;
@@ -396,8 +396,8 @@ async fn run(timeline: &Timeline) -> Result<(), Failure> {
         outcome = peripheral_stream(timeline, &mut ground).await;
     }
     let _ = ground.node.shutdown().await;
-    radio.stop().await.map_err(other)?;
-    let report = vehicle.shutdown().await.map_err(other)?;
+    radio.stop().await.map_err(fail)?;
+    let report = vehicle.shutdown().await.map_err(fail)?;
     let peripheral_report = peripheral.shutdown().await?;
     tap.abort();
     outcome?;
@@ -530,13 +530,10 @@ impl Peripheral {
                 },
                 Duration::from_secs(1),
             )
-            .link(
-                LinkSpec::parse(&format!("udpout:{vehicle}?version=1"), &|_| None)
-                    .map_err(other)?,
-            )
+            .link(LinkSpec::parse(&format!("udpout:{vehicle}?version=1"), &|_| None).map_err(fail)?)
             .start()
             .await
-            .map_err(other)?;
+            .map_err(fail)?;
         let own = Address::new(PERIPHERAL.0, PERIPHERAL.1);
         let mut streams = StreamServer::new(own, Rangefinder { distance_cm: 400 });
         streams.support(DistanceSensor::ID, None);
@@ -572,7 +569,7 @@ impl Peripheral {
     async fn shutdown(self) -> Result<mavstack::NodeReport, Failure> {
         self.narrator.abort();
         let _ = self.served.stop().await;
-        self.node.shutdown().await.map_err(other)
+        self.node.shutdown().await.map_err(fail)
     }
 }
 
@@ -800,7 +797,7 @@ async fn script(
         })
         .await?;
     need(done, "no handshake outcome")?;
-    let outcome = handshake.await.map_err(other)?.map_err(other)?;
+    let outcome = handshake.await.map_err(fail)?.map_err(fail)?;
     match &outcome.result {
         HandshakeResult::ProtocolVersion(v) => timeline.say(format!(
             "ground station ← {} {} (min {}, max {}) in MAVLink 2 after {} request(s): the vehicle speaks MAVLink 2",
@@ -868,7 +865,7 @@ async fn script(
         .handle
         .set_signing(link, Some(SigningConfig::new(SecretKey::new(KEY), 1)))
         .await
-        .map_err(other)?;
+        .map_err(fail)?;
     let signed = ground
         .wait(timeline, Duration::from_secs(3), |e| {
             frame_of(e, Heartbeat::ID)
@@ -886,16 +883,16 @@ async fn script(
         .ok()
         .flatten()
         .ok_or_else(|| other("demo step failed: no signed command captured"))?;
-    let attacker = UdpSocket::bind("127.0.0.1:0").map_err(other)?;
+    let attacker = UdpSocket::bind("127.0.0.1:0").map_err(fail)?;
     timeline.say("attacker → replays the captured signed COMMAND_LONG, byte for byte");
-    attacker.send_to(&captured, radio_addr).map_err(other)?;
+    attacker.send_to(&captured, radio_addr).map_err(fail)?;
     let _ = ground
         .wait(timeline, Duration::from_millis(400), |_| false)
         .await?;
     timeline.say("attacker → forged COMMAND_LONG (ARM): wrong key, timestamp 100 days ahead");
     attacker
         .send_to(&forged_command()?, radio_addr)
-        .map_err(other)?;
+        .map_err(fail)?;
     let _ = ground
         .wait(timeline, Duration::from_millis(400), |_| false)
         .await?;

@@ -113,9 +113,11 @@ pub(crate) fn ftp(action: &FtpAction) -> Result<(), Failure> {
     let args = action.remote();
     // Read what is uploaded before connecting: a missing file is the user's mistake.
     let upload = match action {
-        FtpAction::Put { local, .. } => Some(std::fs::read(local).map_err(|e| {
-            Failure::Input(anyhow::anyhow!("cannot read {}: {e}", local.display()))
-        })?),
+        FtpAction::Put { local, .. } => Some(
+            std::fs::read(local)
+                .with_context(|| format!("cannot read {}", local.display()))
+                .map_err(Failure::Input)?,
+        ),
         _ => None,
     };
     let download_to = match action {

@@ -345,7 +345,7 @@ fn filter(args: &FilterArgs) -> Result<(), Failure> {
         )));
     }
     let file = std::fs::File::create(&args.out)
-        .map_err(|e| Failure::Other(anyhow!("cannot create {}: {e}", args.out.display())))?;
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
     // The one tlog writer: records as `record` and the router write them, raw frames alike.
     let mut out = tlog::Writer::new(file);
     let mut first: Option<u64> = None;

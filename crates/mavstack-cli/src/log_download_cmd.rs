@@ -180,7 +180,8 @@ fn write_log(dir: &Path, id: u16, data: &[u8]) -> Result<PathBuf, Failure> {
 
 pub(crate) fn download(args: &DownloadArgs) -> Result<(), Failure> {
     std::fs::create_dir_all(&args.out)
-        .map_err(|e| Failure::Input(anyhow!("--out {}: {e}", args.out.display())))?;
+        .with_context(|| format!("--out {}", args.out.display()))
+        .map_err(Failure::Input)?;
     runtime()?.block_on(async {
         let session = connect(&args.remote).await?;
         let began = Instant::now();

@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::anyhow;
+use anyhow::{Context as _, anyhow};
 use clap::Args;
 use mavstack_core::MAX_PAYLOAD_LEN;
 use mavstack_xml::codec::{self, Value};
@@ -187,7 +187,8 @@ fn load_font(given: Option<&Path>) -> Result<(), Failure> {
             ))
         })?;
     let bytes = std::fs::read(&path)
-        .map_err(|e| Failure::Input(anyhow!("font {}: {e}", path.display())))?;
+        .with_context(|| format!("font {}", path.display()))
+        .map_err(Failure::Input)?;
     // The font lives as long as the process: plotters keeps a reference to it.
     let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
     plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
@@ -356,7 +357,9 @@ pub(crate) fn plot(args: &PlotArgs) -> Result<(), Failure> {
     } else {
         chart.draw(BitMapBackend::new(&args.out, size).into_drawing_area())
     };
-    result.map_err(|e| Failure::Other(anyhow!("drawing {}: {e}", args.out.display())))
+    result
+        .with_context(|| format!("drawing {}", args.out.display()))
+        .map_err(Failure::Other)
 }
 
 /// What to draw.
@@ -373,10 +376,13 @@ struct Chart<'a> {
 }
 
 impl Chart<'_> {
-    fn draw<DB: DrawingBackend>(&self, root: DrawingArea<DB, Shift>) -> Result<(), String> {
-        let text = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
-        root.fill(&WHITE).map_err(text)?;
-        let body = root.titled(self.title, ("sans-serif", 18)).map_err(text)?;
+    fn draw<DB: DrawingBackend>(&self, root: DrawingArea<DB, Shift>) -> anyhow::Result<()>
+    where
+        DB::ErrorType: 'static,
+    {
+        let error = anyhow::Error::new::<DrawingAreaErrorKind<DB::ErrorType>>;
+        root.fill(&WHITE).map_err(error)?;
+        let body = root.titled(self.title, ("sans-serif", 18)).map_err(error)?;
         let (mut x0, mut x1) = (0.0f64, self.x_end);
         for &(x, _) in self.series.iter().flat_map(|s| s.points.iter()) {
             x0 = x0.min(x);
@@ -388,9 +394,9 @@ impl Chart<'_> {
         let areas = body.split_evenly((self.panels.len().max(1), 1));
         for (panel, (area, unit)) in areas.iter().zip(self.panels).enumerate() {
             let series: Vec<&Series> = self.series.iter().filter(|s| s.panel == panel).collect();
-            self.panel(area, unit, &series, (x0, x1)).map_err(text)?;
+            self.panel(area, unit, &series, (x0, x1)).map_err(error)?;
         }
-        root.present().map_err(text)
+        root.present().map_err(error)
     }
 
     fn panel<DB: DrawingBackend>(

@@ -4,7 +4,7 @@
 use std::io::{self, BufReader};
 use std::path::Path;
 
-use anyhow::{Context as _, anyhow};
+use anyhow::Context as _;
 use mavstack_core::parse::Item;
 use mavstack_core::wire::Frame;
 use mavstack_transport::{raw, tlog};
@@ -46,7 +46,9 @@ pub(crate) fn read_log(
     what: &str,
     mut each: impl FnMut(&LogFrame<'_>),
 ) -> Result<ReadCounts, Failure> {
-    let cannot = |e: io::Error| Failure::Input(anyhow!("cannot read {}: {e}", path.display()));
+    let cannot = |e: io::Error| {
+        Failure::Input(anyhow::Error::new(e).context(format!("cannot read {}", path.display())))
+    };
     let table = dialect.message_table();
     let mut counts = ReadCounts::default();
     if is_tlog(path) {

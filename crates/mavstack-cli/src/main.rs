@@ -189,14 +189,67 @@ fn main() -> ExitCode {
                 Failure::Input(e) => (e, 2),
                 Failure::Other(e) => (e, 1),
             };
-            // One line: the chain of causes joined.
-            let message = e
-                .chain()
-                .map(ToString::to_string)
-                .collect::<Vec<_>>()
-                .join(": ");
-            eprintln!("error: {}", message.replace('\n', " "));
+            eprintln!("error: {}", one_line(&e));
             ExitCode::from(code)
         }
+    }
+}
+
+/// An error and its chain of causes as one line, joined by `": "`.
+///
+/// Some errors print their cause in their own message as well as giving it as their
+/// source (`link "x": cannot bind ...` over the bind error); a cause the line already ends
+/// with is not repeated.
+fn one_line(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if line.is_empty() {
+            line = text;
+        } else if line != text && !line.ends_with(&format!(": {text}")) {
+            line.push_str(": ");
+            line.push_str(&text);
+        }
+    }
+    line.replace('\n', " ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::one_line;
+
+    /// An error that prints its source in its own message too.
+    #[derive(Debug)]
+    struct Repeats {
+        source: std::io::Error,
+    }
+
+    impl core::fmt::Display for Repeats {
+        fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+            write!(f, "link \"x\": {}", self.source)
+        }
+    }
+
+    impl core::error::Error for Repeats {
+        fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+            Some(&self.source)
+        }
+    }
+
+    #[test]
+    fn the_chain_is_joined_without_repeating_a_cause() {
+        let os = || std::io::Error::from_raw_os_error(21);
+        let e = anyhow::Error::new(os()).context("cannot read x.tlog");
+        assert_eq!(
+            one_line(&e),
+            "cannot read x.tlog: Is a directory (os error 21)"
+        );
+        let e = anyhow::Error::new(Repeats { source: os() }).context("cannot open x");
+        assert_eq!(
+            one_line(&e),
+            "cannot open x: link \"x\": Is a directory (os error 21)"
+        );
+        let e = anyhow::anyhow!("two\nlines");
+        assert_eq!(one_line(&e), "two lines");
     }
 }

@@ -13,7 +13,7 @@ pub(crate) fn from_wpl(text: &str) -> anyhow::Result<Vec<MissionItemInt>> {
     wpl::parse(text).map_err(|e| match e {
         WplError::Line { line, what } => anyhow!("{line}: {what}"),
         WplError::Header { found } => anyhow!("1: expected \"QGC WPL 110\", got {found:?}"),
-        e => anyhow!("{e}"),
+        e => e.into(),
     })
 }
 
@@ -21,7 +21,7 @@ pub(crate) use mavstack_services::mission_json::{to_json, type_name};
 
 /// A JSON plan's items; errors name the item and field.
 pub(crate) fn from_json(text: &str) -> anyhow::Result<Vec<MissionItemInt>> {
-    mission_json::parse(text).map_err(|e| anyhow!("{e}"))
+    Ok(mission_json::parse(text)?)
 }
 
 /// Reads a plan, JSON for `.json` files and WPL otherwise; errors name the file.

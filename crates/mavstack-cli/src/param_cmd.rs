@@ -9,8 +9,8 @@ use serde_json::json;
 
 use crate::link_cmd::runtime;
 use crate::remote::{
-    RemoteArgs, close, connect, end_progress, input, print_lines, showing_progress, since,
-    value_json, value_text,
+    RemoteArgs, close, connect, end_progress, print_lines, showing_progress, since, value_json,
+    value_text,
 };
 use crate::{Failure, fail, other};
 
@@ -121,7 +121,9 @@ fn param_json(index: usize, name: Name, value: Value) -> serde_json::Value {
 }
 
 fn name_arg(text: &str) -> Result<Name, Failure> {
-    Name::new(text).map_err(|e| input(format!("parameter name {text:?}: {e}")))
+    Name::new(text)
+        .with_context(|| format!("parameter name {text:?}"))
+        .map_err(Failure::Input)
 }
 
 pub(crate) fn param(action: ParamAction) -> Result<(), Failure> {

@@ -22,7 +22,7 @@ use tokio::time::Instant;
 
 use crate::link_cmd::{runtime, seconds};
 use crate::vehicle_cmd::secret_key;
-use crate::{Failure, other};
+use crate::{Failure, fail};
 
 /// How the probe runs the handshake.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -192,8 +192,7 @@ fn report(key: (u8, u8), s: &System, asked: HandshakeMethod) -> String {
 }
 
 pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
-    let mut spec =
-        LinkSpec::parse(&args.conn, &|_| None).map_err(|e| Failure::Input(e.into()))?;
+    let mut spec = LinkSpec::parse(&args.conn, &|_| None).map_err(|e| Failure::Input(e.into()))?;
     let shown = spec.redacted().to_owned();
     let wait = seconds(args.timeout, "--timeout")?;
     if args.method == Method::RequestMessageOther && args.other_id < 256 {
@@ -237,7 +236,7 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
             .link(spec)
             .start()
             .await
-            .map_err(other)?;
+            .map_err(fail)?;
         let handle = node.handle();
         let mut probe = Probe {
             frames: node.subscribe().await,
@@ -256,7 +255,7 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
         }
         if probe.systems.is_empty() {
             drop(probe);
-            node.shutdown().await.map_err(other)?;
+            node.shutdown().await.map_err(fail)?;
             return Err(Failure::Other(anyhow!(
                 "no system found on {} within {} s",
                 shown,
@@ -332,7 +331,7 @@ pub(crate) fn probe(args: &ProbeArgs) -> Result<(), Failure> {
             println!("{}", report(*key, system, method));
         }
         drop(probe);
-        node.shutdown().await.map_err(other)?;
+        node.shutdown().await.map_err(fail)?;
         Ok(())
     })
 }

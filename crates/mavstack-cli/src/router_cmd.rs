@@ -7,7 +7,7 @@ use core::time::Duration;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use anyhow::anyhow;
+use anyhow::{Context as _, anyhow};
 use clap::Args;
 use mavstack::router::{MessageTable, RouterConfig};
 use mavstack::{InputModeration, LinkSpec, Node, NodeReport, router_conf};
@@ -150,7 +150,8 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
     let mut report_stats = false;
     if let Some(path) = &args.conf {
         let text = std::fs::read_to_string(path)
-            .map_err(|e| Failure::Input(anyhow!("cannot read {}: {e}", path.display())))?;
+            .with_context(|| format!("cannot read {}", path.display()))
+            .map_err(Failure::Input)?;
         let conf = router_conf::parse(&text)
             .map_err(|e| Failure::Input(anyhow!("{}:{}: {}", path.display(), e.line, e.message)))?;
         for (line, key) in &conf.general.ignored {
@@ -184,7 +185,8 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
     if let Some(path) = &args.conf {
         for link in conf_links {
             let spec = LinkSpec::parse_in(&link.link, &dialect)
-                .map_err(|e| Failure::Input(anyhow!("{}:{}: {e}", path.display(), link.line)))?;
+                .with_context(|| format!("{}:{}", path.display(), link.line))
+                .map_err(Failure::Input)?;
             specs.push(spec);
         }
     }
@@ -192,17 +194,15 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
     for text in &args.links {
         if mavstack_bridge::is_bridge_link(text) {
             bridges.push(
-                mavstack_bridge::BridgeSpec::parse(text)
-                    .map_err(|e| Failure::Input(anyhow!("{e}")))?,
+                mavstack_bridge::BridgeSpec::parse(text).map_err(|e| Failure::Input(e.into()))?,
             );
             continue;
         }
-        specs.push(LinkSpec::parse_in(text, &dialect).map_err(|e| Failure::Input(anyhow!("{e}")))?);
+        specs.push(LinkSpec::parse_in(text, &dialect).map_err(|e| Failure::Input(e.into()))?);
     }
     if let Some(port) = tcp_server {
         let text = format!("tcpin:0.0.0.0:{port}?name=tcp-server");
-        specs
-            .push(LinkSpec::parse_in(&text, &dialect).map_err(|e| Failure::Input(anyhow!("{e}")))?);
+        specs.push(LinkSpec::parse_in(&text, &dialect).map_err(|e| Failure::Input(e.into()))?);
     }
     if specs.is_empty() && bridges.is_empty() {
         return Err(Failure::Input(anyhow!(
@@ -223,7 +223,7 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
-        .map_err(crate::other)?;
+        .context("starting the async runtime")?;
     runtime.block_on(async move {
         let mut builder = Node::builder()
             .router(config)
@@ -247,7 +247,7 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         let mut bridge_stats = Vec::new();
         for spec in &bridges {
             let bridge =
-                mavstack_bridge::open(spec, dialect).map_err(|e| Failure::Input(anyhow!("{e}")))?;
+                mavstack_bridge::open(spec, dialect).map_err(|e| Failure::Input(e.into()))?;
             builder = builder.opened_link(bridge.config, bridge.link);
             bridge_stats.push((spec.name.clone(), Arc::clone(&bridge.handle.stats)));
             handles.push(bridge.handle);
@@ -258,7 +258,7 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         if let Some(addr) = http {
             builder = builder.http(addr);
         }
-        let node = builder.start().await.map_err(crate::other)?;
+        let node = builder.start().await.map_err(crate::fail)?;
         if let Some(addr) = node.http_addr() {
             eprintln!("mavstack router: status page on http://{addr}/");
         }
@@ -288,7 +288,7 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         for handle in handles {
             handle.finish().await;
         }
-        let report = result.map_err(|e| crate::other(format!("the router stopped: {e}")))?;
+        let report = result.context("the router stopped")?;
         if stats_every.is_some() {
             print_stats(&report, &bridge_stats);
         }

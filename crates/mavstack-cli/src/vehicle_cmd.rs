@@ -7,7 +7,7 @@
 
 use core::time::Duration;
 
-use anyhow::anyhow;
+use anyhow::{Context as _, anyhow};
 use clap::Args;
 use mavstack::router::{LinkRole, ProtocolVersionSupport, VersionMode};
 use mavstack::services::ftp::DirBackend;
@@ -20,7 +20,7 @@ use mavstack_services::Address;
 use tokio::sync::mpsc;
 
 use crate::link_cmd::{interrupted, runtime};
-use crate::{Failure, other};
+use crate::{Failure, fail};
 use mavstack_sim::logs::LogDir;
 use mavstack_sim::{Autopilot, SimConfig, params};
 
@@ -124,7 +124,9 @@ fn protocol_version_arg(text: &str) -> Result<ProtocolVersionSupport, String> {
 }
 
 pub(crate) fn secret_key(hex: &str, what: &str) -> Result<SecretKey, Failure> {
-    SecretKey::from_hex(hex).map_err(|e| Failure::Input(anyhow!("{what}: {e}")))
+    SecretKey::from_hex(hex)
+        .with_context(|| what.to_owned())
+        .map_err(Failure::Input)
 }
 
 /// One line of what happened, for `--verbose` and the demo's timeline.
@@ -184,8 +186,7 @@ pub(crate) fn vehicle_node(args: &VehicleArgs) -> Result<NodeBuilder, Failure> {
     let dialect = mavstack::core::MessageTable::of::<mavstack::dialects::common::MavMessage>();
     builder = builder.dialect(dialect);
     for text in &args.links {
-        let mut spec =
-            LinkSpec::parse_in(text, &dialect).map_err(|e| Failure::Input(anyhow!("{e}")))?;
+        let mut spec = LinkSpec::parse_in(text, &dialect).map_err(|e| Failure::Input(e.into()))?;
         if !sets_version_or_key(text) {
             if args.mavlink1_only {
                 spec.config.version = VersionMode::Mavlink1;
@@ -219,7 +220,8 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
         .as_ref()
         .map(|root| {
             let backend = DirBackend::new(root)
-                .map_err(|e| Failure::Input(anyhow!("--ftp-root {}: {e}", root.display())))?;
+                .with_context(|| format!("--ftp-root {}", root.display()))
+                .map_err(Failure::Input)?;
             Ok::<_, Failure>(if args.ftp_writable {
                 backend.writable()
             } else {
@@ -232,7 +234,8 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
         .as_ref()
         .map(|dir| {
             LogDir::new(dir)
-                .map_err(|e| Failure::Input(anyhow!("--log-dir {}: {e}", dir.display())))
+                .with_context(|| format!("--log-dir {}", dir.display()))
+                .map_err(Failure::Input)
         })
         .transpose()?;
     // The vehicle's own MAVFTP server serves them beside `@PARAM/param.pck`.
@@ -252,7 +255,7 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
         let log = stderr_log(args.verbose);
         let vehicle = SimVehicle::start_logged(builder, config, log)
             .await
-            .map_err(other)?;
+            .map_err(fail)?;
         if let Some(addr) = vehicle.node().http_addr() {
             eprintln!("mavstack vehicle: status page on http://{addr}/");
         }
@@ -260,6 +263,6 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
             () = interrupted() => {}
             () = vehicle.node().closed() => {}
         }
-        vehicle.shutdown().await.map(drop).map_err(other)
+        vehicle.shutdown().await.map(drop).map_err(fail)
     })
 }
