@@ -153,6 +153,8 @@ fn a_directory_for_a_file_gives_the_os_error() {
         vec!["decode", "--count", path],
         vec!["log", "summary", path],
         vec!["replay", path, NOWHERE],
+        vec!["router", "--conf", path],
+        vec!["ftp", "put", NOWHERE, path, "/x"],
     ] {
         let out = mavstack(&args);
         let err = String::from_utf8_lossy(&out.stderr);
@@ -161,6 +163,32 @@ fn a_directory_for_a_file_gives_the_os_error() {
             err.contains(&format!("cannot read {path}: Is a directory (os error 21)")),
             "{args:?}: {err}"
         );
+    }
+}
+
+/// A link that cannot be opened: the error says why once, however many layers pass the
+/// cause on (the ground-station commands' `cannot open LINK: link "LINK": cannot bind ...`
+/// printed the bind error twice).
+#[test]
+fn a_link_that_cannot_be_opened_says_why_once() {
+    // TEST-NET-1: no interface of this machine has it, so binding it fails at once.
+    let link = "udpin:192.0.2.1:14550";
+    let why = "cannot bind udp 192.0.2.1:14550";
+    for args in [
+        vec!["param", "list", link],
+        vec!["mission", "download", link],
+        vec!["ftp", "ls", link, "/"],
+        vec!["probe", link],
+        vec!["conform", link],
+        vec!["listen", link],
+        vec!["router", link],
+        vec!["vehicle", link],
+    ] {
+        let out = mavstack(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(err.starts_with("error: "), "{args:?}: {err}");
+        assert_eq!(err.matches(why).count(), 1, "{args:?}: {err}");
     }
 }
 
