@@ -118,7 +118,7 @@ mod tests {
     impl Read for Trickle<'_> {
         fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
             self.reads += 1;
-            if self.reads % 5 == 0 {
+            if self.reads.is_multiple_of(5) {
                 return Err(io::ErrorKind::Interrupted.into());
             }
             let n = buf.len().min(self.data.len()).min(1 + self.reads % 97);
@@ -128,8 +128,11 @@ mod tests {
         }
     }
 
-    /// (bytes, known) of every item, the counts, and the `consumed` values.
-    fn read(chunk_len: usize, data: &[u8]) -> (Vec<(Vec<u8>, bool)>, Stats, Vec<u64>) {
+    /// An item's bytes, and whether its id is known.
+    type Found = (Vec<u8>, bool);
+
+    /// Every item, the counts, and the `consumed` values.
+    fn read(chunk_len: usize, data: &[u8]) -> (Vec<Found>, Stats, Vec<u64>) {
         let mut items = Vec::new();
         let mut progress = Vec::new();
         let stats = read_items_in(
@@ -170,7 +173,7 @@ mod tests {
             data.extend_from_slice(&f);
         }
         let mut whole = SliceParser::new(&data[..], lookup);
-        let want: Vec<(Vec<u8>, bool)> = whole
+        let want: Vec<Found> = whole
             .by_ref()
             .map(|item| match item {
                 Item::Frame(f) => (f.as_bytes().to_vec(), true),
