@@ -1,13 +1,15 @@
 #!/usr/bin/env python3
 """A damaged tlog and a damaged raw stream, read by pymavlink and by mavstack: mavstack must
-return exactly the frames pymavlink returns, in its order, with its timestamps.
+return exactly the frames pymavlink returns, in its order, with its timestamps, and the valid
+records pymavlink loses after short MAVLink 1 frames as well.
 
 Usage:
   tlog_damage.py --mavstack BIN [--records N] [--seed S] [--out DIR] [--python]
 
 The corpus is written with pymavlink's encoder (ardupilotmega, MAVLink 2 and MAVLink 1,
-signed frames with a key, an id above 255). One record in ten is damaged, one kind of damage
-per record, every kind in turn:
+MAVLink 1 frames with payloads of 2 and 3 bytes right after MAVLink 2 ones, signed frames with
+a key, an id above 255). One record in ten is damaged, one kind of damage per record, every
+kind in turn:
   payload bit flip, checksum bit flip, length byte flip (shorter and longer), incompat flags
   flip, message id flip (each of its three bytes), start marker flip, sequence/sysid flip,
   an unknown message id (a frame whose id no dialect defines, checksum of a made-up
@@ -17,7 +19,17 @@ per record, every kind in turn:
 The oracle is pymavlink itself: `mavutil.mavlink_connection(path)` (for a log file a
 `mavmmaplog`: an indexing walk, then `mavlogfile`'s robust reading; pymavlink's default dialect
 `all`, MAVLINK_DIALECT picks another) read to the end; every message that is not BAD_DATA is
-a frame it returns, with `_timestamp`. mavstack is then checked, each against that list:
+a frame it returns, with `_timestamp`. With one mend, where pymavlink loses valid records and
+mavstack must not (`short_v1_frames_read_whole`): a MAVLink 1 frame right after its timestamp
+is read exactly as long as it is, where pymavlink's parser asks for more (12 bytes after a
+MAVLink 2 frame; a MAVLink 1 frame with a payload under 4 bytes is 8 to 11 bytes long) and so
+takes the next record's first timestamp bytes with it and loses that record. The script
+prints what pymavlink's own reading and the mended one return, and checks the mended case
+itself: wherever both return an intact MAVLink 2 record and then the intact short MAVLink 1
+record after it, pymavlink's own loses the intact record that follows, and the mended
+reading returns it. (Past damage the two readings can part ways: a read that lands on
+a 0xFE byte followed by a small one takes only the few bytes that "frame" claims, and the two
+then slide over different bytes.) mavstack is then checked, each against the mended list:
   - `mavstack decode --dialect all --keep-unknown FILE.tlog` (JSON lines): the same
     frames (header, signature timestamp and record timestamp), unknown ids included;
   - with --python, the mavstack Python package (`mavstack.mavutil.mavlink_connection`): the
@@ -92,9 +104,25 @@ def message(rng, i):
     return mav.MAVLink_sys_status_message(1, 1, 1, 500, 12000, -1, 80, 0, 0, 0, 0, 0, 0)
 
 
+def short_message(rng, i):
+    """A message whose MAVLink 1 payload is 2 or 3 bytes (a frame of 10 or 11 bytes)."""
+    k = i % 4
+    if k == 0:
+        return mav.MAVLink_param_request_list_message(1, 1)
+    if k == 1:
+        return mav.MAVLink_hwstatus_message(4900 + rng.randrange(200), rng.randrange(4))
+    if k == 2:
+        return mav.MAVLink_extended_sys_state_message(rng.randrange(5), rng.randrange(5))
+    return mav.MAVLink_gopro_heartbeat_message(rng.randrange(3), rng.randrange(4), 0)
+
+
 def pack(rng, i, plain, signed):
-    msg = message(rng, i)
     plain.seq = i % 256
+    if i % 17 == 9:
+        # Right after a MAVLink 2 frame (record i - 1 is one): the frame pymavlink's reader
+        # reads too much after.
+        return short_message(rng, i).pack(plain, force_mavlink1=True)
+    msg = message(rng, i)
     if i % 11 == 3 and msg.id < 256:
         return msg.pack(plain, force_mavlink1=True)
     if i % 13 == 5:
@@ -139,11 +167,14 @@ def unknown_frame(rng, i):
 
 
 def write_corpus(path, raw_path, n, seed, damage_kinds):
+    """Writes the tlog and the raw stream; returns the count of each kind of damage and the
+    records, in order, as (timestamp in seconds as pymavlink gives it, frame, intact)."""
     rng = random.Random(seed)
     plain, signed = encoders()
     out = bytearray()
     raw = bytearray()
     kinds = {}
+    records = []
     for i in range(n):
         ts = START_US + i * 20_000 + rng.randrange(1000)
         frame = pack(rng, i, plain, signed)
@@ -163,6 +194,7 @@ def write_corpus(path, raw_path, n, seed, damage_kinds):
             frame = damage(rng, kind, frame)
         out += struct.pack(">Q", ts) + frame
         raw += frame
+        records.append((ts * 1.0e-6, frame, kind is None))
     # The last record cut short.
     last = pack(rng, n, plain, signed)
     out += struct.pack(">Q", START_US + n * 20_000) + last[: len(last) // 2]
@@ -171,7 +203,7 @@ def write_corpus(path, raw_path, n, seed, damage_kinds):
         fh.write(out)
     with open(raw_path, "wb") as fh:
         fh.write(raw)
-    return kinds
+    return kinds, records
 
 
 def quietly(read):
@@ -180,9 +212,41 @@ def quietly(read):
         return read()
 
 
-def pymavlink_tlog(path):
-    """(timestamp, frame bytes, known) for every message pymavlink's reader returns."""
-    return quietly(lambda: _pymavlink_tlog(path))
+def pymavlink_tlog(path, mended=True):
+    """(timestamp, frame bytes, known) for every message pymavlink's reader returns; `mended`,
+    with `short_v1_frames_read_whole`."""
+    if not mended:
+        return quietly(lambda: _pymavlink_tlog(path))
+    with short_v1_frames_read_whole():
+        return quietly(lambda: _pymavlink_tlog(path))
+
+
+@contextlib.contextmanager
+def short_v1_frames_read_whole():
+    """pymavlink's reader with its one loss of valid records mended, and nothing else changed:
+    when its parser's buffer is empty (a frame starts right after its timestamp) and
+    `bytes_needed()` asks for more bytes than the MAVLink 1 frame there is long, only the
+    frame is read. Unmended, the read goes on into the next record, whose first timestamp
+    bytes stay in the parser's buffer: the next timestamp is read from the wrong place and the
+    next frame is BAD_DATA. mavstack reads such a record like any other (shared/DESIGN.md)."""
+    original = mavutil.mavlogfile.recv
+
+    def recv(self, n=None):
+        if n is None:
+            n = self.mav.bytes_needed()
+        if self.mav.buf_len() == 0:
+            at = self.f.tell()
+            head = self.f.read(2)
+            self.f.seek(at)
+            if len(head) == 2 and head[0] == 0xFE and head[1] + 8 < n:
+                n = head[1] + 8
+        return original(self, n)
+
+    mavutil.mavlogfile.recv = recv
+    try:
+        yield
+    finally:
+        mavutil.mavlogfile.recv = original
 
 
 def messages(conn):
@@ -265,14 +329,34 @@ def main():
     bad = sorted(set(damage_kinds) - set(DAMAGE))
     if bad:
         ap.error("unknown damage kind(s): %s" % ", ".join(bad))
-    kinds = write_corpus(tlog, raw, args.records, args.seed, damage_kinds)
+    kinds, records = write_corpus(tlog, raw, args.records, args.seed, damage_kinds)
     failed = False
 
     expected = pymavlink_tlog(tlog)
-    known = sum(1 for e in expected if e[2])
+    own = pymavlink_tlog(tlog, mended=False)
     damaged = sum(kinds.values())
-    print("corpus: %d records, %d damaged %s; pymavlink returns %d frames (%d of known messages)"
-          % (args.records + 1, damaged + 1, json.dumps(kinds, sort_keys=True), len(expected), known))
+    print("corpus: %d records, %d damaged %s; pymavlink returns %d frames (%d of known messages), "
+          "mended %d (%d)" % (args.records + 1, damaged + 1, json.dumps(kinds, sort_keys=True),
+                              len(own), sum(1 for e in own if e[2]),
+                              len(expected), sum(1 for e in expected if e[2])))
+    # The mended case, explicitly: where both readings return an intact MAVLink 2 record and
+    # then the intact short MAVLink 1 record after it (each with its own timestamp), pymavlink's
+    # own loses the intact record that follows and the mended one (so mavstack) returns it.
+    own_read = {(t, b) for (t, b, _) in own}
+    mended_read = {(t, b) for (t, b, _) in expected}
+    cases = [k for k in range(1, len(records) - 1)
+             if all(r[2] for r in records[k - 1:k + 2]) and records[k - 1][1][0] == 0xFD
+             and records[k][1][0] == 0xFE and records[k][1][1] < 4
+             and {records[k - 1][:2], records[k][:2]} <= own_read & mended_read]
+    lost = [k for k in cases if records[k + 1][:2] not in own_read]
+    found = [k for k in cases if records[k + 1][:2] in mended_read]
+    if cases and len(lost) == len(cases) and len(found) == len(cases):
+        print("ok   pymavlink loses the record after each of %d short MAVLink 1 frames it reads after a "
+              "MAVLink 2 frame; the mended reading returns all %d" % (len(cases), len(found)))
+    else:
+        failed = True
+        print("FAIL short MAVLink 1 frames after MAVLink 2 ones: %d read by both, the next record lost "
+              "by pymavlink %d times, returned mended %d times" % (len(cases), len(lost), len(found)))
 
     got = mavstack_decode(args.mavstack, tlog)
     want = [(t, header_of(b)) for (t, b, _) in expected]

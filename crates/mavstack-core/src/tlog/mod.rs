@@ -3,9 +3,11 @@
 //!
 //! A tlog is a sequence of records with no file header: an 8-byte big-endian timestamp
 //! (microseconds since the Unix epoch) followed by one complete MAVLink frame as it was on the
-//! wire. Damage is read past exactly as pymavlink reads past it ([`Recovery`], which
+//! wire. Damage is read past as pymavlink reads past it ([`Recovery`], which
 //! `mavstack-transport`'s `tlog::Reader` uses too), so a damaged log gives the same frames with
-//! the same timestamps in every mavstack tool and in pymavlink.
+//! the same timestamps in every mavstack tool and in pymavlink. A valid record is never lost,
+//! though: pymavlink loses the record after a MAVLink 1 frame with a payload under 4 bytes
+//! (when a MAVLink 2 frame came before it), and mavstack reads it.
 //!
 //! ```
 //! use mavstack_core::tlog::Records;
@@ -128,8 +130,13 @@ mod tests {
         0xfd, 9, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0, 0, 0, 2, 12, 0x51, 4, 3, 0x1b, 0x74,
     ];
 
+    /// HEARTBEAT (0) and PARAM_REQUEST_LIST (21, a 2-byte payload).
     fn known(id: u32) -> Option<u8> {
-        (id == 0).then_some(50)
+        match id {
+            0 => Some(50),
+            21 => Some(159),
+            _ => None,
+        }
     }
 
     #[test]
@@ -242,28 +249,136 @@ mod tests {
         assert!(!whole.is_empty());
     }
 
-    /// A v2 frame of message 0 (HEARTBEAT, CRC_EXTRA 50) with `payload`, or a v1 one.
-    fn frame(payload: &[u8; 9], seq: u8, v1: bool) -> Vec<u8> {
+    /// A v2 frame of message `id` (one [`known`] knows) with `payload`, or a v1 one.
+    fn frame(id: u8, payload: &[u8], seq: u8, v1: bool) -> Vec<u8> {
+        let len = u8::try_from(payload.len()).unwrap();
         let mut f = if v1 {
-            std::vec![0xfe, 9, seq, 1, 1, 0]
+            std::vec![0xfe, len, seq, 1, 1, id]
         } else {
-            std::vec![0xfd, 9, 0, 0, seq, 1, 1, 0, 0, 0]
+            std::vec![0xfd, len, 0, 0, seq, 1, 1, id, 0, 0]
         };
         f.extend_from_slice(payload);
         let mut crc = crate::Crc16::new();
         crc.update(&f[1..]);
-        crc.update_byte(50);
+        crc.update_byte(known(id.into()).unwrap());
         f.extend_from_slice(&crc.value().to_le_bytes());
         f
     }
 
+    /// A log of `frames`, their timestamps 1 ms apart.
+    fn log_of_frames(frames: &[Vec<u8>]) -> (Vec<u8>, Vec<(u64, Vec<u8>)>) {
+        let mut log = Vec::new();
+        let mut want = Vec::new();
+        for (i, f) in frames.iter().enumerate() {
+            let ts = 1_765_000_000_000_000 + 1000 * i as u64;
+            log.extend_from_slice(&ts.to_be_bytes());
+            log.extend_from_slice(f);
+            want.push((ts, f.clone()));
+        }
+        (log, want)
+    }
+
+    fn read(log: &[u8]) -> Vec<(u64, Vec<u8>)> {
+        Records::new(log, Some(known))
+            .map(|r| (r.ts_us, r.frame.to_vec()))
+            .collect()
+    }
+
+    #[test]
+    fn a_short_mavlink_1_frame_after_a_mavlink_2_one_costs_nothing() {
+        // PARAM_REQUEST_LIST in MAVLink 1 is 10 bytes: fewer than the 12 pymavlink's parser
+        // asks for after a MAVLink 2 frame. pymavlink's reader takes the next record's first
+        // two timestamp bytes with it and loses that record; every one is read here.
+        let short = |seq| frame(21, &[1, 1], seq, true);
+        let heartbeat = |seq, v1| frame(0, &[0, 0, 0, 0, 2, 12, 81, 4, 3], seq, v1);
+        let frames = [
+            short(0),
+            heartbeat(1, false),
+            short(2),
+            heartbeat(3, false),
+            short(4),
+            short(5),
+            heartbeat(6, true),
+            short(7),
+            frame(21, &[1], 8, true), // a 1-byte payload (a MAVLink 2 sender's truncation)
+            heartbeat(9, false),
+            frame(21, &[], 10, true),
+            heartbeat(11, false),
+            short(12),
+        ];
+        assert_eq!(short(0).len(), 10);
+        let (log, want) = log_of_frames(&frames);
+        let mut records = Records::new(&log[..], Some(known));
+        let found: Vec<(u64, Vec<u8>)> = records
+            .by_ref()
+            .map(|r| (r.ts_us, r.frame.to_vec()))
+            .collect();
+        assert_eq!(found, want);
+        assert_eq!(
+            *records.stats(),
+            RecordStats {
+                records: 13,
+                ..RecordStats::default()
+            }
+        );
+        // A damaged short frame costs itself, not the record after it.
+        let mut damaged = log.clone();
+        let fifth = frames[..4]
+            .iter()
+            .map(|f| TIMESTAMP_LEN + f.len())
+            .sum::<usize>();
+        damaged[fifth + TIMESTAMP_LEN + 6] ^= 0x04; // its payload
+        let mut want = want;
+        want.remove(4);
+        assert_eq!(read(&damaged), want);
+    }
+
+    #[test]
+    fn a_frame_in_one_piece_is_returned_when_the_parser_finished_it_later() {
+        // A byte of garbage before a record whose frame is 11 bytes, after a MAVLink 2 frame:
+        // the garbage and the timestamp's first 7 bytes are read as a timestamp, then the 12
+        // bytes the parser asks for are the timestamp's last byte (damage) and the whole
+        // frame. The parser has it only once the next timestamp and one byte more are read:
+        // pymavlink 2.4.50 returns it then, with that next timestamp, and then a frame of an
+        // unknown id made of that byte and bytes after the timestamp after it.
+        let heartbeat = |seq| frame(0, &[0, 0, 0, 0, 2, 12, 81, 4, 3], seq, false);
+        let short = frame(21, &[1, 1, 0], 1, true);
+        let t: Vec<u64> = (0..5)
+            .map(|i| 1_765_000_000_000_000 + 1000 * i + 0x11)
+            .collect();
+        let mut log = Vec::new();
+        log.extend_from_slice(&t[0].to_be_bytes());
+        log.extend_from_slice(&heartbeat(0));
+        log.push(0x55);
+        for (ts, f) in t[1..]
+            .iter()
+            .zip([short.clone(), heartbeat(2), heartbeat(3), heartbeat(4)])
+        {
+            log.extend_from_slice(&ts.to_be_bytes());
+            log.extend_from_slice(&f);
+        }
+        let mut records = Records::new(&log[..], Some(known));
+        let found: Vec<(u64, Vec<u8>)> = records
+            .by_ref()
+            .map(|r| (r.ts_us, r.frame.to_vec()))
+            .collect();
+        assert_eq!(found, [(t[0], heartbeat(0)), (t[2], short)]);
+        // The frame of the unknown id is not in one piece in the log: counted, not returned.
+        assert_eq!(records.stats().assembled, 1);
+    }
+
     proptest::proptest! {
         /// A log read whole gives every record; with one record's payload or checksum
-        /// damaged, it gives every other record, unchanged, with its timestamp.
+        /// damaged, it gives every other record, unchanged, with its timestamp. Payloads of
+        /// 0 to 9 bytes: MAVLink 1 frames shorter than a MAVLink 2 header and checksum too.
         #[test]
         fn a_damaged_payload_costs_its_record_and_nothing_else(
             records in proptest::collection::vec(
-                (proptest::prelude::any::<[u8; 9]>(), proptest::prelude::any::<bool>(), 0u64..5_000_000),
+                (
+                    proptest::collection::vec(proptest::prelude::any::<u8>(), 0..=9),
+                    proptest::prelude::any::<bool>(),
+                    0u64..5_000_000,
+                ),
                 1..40,
             ),
             hit in proptest::prelude::any::<proptest::sample::Index>(),
@@ -276,19 +391,16 @@ mod tests {
             let mut starts = Vec::new();
             for (i, (payload, v1, gap)) in records.iter().enumerate() {
                 ts += gap;
-                let f = frame(payload, i as u8, *v1);
-                starts.push((log.len() + TIMESTAMP_LEN + if *v1 { 6 } else { 10 }, f.len()));
+                let f = frame(0, payload, i as u8, *v1);
+                starts.push(log.len() + TIMESTAMP_LEN + if *v1 { 6 } else { 10 });
                 want.push((ts, f.clone()));
                 log.extend_from_slice(&ts.to_be_bytes());
                 log.extend_from_slice(&f);
             }
-            let read = |log: &[u8]| -> Vec<(u64, Vec<u8>)> {
-                Records::new(log, Some(known)).map(|r| (r.ts_us, r.frame.to_vec())).collect()
-            };
             proptest::prop_assert_eq!(read(&log), want.clone());
             let i = hit.index(records.len());
-            let (payload_at, _) = starts[i];
-            log[payload_at + byte] ^= 1 << bit;
+            // A byte of the payload or of the checksum.
+            log[starts[i] + byte % (records[i].0.len() + 2)] ^= 1 << bit;
             want.remove(i);
             proptest::prop_assert_eq!(read(&log), want);
         }

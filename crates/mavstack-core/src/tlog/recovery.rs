@@ -84,13 +84,21 @@ enum Phase {
 /// next frame, and what damage costs.
 ///
 /// A damaged log is read the way pymavlink's `mavlogfile` reads it (the reader every tlog tool
-/// is compared with), step for step, so both give the same frames with the same timestamps:
+/// is compared with), step for step, so both give the same frames with the same timestamps,
+/// except where pymavlink loses a valid record (below):
 /// - A message starts with an 8-byte timestamp. After damage, a timestamp more than three days
 ///   away from the last good message's is not believed: reading slides on byte by byte until
 ///   one within three days is found (or the log ends).
-/// - The frame parser asks for only the bytes it needs: first a header's worth, then the rest
-///   of what the length byte says. Bytes it was given but did not use stay in its buffer and
-///   come before the log's next bytes (after the next timestamp).
+/// - The frame parser asks for only the bytes it needs: first a shortest frame's worth (12
+///   bytes after a MAVLink 2 frame, else 8), then the rest of what the length byte says. Bytes it was given but did not use stay in its buffer and come before
+///   the log's next bytes (after the next timestamp).
+/// - Unlike pymavlink: a frame that starts right after its timestamp (the parser's buffer
+///   empty) and is all in the log is read exactly as long as its header says, also when that
+///   is less than the parser would first ask for. That is a MAVLink 1 frame with a payload
+///   under 4 bytes (8 to 11 bytes) after a MAVLink 2 frame: pymavlink's `bytes_needed` asks
+///   for 12 bytes, takes the next record's first timestamp bytes with the frame, reads the
+///   next timestamp from the wrong place and the next frame as damage, and so loses a valid
+///   record. Here that record is read like any other.
 /// - A byte that cannot start a frame is damage, together with every following byte of the
 ///   buffer up to a start marker.
 /// - A frame is taken whole as its length byte (and signature flag) says. It is damage when
@@ -121,8 +129,8 @@ pub struct Recovery {
     /// The parser's buffer: bytes given to it and not used yet.
     buf: [u8; PARSER_LEN],
     len: usize,
-    /// Where `buf[0]` is in the log, while the buffer's bytes lie there in one piece.
-    origin: Option<u64>,
+    /// Where each byte of `buf` was in the log.
+    offsets: [u64; PARSER_LEN],
     /// How many bytes the parser wants in its buffer.
     expected: usize,
     /// The last frame returned from the parser's buffer.
@@ -152,7 +160,7 @@ impl Recovery {
             phase: Phase::Timestamp,
             buf: [0; PARSER_LEN],
             len: 0,
-            origin: None,
+            offsets: [0; PARSER_LEN],
             expected: HEADER_V1 + CHECKSUM,
             out: [0; MAX_FRAME_LEN],
             ts_us: 0,
@@ -423,10 +431,11 @@ impl Recovery {
         loop {
             let rest = &window[*at..];
             if self.len == 0
-                && let Some((len, header)) = whole_frame(rest, self.expected)
+                && let Some((len, header)) = whole_frame(rest)
             {
-                // The usual case: the frame is all in the window and the parser would read
-                // exactly it. Checked where it lies.
+                // The usual case: the frame after a timestamp is all in the window. Read
+                // exactly it (pymavlink reads more when it is shorter than `expected`, and
+                // loses the next record), checked where it lies.
                 let start = *at;
                 *at += len;
                 self.expected = header + CHECKSUM;
@@ -438,12 +447,12 @@ impl Recovery {
             let wanted = self.expected.saturating_sub(self.len).max(1);
             let take = wanted.min(rest.len()).min(PARSER_LEN - self.len);
             let offset = base + *at as u64;
-            self.origin = match self.origin {
-                _ if self.len == 0 => Some(offset),
-                Some(o) if o + self.len as u64 == offset => Some(o),
-                _ if take == 0 => self.origin,
-                _ => None,
-            };
+            for (slot, o) in self.offsets[self.len..self.len + take]
+                .iter_mut()
+                .zip(offset..)
+            {
+                *slot = o;
+            }
             self.buf[self.len..self.len + take].copy_from_slice(&rest[..take]);
             self.len += take;
             *at += take;
@@ -482,7 +491,14 @@ impl Recovery {
         let len = self.expected;
         self.expected = header + CHECKSUM;
         self.out[..len].copy_from_slice(&self.buf[..len]);
-        let log_offset = self.origin;
+        // In one piece when its bytes were read one after another (not, say, some before a
+        // timestamp and the rest after it); what was read after the frame does not matter.
+        let first = self.offsets[0];
+        let log_offset = (self.offsets[..len]
+            .iter()
+            .zip(first..)
+            .all(|(&o, want)| o == want))
+        .then_some(first);
         self.consume(len);
         Some(match check(&self.out[..len], lookup) {
             Check::Good => {
@@ -498,8 +514,8 @@ impl Recovery {
     /// Drops the first `n` bytes of the parser's buffer.
     fn consume(&mut self, n: usize) {
         self.buf.copy_within(n..self.len, 0);
+        self.offsets.copy_within(n..self.len, 0);
         self.len -= n;
-        self.origin = self.origin.map(|o| o + n as u64);
     }
 }
 
@@ -533,9 +549,9 @@ fn claimed_len(start: &[u8], header: usize) -> usize {
     usize::from(start[1]) + header + CHECKSUM + if signed { SIGNATURE } else { 0 }
 }
 
-/// The length and header length of the frame at the start of `rest` when the parser, wanting
-/// `expected` bytes, would be given exactly it and it is all there.
-fn whole_frame(rest: &[u8], expected: usize) -> Option<(usize, usize)> {
+/// The length and header length of the frame at the start of `rest` (as its header says),
+/// when it is all there.
+fn whole_frame(rest: &[u8]) -> Option<(usize, usize)> {
     let first = *rest.first()?;
     let header = match first {
         STX_V2 => HEADER_V2,
@@ -543,7 +559,7 @@ fn whole_frame(rest: &[u8], expected: usize) -> Option<(usize, usize)> {
         _ => return None,
     };
     let len = claimed_len(rest.get(..3)?, header);
-    (len >= expected && rest.len() >= len).then_some((len, header))
+    (rest.len() >= len).then_some((len, header))
 }
 
 enum Check {
