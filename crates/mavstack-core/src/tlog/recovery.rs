@@ -90,8 +90,9 @@ enum Phase {
 ///   away from the last good message's is not believed: reading slides on byte by byte until
 ///   one within three days is found (or the log ends).
 /// - The frame parser asks for only the bytes it needs: first a shortest frame's worth (12
-///   bytes after a MAVLink 2 frame, else 8), then the rest of what the length byte says. Bytes it was given but did not use stay in its buffer and come before
-///   the log's next bytes (after the next timestamp).
+///   bytes after a MAVLink 2 frame, else 8), then the rest of what the length byte says.
+///   Bytes it was given but did not use stay in its buffer and come before the log's next
+///   bytes (after the next timestamp).
 /// - Unlike pymavlink: a frame that starts right after its timestamp (the parser's buffer
 ///   empty) and is all in the log is read exactly as long as its header says, also when that
 ///   is less than the parser would first ask for. That is a MAVLink 1 frame with a payload
