@@ -27,6 +27,7 @@ fn main() {
     config
         .layout(mavstack_codegen::Layout::OutDir)
         .feature_gates(true)
+        .dispatch(true)
         .serde(true)
         .format(true);
     if let Err(e) = config.generate() {

@@ -47,93 +47,18 @@ pub(crate) fn load(name: &str) -> Result<Dialect, Failure> {
     mavstack_xml::load(name).map_err(|e| Failure::Input(e.into()))
 }
 
-/// The dialects compiled into the binary, the one list of them in the command line:
-/// `with_compiled!(name, M => expr)` is `Some(expr)` with `M` the generated `MavMessage` of
-/// the built-in dialect `name` (lower case), or `None` when `name` is not one of them.
-macro_rules! with_compiled {
-    ($name:expr, $m:ident => $body:expr) => {
-        match $name {
-            "all" => {
-                type $m = ::mavstack_dialects::all::MavMessage;
-                Some($body)
-            }
-            "ardupilotmega" => {
-                type $m = ::mavstack_dialects::ardupilotmega::MavMessage;
-                Some($body)
-            }
-            "asluav" => {
-                type $m = ::mavstack_dialects::asluav::MavMessage;
-                Some($body)
-            }
-            "avssuas" => {
-                type $m = ::mavstack_dialects::avssuas::MavMessage;
-                Some($body)
-            }
-            "common" => {
-                type $m = ::mavstack_dialects::common::MavMessage;
-                Some($body)
-            }
-            "csairlink" => {
-                type $m = ::mavstack_dialects::csairlink::MavMessage;
-                Some($body)
-            }
-            "cubepilot" => {
-                type $m = ::mavstack_dialects::cubepilot::MavMessage;
-                Some($body)
-            }
-            "development" => {
-                type $m = ::mavstack_dialects::development::MavMessage;
-                Some($body)
-            }
-            "icarous" => {
-                type $m = ::mavstack_dialects::icarous::MavMessage;
-                Some($body)
-            }
-            "loweheiser" => {
-                type $m = ::mavstack_dialects::loweheiser::MavMessage;
-                Some($body)
-            }
-            "matrixpilot" => {
-                type $m = ::mavstack_dialects::matrixpilot::MavMessage;
-                Some($body)
-            }
-            "minimal" => {
-                type $m = ::mavstack_dialects::minimal::MavMessage;
-                Some($body)
-            }
-            "paparazzi" => {
-                type $m = ::mavstack_dialects::paparazzi::MavMessage;
-                Some($body)
-            }
-            "python_array_test" => {
-                type $m = ::mavstack_dialects::python_array_test::MavMessage;
-                Some($body)
-            }
-            "standard" => {
-                type $m = ::mavstack_dialects::standard::MavMessage;
-                Some($body)
-            }
-            "storm32" => {
-                type $m = ::mavstack_dialects::storm32::MavMessage;
-                Some($body)
-            }
-            "test" => {
-                type $m = ::mavstack_dialects::test::MavMessage;
-                Some($body)
-            }
-            "uavionix" => {
-                type $m = ::mavstack_dialects::uavionix::MavMessage;
-                Some($body)
-            }
-            "ualberta" => {
-                type $m = ::mavstack_dialects::ualberta::MavMessage;
-                Some($body)
-            }
-            _ => None,
+/// The message table of `name` when it is a dialect compiled into the binary (any case):
+/// every built-in dialect is (`mavstack_dialects`, feature `all`).
+pub(crate) fn compiled_table(name: &str) -> Option<mavstack_core::MessageTable> {
+    struct Table;
+    impl mavstack_dialects::DialectVisitor for Table {
+        type Output = mavstack_core::MessageTable;
+        fn visit<M: mavstack_core::MessageSet>(self) -> Self::Output {
+            mavstack_core::MessageTable::of::<M>()
         }
-    };
+    }
+    mavstack_dialects::with_dialect(name, Table)
 }
-pub(crate) use with_compiled;
 
 pub(crate) fn run(action: DialectAction) -> Result<(), Failure> {
     let stdout = io::stdout();
@@ -328,4 +253,27 @@ pub(crate) fn codegen(args: &CodegenArgs) -> Result<(), Failure> {
         args.out.display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{compiled_table, load};
+
+    /// Every built-in dialect is compiled in under its name, in any case, and its typed
+    /// table is the run-time model's.
+    #[test]
+    fn every_builtin_dialect_is_compiled_in() {
+        let names = mavstack_xml::builtin::dialect_names();
+        assert!(names.len() >= 19, "{names:?}");
+        for name in names {
+            let compiled = compiled_table(name).unwrap_or_else(|| panic!("{name} not compiled"));
+            let model = load(name)
+                .unwrap_or_else(|_| panic!("{name} loads"))
+                .message_table();
+            assert_eq!(compiled.entries(), model.entries(), "{name}");
+            let upper = compiled_table(&name.to_ascii_uppercase()).expect("any case");
+            assert_eq!(upper.entries(), compiled.entries(), "{name}");
+        }
+        assert!(compiled_table("no_such_dialect").is_none());
+    }
 }

@@ -6,6 +6,7 @@ use std::io::{self, Read};
 use mavstack_core::parse::{CrcExtra, Item, Stats};
 use mavstack_core::signing::{self, SecretKey};
 use mavstack_core::{MessageSet, MessageTable};
+use mavstack_dialects::{DialectVisitor, with_dialect};
 use mavstack_transport::raw::read_items;
 
 /// A dense index over a dialect's [`MessageTable`] for ids below 65536 (0: unknown, else
@@ -71,10 +72,16 @@ pub(crate) fn count_builtin(
     input: &mut dyn Read,
     key: Option<&SecretKey>,
 ) -> Option<io::Result<(Stats, u64)>> {
-    type Count = fn(&mut dyn Read, Option<&SecretKey>) -> io::Result<(Stats, u64)>;
-    let run = crate::dialect_cmd::with_compiled!(
-        name.to_ascii_lowercase().as_str(),
-        M => count::<M> as Count
-    )?;
-    Some(run(input, key))
+    /// [`count`] with the arguments it is called with.
+    struct Count<'a> {
+        input: &'a mut dyn Read,
+        key: Option<&'a SecretKey>,
+    }
+    impl DialectVisitor for Count<'_> {
+        type Output = io::Result<(Stats, u64)>;
+        fn visit<M: MessageSet>(self) -> Self::Output {
+            count::<M>(self.input, self.key)
+        }
+    }
+    with_dialect(name, Count { input, key })
 }

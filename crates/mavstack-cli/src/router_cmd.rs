@@ -117,11 +117,7 @@ pub(crate) enum ModerationArg {
 /// built-in name or an XML file through the run-time model (`docs/contracts/json-lines.md`,
 /// "Dialect names").
 fn dialect(name: &str) -> Result<MessageTable, Failure> {
-    let compiled = crate::dialect_cmd::with_compiled!(
-        name.to_ascii_lowercase().as_str(),
-        M => MessageTable::of::<M>()
-    );
-    match compiled {
+    match crate::dialect_cmd::compiled_table(name) {
         Some(table) => Ok(table),
         None => crate::dialect_cmd::load(name).map(|d| d.message_table()),
     }

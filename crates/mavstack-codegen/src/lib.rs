@@ -139,6 +139,7 @@ pub struct Config {
     layout: Layout,
     format: bool,
     supplements: bool,
+    dispatch: bool,
     options: Options,
 }
 
@@ -150,7 +151,7 @@ impl Default for Config {
 
 impl Config {
     /// Defaults: `Layout::Files`, formatted output, the PROTOCOL_VERSION supplement on, no
-    /// feature gates, no serde, core crate at `::mavstack_core`.
+    /// feature gates, no serde, no dispatch by name, core crate at `::mavstack_core`.
     #[must_use]
     pub fn new() -> Self {
         Self {
@@ -159,6 +160,7 @@ impl Config {
             layout: Layout::Files,
             format: true,
             supplements: true,
+            dispatch: false,
             options: Options {
                 core_path: "::mavstack_core".into(),
                 feature_gates: false,
@@ -202,6 +204,16 @@ impl Config {
     /// another file behind that file's feature (used by `mavstack-dialects`).
     pub fn feature_gates(&mut self, on: bool) -> &mut Self {
         self.options.feature_gates = on;
+        self
+    }
+
+    /// Give `mod.rs` a dispatch by name (default off): a `DialectVisitor` trait and
+    /// `with_dialect(name, visitor)`, which runs the visitor with the `MavMessage` of the
+    /// module called `name` (any case), so that a program can pick a dialect at run time and
+    /// still use the typed code. With [`Config::feature_gates`], only the modules compiled in
+    /// are found. The one list of the generated dialects is then the definition files.
+    pub fn dispatch(&mut self, on: bool) -> &mut Self {
+        self.dispatch = on;
         self
     }
 
@@ -329,7 +341,47 @@ impl Config {
                 }
             }
         }
+        if self.dispatch {
+            self.dispatch_by_name(plan, &mut out);
+        }
         out
+    }
+
+    /// The `DialectVisitor` trait and `with_dialect`, appended to the index.
+    fn dispatch_by_name(&self, plan: &plan::Plan, out: &mut String) {
+        let core = self.options.core_path_str();
+        let _ = write!(
+            out,
+            "
+/// A computation over one dialect's messages, for [`with_dialect`]: the dialect is chosen
+/// by name at run time, the computation compiled for each.
+pub trait DialectVisitor {{
+    /// What the computation gives.
+    type Output;
+    /// Runs the computation with `M`, the chosen dialect's `MavMessage`.
+    fn visit<M: {core}::MessageSet>(self) -> Self::Output;
+}}
+
+/// Runs `visitor` with the `MavMessage` of the dialect called `name` (its module's name,
+/// in any case), or gives `None` when no such dialect is compiled in.
+pub fn with_dialect<V: DialectVisitor>(name: &str, visitor: V) -> Option<V::Output> {{
+"
+        );
+        for unit in &plan.units {
+            if self.options.feature_gates {
+                let _ = writeln!(out, "    #[cfg(feature = {:?})]", unit.module);
+            }
+            let _ = writeln!(
+                out,
+                "    if name.eq_ignore_ascii_case({m:?}) {{\n        return Some(visitor.visit::<{m}::MavMessage>());\n    }}",
+                m = unit.module
+            );
+        }
+        if self.options.feature_gates {
+            // Without any dialect's feature, nothing above uses them.
+            out.push_str("    let _ = (name, visitor);\n");
+        }
+        out.push_str("    None\n}\n");
     }
 }
 

@@ -62,6 +62,26 @@ fn included_files_share_types_and_gate_added_entries() {
     insta::assert_snapshot!("includes_gated", text);
 }
 
+/// `mod.rs` with the dispatch by name: one gated branch per module, valid Rust.
+#[test]
+fn dispatch_by_name_covers_every_module() {
+    let files = Config::new()
+        .dialect(fixture("includes/child.xml"))
+        .feature_gates(true)
+        .dispatch(true)
+        .render()
+        .expect("generates");
+    let index = files.iter().find(|f| f.name == "mod.rs").expect("index");
+    syn::parse_file(&index.contents).expect("parses");
+    insta::assert_snapshot!("dispatch_gated", index.contents);
+    let plain = Config::new()
+        .dialect(fixture("includes/child.xml"))
+        .render()
+        .expect("generates");
+    let index = plain.iter().find(|f| f.name == "mod.rs").expect("index");
+    assert!(!index.contents.contains("with_dialect"), "off by default");
+}
+
 #[test]
 fn out_dir_layout_and_unformatted_output() {
     let files = Config::new()

@@ -16,6 +16,27 @@
 //! entries that `ardupilotmega.xml` adds are constants of `common::MavCmd` when the
 //! `ardupilotmega` feature is on.
 //!
+//! A dialect chosen by name at run time (a command-line argument, a configuration file)
+//! still runs through the typed code: [`with_dialect`] calls a [`DialectVisitor`] with the
+//! `MavMessage` of the dialect of that name among those compiled in, so a program needs no
+//! list of its own.
+//!
+//! ```
+//! use mavstack_core::{MessageSet, MessageTable};
+//! use mavstack_dialects::{DialectVisitor, with_dialect};
+//!
+//! struct Table;
+//! impl DialectVisitor for Table {
+//!     type Output = MessageTable;
+//!     fn visit<M: MessageSet>(self) -> MessageTable {
+//!         MessageTable::of::<M>()
+//!     }
+//! }
+//! let table = with_dialect("ArduPilotMega", Table).expect("the default feature");
+//! assert!(table.info(0).is_some());
+//! assert!(with_dialect("no_such_dialect", Table).is_none());
+//! ```
+//!
 //! Enums are open: `MavType(pub u8)` with a constant per entry, so unknown values survive a
 //! round trip; bitmasks keep unknown bits.
 //!
