@@ -47,8 +47,17 @@ def metres(a, b):
 
 
 async def arm_when_ready(v, limit=180.0):
-    """Arms, asking again while the vehicle refuses (its estimator settling)."""
+    """Arms in a mode that holds position (a landing leaves ArduPilot in LAND, which it will
+    not arm in), asking again while the vehicle refuses (its estimator settling)."""
     end = time.monotonic() + limit
+    while True:
+        try:
+            await v.hold()
+            break
+        except aio.Error as e:
+            if time.monotonic() > end:
+                return step("armed", False, "hold mode: %s" % e)
+            await asyncio.sleep(3)
     reasons = []
     while True:
         r = await v.arm()
@@ -71,6 +80,13 @@ async def take_off(v, height=10.0):
 async def land(v):
     await v.land(wait=True)
     return step("landed_disarmed", not v.armed, "armed %s" % v.armed)
+
+
+async def heading_deg(v):
+    """Its heading (degrees), from one GLOBAL_POSITION_INT."""
+    async for m in v.telemetry("GLOBAL_POSITION_INT", rate_hz=5):
+        return m.hdg / 100.0
+    return 0.0
 
 
 async def modes(v):
@@ -137,17 +153,24 @@ async def offboard(v):
     async def follow():
         async for m in local:
             last["p"] = (m.x, m.y, m.z)
+            last["v"] = (m.vx, m.vy, m.vz)
 
     follower = asyncio.ensure_future(follow())
     try:
-        a = await v.position()
         async with v.offboard(rate_hz=20) as ob:
             ob.set_velocity_ned(3.0, 0.0, 0.0)
+            # 5 s at 3 m/s: timed from when the vehicle reports the speed (it accelerates
+            # at its own rate first; ArduPilot's guided velocity takes about 2 s).
+            t = time.monotonic()
+            while time.monotonic() - t < 15 and last.get("v", (0.0,))[0] < 2.85:
+                await asyncio.sleep(0.05)
+            a = last["p"]
             await asyncio.sleep(5.0)
+            b = last["p"]
             ob.set_velocity_ned(0.0, 0.0, 0.0)
-            b = await v.position()
-            d, dn, _ = metres((a.lat_deg, a.lon_deg), (b.lat_deg, b.lon_deg))
-            step("velocity_3ms_5s", 13.0 <= dn <= 17.0, "moved %.1f m north (%.1f m in all)" % (dn, d))
+            dn = b[0] - a[0]
+            step("velocity_3ms_5s", 13.0 <= dn <= 17.0, "moved %.1f m north in 5 s at 3 m/s (%.1f s to reach it)" % (
+                dn, time.monotonic() - t - 5.0))
             await asyncio.sleep(2.0)
             while "p" not in last:
                 await asyncio.sleep(0.1)
@@ -188,13 +211,16 @@ async def manual(v):
         async with v.manual_control(rate_hz=20) as mc:
             await asyncio.sleep(1.0)
             await v.set_mode("position_hold")
+            heading = await heading_deg(v)
             a = await v.position()
             mc.set(0.6, 0.0, 0.5, 0.0)
             await asyncio.sleep(4.0)
             mc.set(0.0, 0.0, 0.5, 0.0)
             b = await v.position()
             d, dn, de = metres((a.lat_deg, a.lon_deg), (b.lat_deg, b.lon_deg))
-            step("sticks_forward_4s", dn > 3.0, "moved %.1f m north, %.1f m east" % (dn, de))
+            forward = dn * math.cos(math.radians(heading)) + de * math.sin(math.radians(heading))
+            step("sticks_forward_4s", forward > 3.0, "moved %.1f m forward (heading %.0f°; %.1f m north, %.1f m east)" % (
+                forward, heading, dn, de))
             await asyncio.sleep(3.0)
             c = await v.position()
             await asyncio.sleep(3.0)

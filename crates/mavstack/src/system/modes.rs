@@ -15,8 +15,11 @@ use super::state::ModeSeen;
 use super::{System, SystemError};
 use crate::modes::{self as tables, Flavour};
 
-/// How long AVAILABLE_MODES may take to come, all of them.
+/// How long AVAILABLE_MODES may take to come after a request.
 const LIST_WAIT: Duration = Duration::from_secs(2);
+
+/// Rounds of asking one by one for the AVAILABLE_MODES that did not come.
+const LIST_ROUNDS: usize = 3;
 
 /// How long a mode set may take to show in HEARTBEAT (or CURRENT_MODE).
 const CURRENT_WAIT: Duration = Duration::from_secs(5);
@@ -60,9 +63,10 @@ impl Modes {
         Self { system }
     }
 
-    /// Its modes: from AVAILABLE_MODES when the vehicle answers a request for them (asked
-    /// once, awaited up to 2 s), else from the built-in table of its autopilot (empty when
-    /// there is none).
+    /// Its modes: from AVAILABLE_MODES when the vehicle answers a request for them, else from
+    /// the built-in table of its autopilot (empty when there is none). All of them are asked
+    /// for at once (param 2 = 0); those that did not come are then asked for one by one
+    /// (ArduPilot 4.7 answers the request for all with the first mode only).
     pub async fn list(&self) -> Vec<Mode> {
         if let Some(listed) = self.listed() {
             return listed;
@@ -71,28 +75,58 @@ impl Modes {
             let s = self.system.state();
             s.stopped || s.modes_refused
         };
-        if !asked_before {
-            // param2 = 0: every mode.
-            let asked = self
-                .system
-                .commands()
-                .request_message_with(AvailableModes::ID, 0.0)
-                .await;
-            if asked.is_err() {
-                self.system
-                    .inner
-                    .state
-                    .send_modify(|s| s.modes_refused = true);
-            } else {
-                self.system
-                    .wait_state(LIST_WAIT, |s| {
-                        s.modes_count
-                            .is_some_and(|n| usize::from(n) == s.available_modes.len())
-                    })
-                    .await;
-            }
+        if !asked_before && !self.ask_all().await {
+            self.system
+                .inner
+                .state
+                .send_modify(|s| s.modes_refused = true);
         }
         self.listed().unwrap_or_else(|| self.built_in())
+    }
+
+    /// Asks for every AVAILABLE_MODES; whether the vehicle gave them all.
+    async fn ask_all(&self) -> bool {
+        let commands = self.system.commands();
+        // param2 = 0: every mode.
+        if commands
+            .request_message_with(AvailableModes::ID, 0.0)
+            .await
+            .is_err()
+        {
+            return false;
+        }
+        let complete = |s: &super::state::State| {
+            s.modes_count
+                .is_some_and(|n| usize::from(n) == s.available_modes.len())
+        };
+        if !self
+            .system
+            .wait_state(LIST_WAIT, |s| s.modes_count.is_some())
+            .await
+        {
+            return false;
+        }
+        for _ in 0..LIST_ROUNDS {
+            if self.system.wait_state(LIST_WAIT, complete).await {
+                return true;
+            }
+            let missing: Vec<u8> = {
+                let s = self.system.state();
+                (1..=s.modes_count.unwrap_or(0))
+                    .filter(|i| !s.available_modes.contains_key(i))
+                    .collect()
+            };
+            for i in missing {
+                if commands
+                    .request_message_with(AvailableModes::ID, f32::from(i))
+                    .await
+                    .is_err()
+                {
+                    return false;
+                }
+            }
+        }
+        self.system.wait_state(LIST_WAIT, complete).await
     }
 
     /// The list AVAILABLE_MODES gave, once every mode of it came.
