@@ -108,7 +108,8 @@
 //! state machines), [`sim`] (the vehicle model).
 //!
 //! ## Features
-//! - `services`: remote systems' services ([`system`]), our own ([`serve`]), event metadata.
+//! - `services`: remote systems' services ([`system`]), our own ([`serve`]), event metadata,
+//!   probing a link for its systems and their MAVLink versions ([`probe`]).
 //! - `sim`: the simulated vehicle ([`sim_vehicle`], [`sim`]) and `conform` (implies `services`).
 //! - `http`: a live status page and JSON for a node (`status`).
 //! - `fuzzing`: for the fuzz targets and the seed-corpus tests only; not a stable API
@@ -127,6 +128,8 @@ pub mod modes;
 pub mod node;
 #[cfg(target_os = "linux")]
 mod own_thread;
+#[cfg(feature = "services")]
+pub mod probe;
 pub mod radio;
 pub mod router_conf;
 #[cfg(feature = "services")]
