@@ -68,14 +68,21 @@ pub(crate) struct RouterArgs {
     http: HttpArgs,
 }
 
-/// `--http ADDR` and `--http-public`, on `router` and `vehicle`.
+/// `--http ADDR`, `--http-token` and `--http-public`, on `router` and `vehicle`.
 #[derive(Debug, Args)]
 pub(crate) struct HttpArgs {
-    /// Serve a live status page on ADDR (`127.0.0.1:8080`): `/` the page, `/api/status`
-    /// the `--stats` object as JSON, `/api/events` it once a second (server-sent events).
+    /// Serve a live status page and mavlink2rest 1.0.2's REST and WebSocket API on ADDR
+    /// (`127.0.0.1:8080`): `/` the page, `/api/status` the `--stats` object as JSON,
+    /// `/api/events` it once a second (server-sent events), `/mavlink`, `/ws/mavlink`,
+    /// `/helper/mavlink`, `/info`, `/docs.json`, the same under `/v1/`.
     #[arg(long, value_name = "ADDR")]
     http: Option<String>,
-    /// Allow a `--http` address other than loopback (the page has no authentication).
+    /// Require TOKEN on every `--http` request and WebSocket (`Authorization: Bearer
+    /// TOKEN`, or `?token=TOKEN`); with it, ADDR may be any address.
+    #[arg(long, value_name = "TOKEN", requires = "http")]
+    http_token: Option<String>,
+    /// Allow a `--http` address other than loopback without `--http-token` (no
+    /// authentication).
     #[arg(long, requires = "http")]
     http_public: bool,
 }
@@ -92,13 +99,39 @@ impl HttpArgs {
                 "--http {text}: expected an address and port such as 127.0.0.1:8080"
             ))
         })?;
-        if !addr.ip().is_loopback() && !self.http_public {
+        if !addr.ip().is_loopback() && !self.http_public && self.http_token.is_none() {
             return Err(Failure::Input(anyhow!(
-                "--http {text}: not a loopback address; the page has no authentication \
-                 (add --http-public to serve it there anyway)"
+                "--http {text}: not a loopback address; give --http-token, or add \
+                 --http-public to serve it there without authentication"
             )));
         }
+        if self.http_token.as_ref().is_some_and(String::is_empty) {
+            return Err(Failure::Input(anyhow!("--http-token: empty")));
+        }
         Ok(Some(addr))
+    }
+
+    /// `builder` serving `--http` (if given) with the API's messages in `dialect`.
+    pub(crate) fn apply(
+        &self,
+        mut builder: mavstack::NodeBuilder,
+        dialect: &str,
+    ) -> Result<mavstack::NodeBuilder, Failure> {
+        let Some(addr) = self.addr()? else {
+            return Ok(builder);
+        };
+        let mapping = if dialect.eq_ignore_ascii_case("ardupilotmega") {
+            mavstack::web::default_mapping()
+        } else {
+            let dialect = crate::dialect_cmd::load(dialect)?;
+            Arc::new(mavstack::web::json::JsonMapping::new(dialect))
+        };
+        let mut options = mavstack::web::WebOptions::default().mapping(mapping);
+        if let Some(token) = &self.http_token {
+            options = options.token(token.clone());
+        }
+        builder = builder.http(addr).web(options);
+        Ok(builder)
     }
 }
 
@@ -212,7 +245,8 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         .map(|s| seconds(s, "--stats"))
         .transpose()?
         .or_else(|| report_stats.then_some(Duration::from_secs(1)));
-    let http = args.http.addr()?;
+    // A bad --http is a usage error before anything opens.
+    args.http.addr()?;
     // The node runs on a thread of its own, waiting on its UDP sockets directly (no
     // scheduler between a datagram's wake-up and the forwarded frames); one runtime thread
     // beside it runs the TCP and serial links' tasks, signals and statistics.
@@ -251,9 +285,7 @@ pub(crate) fn router(args: &RouterArgs) -> Result<(), Failure> {
         if let Some(dir) = &log {
             builder = builder.log_dir(dir);
         }
-        if let Some(addr) = http {
-            builder = builder.http(addr);
-        }
+        builder = args.http.apply(builder, &dialect_name)?;
         let node = builder.start().await.map_err(crate::fail)?;
         if let Some(addr) = node.http_addr() {
             eprintln!("mavstack router: status page on http://{addr}/");

@@ -208,9 +208,8 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
         )));
     }
     let mut builder = vehicle_node(args)?;
-    if let Some(addr) = args.http.addr()? {
-        builder = builder.http(addr);
-    }
+    // The API speaks ardupilotmega, as mavlink2rest does (a superset of the node's common).
+    builder = args.http.apply(builder, "ardupilotmega")?;
     let params = match &args.params {
         Some(path) => params::load(path).map_err(|e| Failure::Input(e.into()))?,
         None => params::defaults(args.autopilot),

@@ -103,5 +103,5 @@ pub use conn::{ConnSpec, ConnSpecError, FileFormat};
 pub use connection::{Connection, ConnectionStats, FileMode, Options};
 pub use error::{LinkError, OpenError, SendError};
 pub use frame::{FrameBuf, FrameCommand, FrameEvent, FrameProtocol, ReceivedFrame};
-pub use link::{ExternalPeer, Link, LinkStats};
+pub use link::{ExternalPeer, ExternalSender, Link, LinkStats};
 pub use protocol::{Dest, Input, PeerId, PeerInfo, Protocol, Transmit};

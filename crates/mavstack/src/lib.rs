@@ -140,6 +140,8 @@ pub mod sim_vehicle;
 pub mod status;
 #[cfg(feature = "services")]
 pub mod system;
+#[cfg(feature = "http")]
+pub mod web;
 
 pub use link_spec::{LinkSpec, LinkSpecError, redacted};
 pub use node::{

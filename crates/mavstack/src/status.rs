@@ -3,9 +3,14 @@
 //! One object describes a node: `t_s` (seconds since it started), `links` (per router link:
 //! name, peer, version, frames and bytes each way, conversions, drops by reason, sequence
 //! loss per source), `routes` (sysid/compid → link, age) and `systems` (each component's
-//! latest HEARTBEAT and the link it came on). `mavstack router --stats` prints it,
-//! `GET /api/status` returns it, `GET /api/events` streams it once a second, and the page at
-//! `GET /` draws it, rates computed from successive objects.
+//! latest HEARTBEAT and the link it came on). `mavstack router --stats` prints it.
+//! `GET /api/status` returns it with what the web service ([`crate::web`]) adds: per
+//! system its `mode` by name (the autopilot's mode table), `track` (recent
+//! `[lat, lon, height above home]` from GLOBAL_POSITION_INT, one a second) and `statustext`
+//! (the last lines: `severity`, `text`, `unix_s`), and `web` (the service's counters).
+//! `GET /api/events` streams that once a second, and the page at `GET /` draws it beside
+//! the telemetry it reads from the mavlink2rest API (`GET /mavlink`), rates computed from
+//! successive objects.
 //!
 //! ```
 //! # async fn run() -> Result<(), Box<dyn core::error::Error>> {
@@ -37,9 +42,10 @@ use axum::response::{Html, IntoResponse, Json, Response};
 use axum::routing::get;
 use futures_util::Stream;
 use serde_json::{Map, Value, json};
-use tokio::net::TcpListener;
+use std::sync::Arc;
 
-use crate::{NodeHandle, NodeReport};
+use crate::NodeReport;
+use crate::web::Shared;
 
 /// The page: one self-contained HTML file (no external scripts, styles or fonts).
 const PAGE: &str = include_str!("status_page.html");
@@ -122,24 +128,50 @@ pub fn status_json(report: &NodeReport) -> Value {
     })
 }
 
-/// Serves the page, `/api/status` and `/api/events` for the node behind `handle` on
-/// `listener` until the node stops.
-///
-/// # Errors
-/// An error of the listener.
-pub async fn serve(listener: TcpListener, handle: NodeHandle) -> std::io::Result<()> {
-    let stop = handle.clone();
-    let app = Router::new()
+/// The status object with what the web service adds (see the [module docs](self)).
+fn full_json(report: &NodeReport, shared: &Shared) -> Value {
+    let mut value = status_json(report);
+    if let Some(Value::Array(systems)) = value.get_mut("systems") {
+        let store = shared.lock_store();
+        for (system, s) in systems.iter_mut().zip(&report.systems) {
+            let h = &s.heartbeat;
+            let mode = mode_name(h.autopilot, h.mav_type, h.custom_mode);
+            let track: Vec<Value> = store
+                .track(h.sysid, h.compid)
+                .into_iter()
+                .map(|(lat, lon, height)| json!([lat, lon, tenths(height)]))
+                .collect();
+            let texts: Vec<Value> = store
+                .texts(h.sysid, h.compid)
+                .into_iter()
+                .map(|t| json!({"severity": t.severity, "text": t.text, "unix_s": t.unix_s}))
+                .collect();
+            if let Value::Object(map) = system {
+                map.insert("mode".into(), mode.map_or(Value::Null, Value::from));
+                map.insert("track".into(), Value::Array(track));
+                map.insert("statustext".into(), Value::Array(texts));
+            }
+        }
+    }
+    if let Value::Object(map) = &mut value {
+        map.insert("web".into(), shared.counters_json());
+    }
+    value
+}
+
+/// The name of a HEARTBEAT's `custom_mode` in its autopilot's mode table, if it has one.
+fn mode_name(autopilot: u8, mav_type: u8, custom_mode: u32) -> Option<&'static str> {
+    use mavstack_dialects::common::{MavAutopilot, MavType};
+    let flavour = crate::modes::Flavour::of(MavAutopilot(autopilot), MavType(mav_type))?;
+    crate::modes::name_of(flavour, custom_mode)
+}
+
+/// The page, `/api/status` and `/api/events`, for the web service's router.
+pub(crate) fn routes() -> Router<Arc<Shared>> {
+    Router::new()
         .route("/", get(page))
         .route("/api/status", get(status))
         .route("/api/events", get(events))
-        .with_state(handle);
-    if let Ok(addr) = listener.local_addr() {
-        tracing::info!("status page on http://{addr}/");
-    }
-    axum::serve(listener, app)
-        .with_graceful_shutdown(async move { stop.closed().await })
-        .await
 }
 
 async fn page() -> Response {
@@ -150,9 +182,9 @@ async fn page() -> Response {
         .into_response()
 }
 
-async fn status(State(node): State<NodeHandle>) -> Response {
-    match node.report().await {
-        Some(report) => Json(status_json(&report)).into_response(),
+async fn status(State(shared): State<Arc<Shared>>) -> Response {
+    match shared.node.report().await {
+        Some(report) => Json(full_json(&report, &shared)).into_response(),
         None => (
             axum::http::StatusCode::SERVICE_UNAVAILABLE,
             "the node has stopped",
@@ -162,14 +194,14 @@ async fn status(State(node): State<NodeHandle>) -> Response {
 }
 
 async fn events(
-    State(node): State<NodeHandle>,
+    State(shared): State<Arc<Shared>>,
 ) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
     let ticks = tokio::time::interval(EVENT_PERIOD);
-    let stream = futures_util::stream::unfold((node, ticks), |(node, mut ticks)| async move {
+    let stream = futures_util::stream::unfold((shared, ticks), |(shared, mut ticks)| async move {
         ticks.tick().await;
-        let report = node.report().await?;
-        let event = Event::default().data(status_json(&report).to_string());
-        Some((Ok(event), (node, ticks)))
+        let report = shared.node.report().await?;
+        let event = Event::default().data(full_json(&report, &shared).to_string());
+        Some((Ok(event), (shared, ticks)))
     });
     Sse::new(stream).keep_alive(KeepAlive::default())
 }

@@ -22,7 +22,35 @@ pub struct ExternalPeer {
     output: mpsc::Receiver<(PeerId, Vec<u8>)>,
 }
 
+/// A cloneable handle that hands frames to a [`Link::external`] (what
+/// [`ExternalPeer::deliver`] does), for code that reads the link's output in another task.
+#[derive(Clone, Debug)]
+pub struct ExternalSender {
+    input: mpsc::Sender<LinkMsg>,
+}
+
+impl ExternalSender {
+    /// Hands `bytes` (whole frames) to the link as one datagram from `peer`, waiting while
+    /// the link's queue is full. False once the link has closed.
+    pub async fn deliver(&self, peer: PeerId, bytes: Vec<u8>) -> bool {
+        let msg = LinkMsg::Data {
+            peer,
+            time: clock::now(),
+            bytes,
+        };
+        self.input.send(msg).await.is_ok()
+    }
+}
+
 impl ExternalPeer {
+    /// A handle that delivers frames to the link while this end is busy receiving.
+    #[must_use]
+    pub fn sender(&self) -> ExternalSender {
+        ExternalSender {
+            input: self.input.clone(),
+        }
+    }
+
     /// The peer the link started with, if it did.
     #[must_use]
     pub const fn first(&self) -> Option<PeerId> {

@@ -22,7 +22,7 @@ mod tasks;
 mod tcp;
 mod udp;
 
-pub use external::ExternalPeer;
+pub use external::{ExternalPeer, ExternalSender};
 
 use core::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
 use core::sync::atomic::{AtomicU32, Ordering};

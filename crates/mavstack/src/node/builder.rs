@@ -45,6 +45,8 @@ pub struct NodeBuilder {
     pub(super) moderation: InputModeration,
     pub(super) own_thread: bool,
     pub(super) http: Option<SocketAddr>,
+    #[cfg(feature = "http")]
+    pub(super) web: crate::web::WebOptions,
     /// Taps and event subscribers registered before the node starts.
     pub(super) taps: Vec<mpsc::Sender<Tapped>>,
     pub(super) watchers: Vec<mpsc::Sender<NodeEvent>>,
@@ -197,15 +199,27 @@ impl NodeBuilder {
         self
     }
 
-    /// Serves a read-only status page on `addr` (feature `http`): `GET /` a live page of
-    /// the links (version, rates, drops, conversions), routes and systems heard;
-    /// `GET /api/status` the same as one JSON object ([`crate::status::status_json`]);
-    /// `GET /api/events` that object once a second as server-sent events. It has no
-    /// authentication: give a loopback address unless the network is trusted.
+    /// Serves a status page and mavlink2rest 1.0.2's REST and WebSocket API on `addr`
+    /// (feature `http`; [`crate::web`]): `GET /` a live page of the links (version, rates,
+    /// drops, conversions), routes and vehicles heard (mode, battery, GPS, track, ...);
+    /// `GET /api/status` the same as one JSON object ([`crate::status`]);
+    /// `GET /api/events` that object once a second as server-sent events; `/mavlink`,
+    /// `/ws/mavlink` and the rest of the API through a link of the node named `web`. Without
+    /// a token ([`web`](Self::web)) it has no authentication: give a loopback address unless
+    /// the network is trusted.
     #[cfg(feature = "http")]
     #[must_use]
     pub const fn http(mut self, addr: SocketAddr) -> Self {
         self.http = Some(addr);
+        self
+    }
+
+    /// The web service's settings (token, limits, dialect; [`crate::web::WebOptions`]),
+    /// for [`http`](Self::http).
+    #[cfg(feature = "http")]
+    #[must_use]
+    pub fn web(mut self, options: crate::web::WebOptions) -> Self {
+        self.web = options;
         self
     }
 
@@ -224,7 +238,16 @@ impl NodeBuilder {
     ///
     /// # Panics
     /// Outside a tokio runtime.
-    pub async fn start(self) -> Result<Node, NodeError> {
+    pub async fn start(mut self) -> Result<Node, NodeError> {
+        // The web API is a monitor link of the node, fed and read by the web service.
+        #[cfg(feature = "http")]
+        let web_peer = self.http.map(|_| {
+            let (link, peer) = Link::external(Some("web".to_owned()), crate::web::LINK_QUEUE);
+            let mut config = LinkConfig::new("web");
+            config.monitor = true;
+            self.links.push(NewLink::Open(config, Box::new(link)));
+            peer
+        });
         let mut router_config = self.router;
         // The log sees every frame through local delivery; a node that wants none itself
         // only logs them.
@@ -324,8 +347,8 @@ impl NodeBuilder {
             http_addr: http.as_ref().and_then(|l| l.local_addr().ok()),
         };
         #[cfg(feature = "http")]
-        if let Some(listener) = http {
-            tokio::spawn(crate::status::serve(listener, node.handle()));
+        if let (Some(listener), Some(peer)) = (http, web_peer) {
+            tokio::spawn(crate::web::serve(listener, node.handle(), peer, self.web));
         }
         #[cfg(not(feature = "http"))]
         drop(http);

@@ -42,6 +42,8 @@ impl Node {
             moderation: InputModeration::Timer,
             own_thread: false,
             http: None,
+            #[cfg(feature = "http")]
+            web: crate::web::WebOptions::default(),
             taps: Vec::new(),
             watchers: Vec::new(),
         }
@@ -356,6 +358,24 @@ impl NodeHandle {
             .await
             .map_err(|_| RequestError::Stopped)?;
         Ok(rx.await.map_err(|_| RequestError::Stopped)??)
+    }
+
+    /// Holds SETUP_SIGNING on every link of the node, those that come later too (`true`), or
+    /// takes it again (`false`): a vehicle holds it while it will not change its key
+    /// (ArduPilot while armed). A held SETUP_SIGNING changes nothing and comes as a
+    /// [`LinkEvent::Rejected`] with
+    /// [`RejectReason::SetupSigningHeld`](mavstack_channel::RejectReason::SetupSigningHeld),
+    /// for the vehicle to say why.
+    ///
+    /// # Errors
+    /// [`RequestError::Stopped`].
+    pub async fn hold_setup_signing(&self, held: bool) -> Result<(), RequestError> {
+        let (done, rx) = oneshot::channel();
+        self.commands
+            .send(Command::HoldSetupSigning { held, done })
+            .await
+            .map_err(|_| RequestError::Stopped)?;
+        rx.await.map_err(|_| RequestError::Stopped)
     }
 
     /// Every link event from now on (peers, version changes, handshakes answered, signing
