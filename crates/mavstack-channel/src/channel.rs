@@ -113,6 +113,8 @@ pub struct Channel {
     compid: u8,
     role: Role,
     secure: bool,
+    /// SETUP_SIGNING refused for now ([`Channel::hold_setup_signing`]).
+    setup_signing_held: bool,
     handshake_config: HandshakeConfig,
     table: MessageTable,
     deframer: Deframer,
@@ -164,6 +166,7 @@ impl Channel {
             compid: config.component_id,
             role: config.role,
             secure: config.secure,
+            setup_signing_held: false,
             handshake_config: config.handshake,
             table,
             deframer: Deframer::new(),
@@ -525,6 +528,20 @@ impl Channel {
         self.secure = secure;
     }
 
+    /// Refuses SETUP_SIGNING for now (`true`) or takes it again (`false`): a vehicle that
+    /// will not change its key at the moment (ArduPilot ignores SETUP_SIGNING while armed)
+    /// holds it; a held SETUP_SIGNING is a rejection ([`RejectReason::SetupSigningHeld`]),
+    /// for the vehicle to say why. Off by default.
+    pub const fn hold_setup_signing(&mut self, held: bool) {
+        self.setup_signing_held = held;
+    }
+
+    /// Whether SETUP_SIGNING is held ([`hold_setup_signing`](Self::hold_setup_signing)).
+    #[must_use]
+    pub const fn is_setup_signing_held(&self) -> bool {
+        self.setup_signing_held
+    }
+
     /// The counters.
     #[must_use]
     pub fn stats(&self) -> LinkStats {
@@ -627,6 +644,7 @@ impl core::fmt::Debug for Channel {
             .field("compid", &self.compid)
             .field("role", &self.role)
             .field("secure", &self.secure)
+            .field("setup_signing_held", &self.setup_signing_held)
             .field("version", &self.version())
             .field("seq", &self.seq)
             .field("handshake", &self.handshake)

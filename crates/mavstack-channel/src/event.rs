@@ -130,6 +130,10 @@ pub enum RejectReason {
     /// SETUP_SIGNING to a vehicle with MAVLink 2 disabled: signing needs MAVLink 2.
     #[error("SETUP_SIGNING on a link with MAVLink 2 disabled")]
     SetupSigningNeedsMavlink2,
+    /// SETUP_SIGNING while the vehicle holds it ([`crate::Channel::hold_setup_signing`]:
+    /// ArduPilot while armed). The key is not taken.
+    #[error("SETUP_SIGNING held by the vehicle")]
+    SetupSigningHeld,
 }
 
 /// A frame the channel did not accept.

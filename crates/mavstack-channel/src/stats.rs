@@ -25,6 +25,8 @@ pub struct RejectionCounts {
     pub setup_signing_misaddressed: u64,
     /// [`RejectReason::SetupSigningNeedsMavlink2`].
     pub setup_signing_needs_mavlink2: u64,
+    /// [`RejectReason::SetupSigningHeld`].
+    pub setup_signing_held: u64,
 }
 
 impl RejectionCounts {
@@ -40,6 +42,7 @@ impl RejectionCounts {
             RejectReason::SetupSigningInsecure => &mut self.setup_signing_insecure,
             RejectReason::SetupSigningMisaddressed => &mut self.setup_signing_misaddressed,
             RejectReason::SetupSigningNeedsMavlink2 => &mut self.setup_signing_needs_mavlink2,
+            RejectReason::SetupSigningHeld => &mut self.setup_signing_held,
         };
         *counter += 1;
     }
@@ -56,6 +59,7 @@ impl RejectionCounts {
             + self.setup_signing_insecure
             + self.setup_signing_misaddressed
             + self.setup_signing_needs_mavlink2
+            + self.setup_signing_held
     }
 }
 

@@ -527,6 +527,34 @@ fn setup_signing_on_a_secure_link_enables_signing() {
 }
 
 #[test]
+fn setup_signing_held_by_the_vehicle_is_rejected_until_released() {
+    let mut config = Config::vehicle(1, 1);
+    config.secure = true;
+    let mut v = Channel::new(config).unwrap();
+    assert!(!v.is_setup_signing_held());
+    v.hold_setup_signing(true);
+    let events = feed(
+        &mut v,
+        T0,
+        &frame(Version::V2, 0, 255, 190, &setup(1, 1, [7; 32], 1)),
+    );
+    assert_eq!(rejected(&events), [RejectReason::SetupSigningHeld]);
+    assert_eq!(v.stats().rejected.setup_signing_held, 1);
+    assert!(
+        v.signing().is_none(),
+        "a held SETUP_SIGNING changes nothing"
+    );
+    v.hold_setup_signing(false);
+    let events = feed(
+        &mut v,
+        T0,
+        &frame(Version::V2, 1, 255, 190, &setup(1, 1, [7; 32], 1)),
+    );
+    assert!(rejected(&events).is_empty());
+    assert_eq!(v.version(), LinkVersion::SignedMavlink2);
+}
+
+#[test]
 fn setup_signing_misaddressed_is_rejected() {
     let mut config = Config::vehicle(1, 1);
     config.secure = true;

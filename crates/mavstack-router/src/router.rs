@@ -218,6 +218,8 @@ pub struct Router {
     ready: VecDeque<LinkId>,
     scratch: Vec<LinkId>,
     next_sweep: Option<Instant>,
+    /// SETUP_SIGNING held on every link ([`Router::hold_setup_signing`]).
+    setup_signing_held: bool,
 }
 
 impl Router {
@@ -240,6 +242,7 @@ impl Router {
             ready: VecDeque::new(),
             scratch: Vec::new(),
             next_sweep: None,
+            setup_signing_held: false,
         }
     }
 
@@ -256,10 +259,11 @@ impl Router {
     /// # Errors
     /// [`ConfigError`] if its channel cannot be set up (signing with `version=1`).
     pub fn add_link(&mut self, config: LinkConfig) -> Result<LinkId, ConfigError> {
-        let channel = Channel::with_table(
+        let mut channel = Channel::with_table(
             config.channel_config(self.config.system_id, self.config.component_id),
             self.dialect,
         )?;
+        channel.hold_setup_signing(self.setup_signing_held);
         let state = LinkState {
             limiter: Limiter::new(&config.limits),
             config,
@@ -839,6 +843,18 @@ impl Router {
         l.channel.set_signing(signing)?;
         self.drain_channel(now, link);
         Ok(())
+    }
+
+    /// Holds SETUP_SIGNING on every link, those added later too (`true`), or takes it again
+    /// (`false`): a vehicle holds it while it will not change its key (ArduPilot while
+    /// armed). A held SETUP_SIGNING comes out as [`Event::Rejected`] with
+    /// [`RejectReason::SetupSigningHeld`](mavstack_channel::RejectReason::SetupSigningHeld)
+    /// and changes nothing.
+    pub fn hold_setup_signing(&mut self, held: bool) {
+        self.setup_signing_held = held;
+        for l in self.links.iter_mut().flatten() {
+            l.channel.hold_setup_signing(held);
+        }
     }
 
     // ----- output ----------------------------------------------------------------------

@@ -880,3 +880,46 @@ fn a_transparent_monitor_link_gets_every_frame_as_it_arrived() {
     assert_eq!(out, vec![(vehicle, from_cloud)]);
     assert_eq!(r.link_status(bridge).unwrap().mode.as_str(), "transparent");
 }
+
+#[test]
+fn setup_signing_held_by_the_router_is_refused_on_every_link_until_released() {
+    use mavstack_channel::RejectReason;
+    use mavstack_dialects::common::SetupSigning;
+    use mavstack_router::{Event, LinkRole};
+    let mut config = RouterConfig::default();
+    config.component_id = 1;
+    let mut r = Router::new(config, MessageTable::of::<MavMessage>());
+    let vehicle = |c: &mut LinkConfig| {
+        c.role = LinkRole::Vehicle {
+            protocol_version: mavstack_router::ProtocolVersionSupport::Answer,
+        };
+        c.secure = true;
+    };
+    let before = link(&mut r, "before", vehicle);
+    r.hold_setup_signing(true);
+    let after = link(&mut r, "after", vehicle);
+    let setup = SetupSigning {
+        target_system: 1,
+        target_component: 1,
+        secret_key: [9; 32],
+        initial_timestamp: 1,
+    };
+    let held = |r: &mut R| {
+        let mut reasons = Vec::new();
+        while let Some(e) = r.poll_event() {
+            if let Event::Rejected { rejected, .. } = e {
+                reasons.push(rejected.reason);
+            }
+        }
+        reasons
+    };
+    for l in [before, after] {
+        r.handle_datagram(T0, l, &frame(&setup, Version::V2, (255, 190), 0, None));
+        assert_eq!(held(&mut r), [RejectReason::SetupSigningHeld]);
+        assert!(r.channel(l).unwrap().signing().is_none());
+    }
+    r.hold_setup_signing(false);
+    r.handle_datagram(T0, after, &frame(&setup, Version::V2, (255, 190), 1, None));
+    assert!(held(&mut r).is_empty());
+    assert!(r.channel(after).unwrap().signing().is_some());
+}

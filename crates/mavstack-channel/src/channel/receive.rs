@@ -322,6 +322,9 @@ impl Channel {
         if !self.accepts_mavlink2() {
             return self.reject(now, frame, RejectReason::SetupSigningNeedsMavlink2);
         }
+        if self.setup_signing_held {
+            return self.reject(now, frame, RejectReason::SetupSigningHeld);
+        }
         self.stats.accepted += 1;
         let before = self.version();
         let disable = setup.secret_key == [0; 32] && setup.initial_timestamp == 0;

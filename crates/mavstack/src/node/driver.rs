@@ -301,6 +301,10 @@ impl Driver {
                 self.drain_events()?;
                 let _ = done.send(set);
             }
+            Some(Some(Command::HoldSetupSigning { held, done })) => {
+                self.router.hold_setup_signing(held);
+                let _ = done.send(());
+            }
             Some(Some(Command::Shutdown) | None) => return Ok(Turn::Stop),
             None => {}
         }

@@ -310,5 +310,9 @@ enum Command {
         signing: Option<SigningConfig>,
         done: oneshot::Sender<Result<(), ConfigError>>,
     },
+    HoldSetupSigning {
+        held: bool,
+        done: oneshot::Sender<()>,
+    },
     Shutdown,
 }
