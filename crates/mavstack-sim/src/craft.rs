@@ -2,23 +2,28 @@
 //! streams, and the vehicle's clock.
 
 use core::time::Duration;
+use std::collections::VecDeque;
 
 use mavstack_core::Message as _;
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::{
-    Attitude, AutopilotVersion, BatteryStatus, ComponentMetadata, ExtendedSysState,
-    GlobalPositionInt, GpsFixType, GpsRawInt, Heartbeat, HomePosition, MavAutopilot,
-    MavBatteryChargeState, MavBatteryFunction, MavBatteryType, MavCmd, MavDataStream, MavMessage,
-    MavModeFlag, MavProtocolCapability, MavResult, MavState, MavSysStatusSensor, MavType,
+    Attitude, AutopilotVersion, AvailableModes, AvailableModesMonitor, BatteryStatus,
+    ComponentMetadata, CurrentMode, ExtendedSysState, GlobalPositionInt, GpsFixType, GpsRawInt,
+    Heartbeat, HomePosition, LocalPositionNed, MavAutopilot, MavBatteryChargeState,
+    MavBatteryFunction, MavBatteryType, MavCmd, MavDataStream, MavMessage, MavModeFlag,
+    MavProtocolCapability, MavResult, MavSeverity, MavState, MavSysStatusSensor, MavType,
     MavVtolState, MissionCurrent, MissionState, RequestDataStream, SysStatus, VfrHud,
 };
-use mavstack_services::Address;
 use mavstack_services::command::{Command, CommandHandler, Request, Response};
 use mavstack_services::stream::{self, Interval, StreamScheduler, request_message};
+use mavstack_services::{Address, Outgoing};
 
+use crate::control::Control;
 use crate::flight::{Flight, HOME_AMSL, Position};
 use crate::modes::{self, Behaviour, Mode};
 use crate::{Autopilot, events};
+
+mod mode_commands;
 
 /// The vehicle's clock: the time since it started, which it reads as a flight stack reads
 /// the time since its boot. Every time field it sends comes from here, never from the
@@ -56,13 +61,27 @@ impl Boot {
     }
 }
 
-/// The messages the vehicle streams and their default intervals (`None`: on request only).
-pub(crate) const STREAMS: &[(u32, Option<Duration>)] = &[
+/// The messages the vehicle of a flavour streams and their default intervals (`None`: on
+/// request only): [`STREAMS`], and PX4's CURRENT_MODE every 2 s (`mavlink_main.cpp`
+/// configures it at 0.5 Hz), ArduPilot's AVAILABLE_MODES_MONITOR once AVAILABLE_MODES was
+/// asked for.
+pub(crate) fn streams(autopilot: Autopilot) -> Vec<(u32, Option<Duration>)> {
+    let mut all = STREAMS.to_vec();
+    all.push(match autopilot {
+        Autopilot::Ardupilot => (AvailableModesMonitor::ID, None),
+        Autopilot::Px4 => (CurrentMode::ID, Some(Duration::from_secs(2))),
+    });
+    all
+}
+
+/// The messages both flavours stream and their default intervals (`None`: on request only).
+const STREAMS: &[(u32, Option<Duration>)] = &[
     (Heartbeat::ID, Some(Duration::from_secs(1))),
     (SysStatus::ID, Some(Duration::from_secs(1))),
     (GpsRawInt::ID, Some(Duration::from_secs(1))),
     (Attitude::ID, Some(Duration::from_millis(250))),
     (GlobalPositionInt::ID, Some(Duration::from_millis(250))),
+    (LocalPositionNed::ID, Some(Duration::from_millis(250))),
     (MissionCurrent::ID, Some(Duration::from_secs(1))),
     (VfrHud::ID, Some(Duration::from_millis(500))),
     (BatteryStatus::ID, Some(Duration::from_secs(1))),
@@ -89,6 +108,15 @@ pub(crate) struct Craft {
     pub(crate) events: events::Events,
     /// Its clock, for the time fields of what it sends.
     pub(crate) boot: Boot,
+    /// Setpoints and sticks, and the failsafes of their loss.
+    pub(crate) control: Control,
+    /// Messages answering a command, sent after its ACK (AVAILABLE_MODES).
+    pub(crate) replies: VecDeque<Outgoing>,
+    /// Messages sent before the ACK of the command that caused them (PX4's first ACK of
+    /// MAV_CMD_DO_SET_MODE).
+    pub(crate) early: VecDeque<Outgoing>,
+    /// Lines for STATUSTEXT with their severity.
+    pub(crate) said: Vec<(MavSeverity, String)>,
 }
 
 /// The numeric params of a command: p1–p4, latitude and longitude in degrees (`None` when
@@ -124,8 +152,15 @@ fn params_of(command: &Command) -> Params {
 }
 
 impl Craft {
+    /// The mode the user (a command, SET_MODE) asked for: it ends a failsafe.
     pub(crate) fn set_mode(&mut self, mode: Mode) {
+        self.control.user_mode_change();
         self.flight.set_mode(mode);
+    }
+
+    /// A line for STATUSTEXT.
+    fn tell(&mut self, severity: MavSeverity, text: String) {
+        self.said.push((severity, text));
     }
 
     fn mode_with(&self, behaviour: Behaviour) -> Mode {
@@ -153,6 +188,42 @@ impl Craft {
         self.streams
             .handle_command(now, &request)
             .unwrap_or(Response::done(MavResult::FAILED))
+    }
+
+    /// MAV_CMD_DO_REPOSITION with the change-mode flags `flags` (param2) to `lat`, `lon` and
+    /// `z` metres above mean sea level. ArduPilot: armed, it flies there in GUIDED. PX4 1.16
+    /// (`Commander`, `Navigator`): flag 1 switches to Hold (ACCEPTED, also disarmed); without
+    /// it UNSUPPORTED; armed, the point is flown to in Hold either way, disarmed it is not
+    /// kept.
+    fn reposition(&mut self, flags: f32, lat: Option<f64>, lon: Option<f64>, z: f32) -> Response {
+        let alt = z.is_finite().then_some(z - HOME_AMSL);
+        let armed = self.flight.is_armed();
+        match self.autopilot {
+            Autopilot::Ardupilot => {
+                if !armed {
+                    return Response::done(MavResult::DENIED);
+                }
+                self.control.user_mode_change();
+                self.flight.go_to(lat, lon, alt);
+                Response::done(MavResult::ACCEPTED)
+            }
+            Autopilot::Px4 => {
+                let change_mode = flags.is_finite() && flags as u32 == 1;
+                let in_hold = self.flight.mode().behaviour == Behaviour::Hold;
+                if armed && (change_mode || in_hold) {
+                    self.control.user_mode_change();
+                    self.flight.go_to(lat, lon, alt);
+                } else if change_mode {
+                    let hold = self.mode_with(Behaviour::Hold);
+                    self.set_mode(hold);
+                }
+                Response::done(if change_mode {
+                    MavResult::ACCEPTED
+                } else {
+                    MavResult::UNSUPPORTED
+                })
+            }
+        }
     }
 
     pub(crate) fn heartbeat(&self) -> Heartbeat {
@@ -356,10 +427,32 @@ impl Craft {
                     ..HomePosition::default()
                 })
             }
+            // ArduPilot Copter says MC; PX4 on a multicopter UNDEFINED.
             ExtendedSysState::ID => MavMessage::ExtendedSysState(ExtendedSysState {
-                vtol_state: MavVtolState::UNDEFINED,
+                vtol_state: match self.autopilot {
+                    Autopilot::Ardupilot => MavVtolState::MC,
+                    Autopilot::Px4 => MavVtolState::UNDEFINED,
+                },
                 landed_state: f.landed_state(),
             }),
+            LocalPositionNed::ID => {
+                let [x, y, z] = f.local_position();
+                MavMessage::LocalPositionNed(LocalPositionNed {
+                    time_boot_ms: boot_ms,
+                    x,
+                    y,
+                    z,
+                    vx: vn,
+                    vy: ve,
+                    vz: vd,
+                })
+            }
+            CurrentMode::ID if self.autopilot == Autopilot::Px4 => {
+                MavMessage::CurrentMode(self.current_mode())
+            }
+            AvailableModesMonitor::ID if self.autopilot == Autopilot::Ardupilot => {
+                MavMessage::AvailableModesMonitor(AvailableModesMonitor { seq: 0 })
+            }
             _ => return None,
         })
     }
@@ -377,6 +470,10 @@ impl Craft {
         };
         for group in groups {
             for &id in stream::data_stream_members(group) {
+                // ArduPilot 4.7 has EXTENDED_SYS_STATE in no group (on request only).
+                if self.autopilot == Autopilot::Ardupilot && id == ExtendedSysState::ID {
+                    continue;
+                }
                 // Ids of a group the simulator does not send are refused: nothing to do.
                 let _ = self.streams.set_interval(now, id, interval);
             }
@@ -395,6 +492,15 @@ impl CommandHandler for Craft {
             // MESSAGE_INTERVAL (244), which it gives for GET_MESSAGE_INTERVAL alone.
             MavCmd::REQUEST_MESSAGE if self.autopilot == Autopilot::Px4 && p[0] == 244.0 => {
                 done(MavResult::DENIED)
+            }
+            MavCmd::REQUEST_MESSAGE if p[0] == AvailableModes::ID as f32 => {
+                self.request_available_modes(now, request.from, p[1])
+            }
+            // ArduPilot has no CURRENT_MODE: a message it does not know is FAILED.
+            MavCmd::REQUEST_MESSAGE
+                if self.autopilot == Autopilot::Ardupilot && p[0] == CurrentMode::ID as f32 =>
+            {
+                done(MavResult::FAILED)
             }
             MavCmd::SET_MESSAGE_INTERVAL
             | MavCmd::REQUEST_MESSAGE
@@ -446,16 +552,8 @@ impl CommandHandler for Craft {
                 self.set_mode(rtl);
                 accepted
             }
-            MavCmd::DO_SET_MODE => {
-                let custom = modes::custom_mode_of_command(self.autopilot, p[1], p[2]);
-                match modes::by_custom_mode(self.autopilot, custom) {
-                    Some(mode) => {
-                        self.set_mode(mode);
-                        accepted
-                    }
-                    None => done(MavResult::DENIED),
-                }
-            }
+            MavCmd::DO_SET_MODE => self.do_set_mode(now, request, p),
+            MavCmd::DO_SET_STANDARD_MODE => self.do_set_standard_mode(now, p[0]),
             MavCmd::MISSION_START => {
                 let len = self.flight.mission_len();
                 if len == 0 {
@@ -486,14 +584,7 @@ impl CommandHandler for Craft {
                 self.flight.set_speed(p[1]);
                 accepted
             }
-            MavCmd::DO_REPOSITION => {
-                if !self.flight.is_armed() {
-                    return done(MavResult::DENIED);
-                }
-                let alt = z.is_finite().then_some(z - HOME_AMSL);
-                self.flight.go_to(lat, lon, alt);
-                accepted
-            }
+            MavCmd::DO_REPOSITION => self.reposition(p[1], lat, lon, z),
             MavCmd::DO_SET_HOME => {
                 let here = self.flight.position();
                 let home = if p[0] >= 0.5 {

@@ -13,6 +13,10 @@ use mavstack_dialects::common::{MavCmd, MavFrame, MavLandedState, MissionItemInt
 use super::modes::{self, Behaviour, Mode};
 use crate::Autopilot;
 
+mod demand;
+
+pub use demand::Demand;
+
 /// Metres per degree of latitude (spherical Earth, as every GCS map does at this scale).
 const METRES_PER_DEGREE: f64 = 111_319.49;
 
@@ -123,8 +127,12 @@ pub struct Flight {
     home: Position,
     tuning: Tuning,
     speed_override: Option<f32>,
-    /// Where GUIDED (or PX4 TAKEOFF) is going.
+    /// Where GUIDED (or PX4 TAKEOFF, or a PX4 reposition in Hold) is going.
     target: Option<Position>,
+    /// What the pilot's sticks or a companion's setpoints ask for now (see [`Demand`]).
+    demand: Option<Demand>,
+    /// Horizontal velocity (north, east, m/s) built up under an [`Demand::Attitude`].
+    drift: [f32; 2],
     rtl_climbed: bool,
     mission: Vec<MissionItemInt>,
     current: u16,
@@ -155,6 +163,8 @@ impl Flight {
             tuning,
             speed_override: None,
             target: None,
+            demand: None,
+            drift: [0.0; 2],
             rtl_climbed: false,
             mission: Vec::new(),
             current: 0,
@@ -169,6 +179,11 @@ impl Flight {
     /// Takes new speeds, altitudes and battery size.
     pub fn set_tuning(&mut self, tuning: Tuning) {
         self.tuning = tuning;
+    }
+
+    /// Its speeds, altitudes and battery size.
+    pub fn tuning(&self) -> Tuning {
+        self.tuning
     }
 
     /// The flight mode.
@@ -196,12 +211,34 @@ impl Flight {
         self.home
     }
 
+    /// The origin of the local frame (LOCAL_POSITION_NED, offboard positions): where the
+    /// craft started, as a flight stack's estimator origin stays where it was set at boot
+    /// whatever becomes of home.
+    pub fn origin(&self) -> Position {
+        HOME
+    }
+
+    /// Where the craft is in the local frame: north, east, down of [`origin`](Self::origin),
+    /// metres.
+    pub fn local_position(&self) -> [f32; 3] {
+        let (north, east) = self.origin().offset_to(&self.position);
+        [north as f32, east as f32, -self.position.alt]
+    }
+
+    /// The point `north`, `east` metres from the origin, `up` metres above home.
+    pub fn local_point(&self, north: f32, east: f32, up: f32) -> Position {
+        Position {
+            alt: up,
+            ..self.origin().moved(f64::from(north), f64::from(east))
+        }
+    }
+
     /// Velocity north, east, down, m/s.
     pub fn velocity(&self) -> [f32; 3] {
         self.velocity
     }
 
-    /// Heading, degrees from north.
+    /// Heading, radians from north (0 to 2π).
     pub fn heading(&self) -> f32 {
         self.heading
     }
@@ -302,6 +339,8 @@ impl Flight {
         self.mode = mode;
         self.rtl_climbed = false;
         self.hold_until = None;
+        self.demand = None;
+        self.drift = [0.0; 2];
         match mode.behaviour {
             Behaviour::Takeoff => {
                 self.target = Some(Position {
@@ -309,7 +348,7 @@ impl Flight {
                     ..self.position
                 });
             }
-            Behaviour::Guided => {
+            Behaviour::Guided | Behaviour::Hold | Behaviour::Manual => {
                 self.target = None;
             }
             Behaviour::Mission
@@ -374,21 +413,28 @@ impl Flight {
     }
 
     /// Sets the guided target (DO_REPOSITION, guided waypoints); `None` parts keep ours.
+    /// ArduPilot flies it in GUIDED, PX4 in Hold: the craft switches unless it is in that
+    /// mode already.
     pub fn go_to(&mut self, lat: Option<f64>, lon: Option<f64>, alt: Option<f32>) {
+        let flies_in = match self.autopilot {
+            Autopilot::Ardupilot => Behaviour::Guided,
+            Autopilot::Px4 => Behaviour::Hold,
+        };
+        if self.mode.behaviour != flies_in {
+            self.set_mode(modes::with_behaviour(self.autopilot, flies_in));
+        }
         let here = self.position;
         self.target = Some(Position {
             lat: lat.unwrap_or(here.lat),
             lon: lon.unwrap_or(here.lon),
             alt: alt.unwrap_or(here.alt),
         });
-        if self.mode.behaviour != Behaviour::Guided {
-            let guided = match self.autopilot {
-                Autopilot::Ardupilot => modes::with_behaviour(self.autopilot, Behaviour::Guided),
-                // PX4 repositions in HOLD.
-                Autopilot::Px4 => modes::with_behaviour(self.autopilot, Behaviour::Hold),
-            };
-            self.set_mode(guided);
-        }
+    }
+
+    /// Forgets the guided target: the craft holds where it is (a velocity target replaces a
+    /// position one, as in ArduPilot's GUIDED).
+    pub fn clear_target(&mut self) {
+        self.target = None;
     }
 
     /// Sets the ground speed, m/s (DO_CHANGE_SPEED).
@@ -412,8 +458,16 @@ impl Flight {
             return;
         }
         match self.mode.behaviour {
-            Behaviour::Manual | Behaviour::Hold => self.hold(),
-            Behaviour::Guided => match self.target {
+            Behaviour::Manual => match self.demand {
+                Some(d @ Demand::Velocity { .. }) => self.follow(d, dt),
+                _ => self.hold(),
+            },
+            Behaviour::Guided if self.demand.is_some() => {
+                if let Some(d) = self.demand {
+                    self.follow(d, dt);
+                }
+            }
+            Behaviour::Hold | Behaviour::Guided => match self.target {
                 Some(t) if self.airborne || t.alt > 0.0 => {
                     self.fly_to(t, dt);
                 }

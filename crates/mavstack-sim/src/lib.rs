@@ -7,9 +7,14 @@
 //! craft ([`flight::Flight`]): a [`CommandServer`] whose handler flies the craft, a
 //! [`ParamServer`] with the flavour's table (or a file's), a [`MissionServer`] whose plan the
 //! craft flies in mission mode, a [`StreamScheduler`] for telemetry rates, TIMESYNC, MAVFTP,
-//! and log download (LOG_*) of its [`logs`] (a directory's files, or generated ones). Like
-//! every service it takes decoded messages and the time, and hands out messages to send:
-//! the caller moves them over its links (`mavstack vehicle` over a `mavstack-channel` link).
+//! and log download (LOG_*) of its [`logs`] (a directory's files, or generated ones). The
+//! craft is also flown as each flight stack flies it from outside: ArduPilot's GUIDED
+//! targets and PX4's OFFBOARD setpoints, sticks (MANUAL_CONTROL) in the pilot modes, and the
+//! failsafes of their loss; its [`modes`] are listed (AVAILABLE_MODES), told (CURRENT_MODE)
+//! and entered (MAV_CMD_DO_SET_MODE, MAV_CMD_DO_SET_STANDARD_MODE) with each stack's
+//! answers. Like every service it takes decoded messages and the time, and hands out
+//! messages to send: the caller moves them over its links (`mavstack vehicle` over a
+//! `mavstack-channel` link).
 //!
 //! [`CommandServer`]: mavstack_services::command::CommandServer
 //! [`ParamServer`]: mavstack_services::param::ParamServer
@@ -26,6 +31,7 @@ pub mod logs;
 pub mod modes;
 pub mod params;
 
+mod control;
 mod craft;
 mod vehicle;
 

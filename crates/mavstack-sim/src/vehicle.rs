@@ -21,9 +21,10 @@ use mavstack_services::stream::StreamScheduler;
 use mavstack_services::timesync::{Timesync, TimesyncConfig};
 use mavstack_services::{Address, Outgoing, Service};
 
-use crate::craft::{Boot, Craft, STREAMS};
+use crate::control::Control;
+use crate::craft::{self, Boot, Craft};
 use crate::flight::{Flight, FlightEvent, HOME_AMSL, Tuning};
-use crate::{Autopilot, SimConfig, events, logs, modes};
+use crate::{Autopilot, SimConfig, events, logs};
 
 /// Peers that appear later than this after the start get a HEARTBEAT of their own.
 const GREETING_AFTER: Duration = Duration::from_millis(100);
@@ -99,6 +100,8 @@ pub struct Vehicle {
     next_step: Instant,
     /// When the vehicle started.
     started: Instant,
+    /// The `id` of the last STATUSTEXT sent in chunks.
+    text_id: u16,
 }
 
 impl Vehicle {
@@ -133,7 +136,7 @@ impl Vehicle {
             FtpServer::new(config.own, ServerConfig::default(), overlay)
         });
         let mut streams = StreamScheduler::new();
-        for &(id, interval) in STREAMS {
+        for (id, interval) in craft::streams(config.autopilot) {
             let unasked = config.streams_on_request && id != Heartbeat::ID;
             streams.support(id, interval.filter(|_| !unasked));
         }
@@ -151,6 +154,10 @@ impl Vehicle {
             data_streams_only: config.data_streams_only,
             events: events::Events::default(),
             boot: Boot(now),
+            control: Control::new(config.autopilot),
+            replies: VecDeque::new(),
+            early: VecDeque::new(),
+            said: Vec::new(),
         };
         let mut vehicle = Self {
             own: config.own,
@@ -168,6 +175,7 @@ impl Vehicle {
             log: VecDeque::new(),
             next_step: now,
             started: now,
+            text_id: 0,
         };
         vehicle.retune();
         vehicle.restore_home_item();
@@ -244,17 +252,19 @@ impl Vehicle {
         let own = self.own;
         match message {
             MavMessage::SetMode(m) if m.target_system == own.system => {
-                let autopilot = self.commands.handler().autopilot;
-                if let Some(mode) = modes::by_custom_mode(autopilot, m.custom_mode) {
-                    self.craft().set_mode(mode);
-                }
+                self.craft().set_mode_message(now, m.custom_mode);
             }
             MavMessage::RequestDataStream(r)
                 if own.is_reached_by(Address::new(r.target_system, r.target_component)) =>
             {
                 self.craft().request_data_stream(now, r);
             }
-            _ => {}
+            _ => {
+                let craft = self.commands.handler_mut();
+                craft
+                    .control
+                    .handle_message(now, own, &mut craft.flight, message);
+            }
         }
         self.commands.handle_message(now, from, message);
         self.params.handle_message(now, from, message);
@@ -272,7 +282,10 @@ impl Vehicle {
     /// Advances the model and every timer to `now`.
     pub fn handle_timeout(&mut self, now: Instant) {
         while self.next_step <= now {
-            self.craft().flight.step(STEP.as_secs_f64());
+            let at = self.next_step;
+            let craft = self.commands.handler_mut();
+            craft.control.step(at, &mut craft.flight);
+            craft.flight.step(STEP.as_secs_f64());
             self.next_step += STEP;
         }
         self.commands.handle_timeout(now);
@@ -366,6 +379,14 @@ impl Vehicle {
         for e in self.craft().events.take() {
             self.broadcast(MavMessage::Event(e));
         }
+        let said = core::mem::take(&mut self.craft().said);
+        let failsafes = self.craft().control.take_said();
+        for (severity, text) in said.into_iter().chain(failsafes) {
+            self.say(severity, text);
+        }
+        while let Some(reply) = self.craft().replies.pop_front() {
+            self.out.push_back(reply);
+        }
         while let Some(e) = self.craft().flight.poll_event() {
             match e {
                 FlightEvent::ItemReached(seq) => {
@@ -392,16 +413,31 @@ impl Vehicle {
         }
     }
 
-    /// A line in STATUSTEXT (cut to its 50 bytes) and in the log.
+    /// A line in STATUSTEXT and in the log: a line longer than the field's 50 bytes goes in
+    /// chunks of one `id` (the last shorter than 50 bytes, empty if need be), as ArduPilot
+    /// and PX4 send theirs.
     fn say(&mut self, severity: MavSeverity, text: String) {
-        let mut field = [0u8; 50];
-        let n = text.len().min(50);
-        field[..n].copy_from_slice(&text.as_bytes()[..n]);
-        self.broadcast(MavMessage::Statustext(Statustext {
-            severity,
-            text: field,
-            ..Statustext::default()
-        }));
+        let bytes = text.as_bytes();
+        let id = if bytes.len() > 50 {
+            self.text_id = self.text_id.wrapping_add(1).max(1);
+            self.text_id
+        } else {
+            0
+        };
+        let mut chunks: Vec<&[u8]> = bytes.chunks(50).collect();
+        if id != 0 && bytes.len().is_multiple_of(50) {
+            chunks.push(&[]);
+        }
+        for (seq, chunk) in chunks.into_iter().enumerate().take(usize::from(u8::MAX)) {
+            let mut field = [0u8; 50];
+            field[..chunk.len()].copy_from_slice(chunk);
+            self.broadcast(MavMessage::Statustext(Statustext {
+                severity,
+                text: field,
+                id,
+                chunk_seq: u8::try_from(seq).unwrap_or(u8::MAX),
+            }));
+        }
         self.log.push_back(text);
     }
 
@@ -439,6 +475,9 @@ impl Vehicle {
 
     /// The next message to send.
     pub fn poll_transmit(&mut self) -> Option<Outgoing> {
+        if let Some(o) = self.commands.handler_mut().early.pop_front() {
+            return Some(o);
+        }
         if let Some(o) = self.commands.poll_transmit() {
             return Some(o);
         }
@@ -486,6 +525,27 @@ impl Vehicle {
     /// The parameter table's size.
     pub fn param_count(&self) -> usize {
         self.params.len()
+    }
+
+    /// Whether the motors are armed.
+    pub fn is_armed(&self) -> bool {
+        self.commands.handler().flight.is_armed()
+    }
+
+    /// Whether SETUP_SIGNING is to be refused now: the ArduPilot flavour refuses it while
+    /// armed, as ArduPilot does (`GCS_MAVLINK::handle_setup_signing`,
+    /// libraries/GCS_MAVLink/GCS_Signing.cpp); the PX4 flavour never.
+    pub fn refuses_setup_signing(&self) -> bool {
+        self.commands.handler().autopilot == Autopilot::Ardupilot && self.is_armed()
+    }
+
+    /// Says why a SETUP_SIGNING was refused, as ArduPilot says it: "ERROR: Won't setup
+    /// signing when armed" (severity WARNING).
+    pub fn setup_signing_refused(&mut self) {
+        self.say(
+            MavSeverity::WARNING,
+            "ERROR: Won't setup signing when armed".to_owned(),
+        );
     }
 }
 
