@@ -43,7 +43,8 @@ pub(crate) struct DecodeArgs {
     #[arg(long)]
     raw: bool,
     /// With `--count`: also print `frames=N bytes=B seconds=S` for the parse loop alone to
-    /// stderr, the line the peer benchmarks of shared/peers print (file reading excluded).
+    /// stderr (file reading excluded), the line the peers' benchmarks print: what
+    /// `scripts/bench-peers.sh` compares (`docs/contracts/json-lines.md`).
     #[arg(long, requires = "count")]
     time: bool,
 }
