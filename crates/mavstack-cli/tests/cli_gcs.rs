@@ -407,6 +407,48 @@ fn signing_set_up_on_one_link_signs_the_others() {
     ok(&gcs_on(&second, 1, &request));
 }
 
+/// ArduPilot ignores SETUP_SIGNING while armed and says so ("ERROR: Won't setup signing when
+/// armed", libraries/GCS_MAVLink/GCS_Signing.cpp): the simulator's ArduPilot flavour too, and
+/// the ground station shows the reason; disarmed, the same setup is taken.
+#[test]
+fn signing_setup_is_refused_while_armed_with_ardupilots_reason() {
+    let port = free_port();
+    let _vehicle = SecureVehicle(
+        Command::new(env!("CARGO_BIN_EXE_mavstack"))
+            .args([
+                "vehicle",
+                &format!("udpout:127.0.0.1:{port}"),
+                "--secure",
+                "--autopilot",
+                "ardupilot",
+                "--estimator-settle",
+                "0",
+            ])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("vehicle starts"),
+    );
+    let conn = format!("udpin:127.0.0.1:{port}");
+    ok(&gcs_on(&conn, 1, &["command", "arm"]));
+    let refused = gcs_on(&conn, 2, &["signing", "setup", "--key", KEY]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("Won't setup signing when armed"),
+        "{stderr}"
+    );
+    // Still unsigned: an unsigned request is answered.
+    ok(&gcs_on(
+        &conn,
+        1,
+        &["command", "MAV_CMD_REQUEST_MESSAGE", "148"],
+    ));
+    ok(&gcs_on(&conn, 1, &["command", "disarm"]));
+    let on = ok(&gcs_on(&conn, 2, &["signing", "setup", "--key", KEY]));
+    assert_eq!(on.trim(), "signing on: 1/1 answers signed");
+}
+
 #[test]
 fn listen_asks_the_vehicle_for_the_rates_given() {
     // The simulator streams ATTITUDE at 4 Hz unasked; 20 Hz only comes when asked for.

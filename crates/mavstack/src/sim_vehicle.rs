@@ -17,7 +17,7 @@
 //! # Ok(()) }
 //! ```
 
-use mavstack_channel::{SigningConfig, SigningSetup};
+use mavstack_channel::{RejectReason, SigningConfig, SigningSetup};
 use mavstack_core::Message as _;
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::{AutopilotVersion, CommandLong, MavCmd, MavMessage};
@@ -26,7 +26,7 @@ use mavstack_services::param::{Name, Value};
 use mavstack_services::{Address, Outgoing, Service};
 use mavstack_sim::{Autopilot, SimConfig, Vehicle};
 use mavstack_transport::clock;
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 
 use crate::node::{
@@ -45,7 +45,9 @@ use crate::serve::{Served, ServedHandle};
 /// ([`LinkRole::Vehicle`]): each answers the MAVLink 2 handshake by its own `version`
 /// (PROTOCOL_VERSION, or a MAVLink 1 NACK on a `version=1` link), applies SETUP_SIGNING when
 /// `secure`, and carries the MAVLINK2 capability bit in AUTOPILOT_VERSION exactly when it
-/// accepts MAVLink 2.
+/// accepts MAVLink 2. The ArduPilot flavour holds SETUP_SIGNING while armed
+/// ([`NodeHandle::hold_setup_signing`]) and says so as ArduPilot does: "ERROR: Won't setup
+/// signing when armed".
 #[derive(Debug)]
 pub struct SimVehicle {
     node: Node,
@@ -62,6 +64,8 @@ pub type LogLines = mpsc::UnboundedSender<String>;
 struct Narrated {
     sim: Vehicle,
     log: Option<LogLines>,
+    /// Whether the vehicle refuses SETUP_SIGNING now (the links hold it meanwhile).
+    holds_signing: watch::Sender<bool>,
 }
 
 impl Narrated {
@@ -69,6 +73,12 @@ impl Narrated {
         while let Some(line) = self.sim.poll_log() {
             say(&self.log, || format!("vehicle: {line}"));
         }
+        let refuses = self.sim.refuses_setup_signing();
+        self.holds_signing.send_if_modified(|held| {
+            let changed = *held != refuses;
+            *held = refuses;
+            changed
+        });
     }
 }
 
@@ -164,15 +174,23 @@ impl SimVehicle {
                 sim.param_count()
             )
         });
+        let (holds_signing, held) = watch::channel(false);
         let served = Served::start(
             &node.handle(),
             Narrated {
                 sim,
                 log: log.clone(),
+                holds_signing,
             },
         )
         .await;
-        let events = tokio::spawn(link_events(node.handle(), served.handle(), events, log));
+        let events = tokio::spawn(link_events(
+            node.handle(),
+            served.handle(),
+            events,
+            held,
+            log,
+        ));
         Ok(Self {
             node,
             served,
@@ -241,14 +259,31 @@ async fn sign_other_links(node: &NodeHandle, from: LinkId, setup: &SigningSetup)
     changed
 }
 
-/// What the vehicle does about its links' events: greets a new peer, says the rest.
+/// What the vehicle does about its links' events: greets a new peer, says why it refused a
+/// SETUP_SIGNING it held, says the rest; and holds SETUP_SIGNING on every link while the
+/// vehicle refuses it.
 async fn link_events(
     node: NodeHandle,
     vehicle: ServedHandle<Narrated>,
     mut events: EventSubscription,
+    mut held: watch::Receiver<bool>,
     log: Option<LogLines>,
 ) {
-    while let Some(event) = events.recv().await {
+    loop {
+        let event = tokio::select! {
+            event = events.recv() => event,
+            changed = held.changed() => {
+                if changed.is_err() {
+                    return;
+                }
+                let hold = *held.borrow_and_update();
+                if node.hold_setup_signing(hold).await.is_err() {
+                    return;
+                }
+                continue;
+            }
+        };
+        let Some(event) = event else { return };
         let link = &event.link;
         match event.kind {
             LinkEvent::PeerAdded { .. } => {
@@ -265,6 +300,12 @@ async fn link_events(
             LinkEvent::ProtocolVersionRequested { answer, .. } => {
                 say(&log, || {
                     format!("vehicle ← handshake request: {answer} [{link}]")
+                });
+            }
+            LinkEvent::Rejected(r) if r.reason == RejectReason::SetupSigningHeld => {
+                let _ = vehicle.with(|v| v.sim.setup_signing_refused()).await;
+                say(&log, || {
+                    format!("vehicle ✗ SETUP_SIGNING refused: the vehicle is armed [{link}]")
                 });
             }
             LinkEvent::Rejected(r) => say(&log, || {
