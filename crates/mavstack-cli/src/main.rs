@@ -195,23 +195,11 @@ fn main() -> ExitCode {
     }
 }
 
-/// An error and its chain of causes as one line, joined by `": "`.
-///
-/// Some errors print their cause in their own message as well as giving it as their
-/// source (`link "x": cannot bind ...` over the bind error); a cause the line already ends
-/// with is not repeated.
+/// An error and its chain of causes as one line, joined by `": "` without repeating a
+/// cause the line already ends with (`mavstack::error_chain`).
 fn one_line(e: &anyhow::Error) -> String {
-    let mut line = String::new();
-    for cause in e.chain() {
-        let text = cause.to_string();
-        if line.is_empty() {
-            line = text;
-        } else if line != text && !line.ends_with(&format!(": {text}")) {
-            line.push_str(": ");
-            line.push_str(&text);
-        }
-    }
-    line.replace('\n', " ")
+    let e: &(dyn core::error::Error + 'static) = e.as_ref();
+    mavstack::error_chain(e).replace('\n', " ")
 }
 
 #[cfg(test)]

@@ -165,19 +165,27 @@ pub fn message_name(id: u32) -> String {
 }
 
 /// An error and its sources, joined by `: ` (`cannot read x.tlog: Is a directory (os
-/// error 21)`): how an error with its cause chain is shown on one line.
+/// error 21)`): how an error with its cause chain is shown on one line. A source the line
+/// already ends with is not repeated: some errors print their source in their own message
+/// too (`link "x": cannot bind ...` over the bind error).
 ///
 /// ```
 /// let e = std::io::Error::other("inner");
 /// assert_eq!(mavstack::error_chain(&e), "inner");
+/// let spec = mavstack::LinkSpec::parse("udpin:0.0.0.0:99999", &|_| None).unwrap_err();
+/// let line = mavstack::error_chain(&spec);
+/// assert_eq!(line, spec.to_string(), "its cause is already in its message");
 /// ```
 #[must_use]
 pub fn error_chain(e: &dyn ::core::error::Error) -> String {
     let mut text = e.to_string();
     let mut source = e.source();
     while let Some(s) = source {
-        text.push_str(": ");
-        text.push_str(&s.to_string());
+        let more = s.to_string();
+        if text != more && !text.ends_with(&format!(": {more}")) {
+            text.push_str(": ");
+            text.push_str(&more);
+        }
         source = s.source();
     }
     text
