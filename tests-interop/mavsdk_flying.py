@@ -7,7 +7,7 @@ so that the simulator's can be compared with PX4's.
     mavsdk_flying.py URL [--out FILE.json] [--expect FILE.json]
 
 URL is MAVSDK's (`udpin://127.0.0.1:14550` for PX4 SITL, which sends there). Steps: connect;
-arm (asked again while refused: the estimator settling); takeoff to 10 m (in air, at least
+hold; arm (asked again while refused: the estimator settling); takeoff to 10 m (in air, at least
 9 m up); offboard start without a setpoint (MAVSDK refuses it itself); a zero velocity set,
 offboard start (OFFBOARD); 3 m/s north for 5 s (moved 10-20 m); offboard stop (HOLD); goto
 20 m east at the same altitude (within 3 m); land (landed, disarmed). The transcript is the
@@ -76,6 +76,8 @@ async def main(url):
         return result
 
     await until(lambda: state["position"] is not None and state["mode"] is not None)
+    # Hold first: PX4 arms in Hold, not in a manual mode without sticks.
+    await record("hold", action.hold(), lambda: mode() == "HOLD")
     end = time.monotonic() + 180
     while True:
         r = await record("arm", action.arm(), lambda: state["armed"])

@@ -163,8 +163,8 @@ impl Modes {
             .collect()
     }
 
-    /// The mode it is in now: CURRENT_MODE's where it sends one, else its HEARTBEAT's
-    /// `custom_mode`, named from [`list`](Self::list) (a mode not listed is named by its
+    /// The mode it is in now: the `custom_mode` of its newest CURRENT_MODE or HEARTBEAT,
+    /// named from [`list`](Self::list) (a mode not listed is named by its
     /// number).
     pub async fn current(&self) -> Option<Mode> {
         let custom = self.current_custom()?;
@@ -187,14 +187,9 @@ impl Modes {
         )
     }
 
-    /// The `custom_mode` it reports now (CURRENT_MODE, else HEARTBEAT).
+    /// The `custom_mode` it reports now (the newer of CURRENT_MODE and HEARTBEAT).
     fn current_custom(&self) -> Option<u32> {
-        let state = self.system.state();
-        state
-            .current_mode
-            .as_ref()
-            .map(|m| m.custom_mode)
-            .or_else(|| state.heartbeat.as_ref().map(|(hb, _)| hb.custom_mode))
+        self.system.state().custom_mode()
     }
 
     /// The mode called `name`: a name of [`list`](Self::list) (any case; PX4's also as

@@ -69,8 +69,8 @@ pub(crate) struct State {
     pub(crate) capabilities: Option<MavProtocolCapability>,
     /// The URI of its general metadata file (COMPONENT_METADATA).
     pub(crate) metadata_uri: Option<String>,
-    /// Its CURRENT_MODE.
-    pub(crate) current_mode: Option<ModeSeen>,
+    /// Its CURRENT_MODE and when it came.
+    pub(crate) current_mode: Option<(ModeSeen, Instant)>,
     /// Its AVAILABLE_MODES, by index (1-based), and how many it has.
     pub(crate) available_modes: BTreeMap<u8, ModeSeen>,
     /// AVAILABLE_MODES' `number_modes`, once one came.
@@ -95,6 +95,19 @@ impl State {
         self.heartbeat
             .as_ref()
             .map(|(hb, _)| hb.base_mode.contains(MavModeFlag::SAFETY_ARMED))
+    }
+
+    /// The `custom_mode` it reported last: the newer of CURRENT_MODE and HEARTBEAT (PX4 sends
+    /// CURRENT_MODE on a change but also at a low rate, so either can be the fresher).
+    pub(crate) fn custom_mode(&self) -> Option<u32> {
+        match (&self.current_mode, &self.heartbeat) {
+            (Some((m, at)), Some((hb, hb_at))) => {
+                Some(if at >= hb_at { m.custom_mode } else { hb.custom_mode })
+            }
+            (Some((m, _)), None) => Some(m.custom_mode),
+            (None, Some((hb, _))) => Some(hb.custom_mode),
+            (None, None) => None,
+        }
     }
 
     /// What it said after thing number `after`, oldest first.
@@ -162,12 +175,13 @@ impl State {
                 );
             }
             MavMessage::CurrentMode(m) if ours => {
-                self.current_mode = Some(ModeSeen {
+                let seen = ModeSeen {
                     standard: m.standard_mode.0,
                     custom_mode: m.custom_mode,
                     properties: 0,
                     name: String::new(),
-                });
+                };
+                self.current_mode = Some((seen, now));
             }
             _ => {}
         }
