@@ -275,7 +275,10 @@ async fn px4_refuses_offboard_before_setpoints_and_leaves_it_after_the_last() {
     let (vehicle, gcs, system) = fly(Autopilot::Px4).await;
     take_off(&system).await;
     let hold = 0x0304_0000;
-    until("Hold after the take-off", async || current(&system).await == hold).await;
+    until("Hold after the take-off", async || {
+        current(&system).await == hold
+    })
+    .await;
     let mut acks = system.telemetry().subscribe::<CommandAck>().await;
     let mut texts = system.telemetry().subscribe::<Statustext>().await;
     // PX4 acknowledges DO_SET_MODE twice: its MAVLink receiver at once (ACCEPTED), then its
