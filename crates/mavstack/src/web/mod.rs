@@ -34,6 +34,7 @@ mod store;
 mod ws;
 
 use core::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use axum::Router;
@@ -137,6 +138,9 @@ pub(crate) struct Shared {
     pub(crate) peer: Option<PeerId>,
     pub(crate) clients: AtomicUsize,
     pub(crate) counters: WebCounters,
+    /// The next sequence number of each (system, component) clients send as: like
+    /// mavlink2rest, the link numbers the frames itself, whatever `sequence` a client gave.
+    pub(crate) sequences: Mutex<HashMap<(u8, u8), u8>>,
 }
 
 /// The service's counters, shown in `/api/status` under `web`.
@@ -165,22 +169,38 @@ impl Shared {
         })
     }
 
-    /// Hands a client's frame to the node and keeps it as the latest of its type, as
-    /// mavlink2rest does; false once the node has stopped.
-    pub(crate) async fn send(&self, header: Header, frame: Vec<u8>) -> bool {
+    /// Hands a client's frame to the node, numbered in the sequence of its sender, and keeps
+    /// it as the latest of its type, as mavlink2rest does; false once the node has stopped.
+    pub(crate) async fn send(&self, header: Header, mut frame: Vec<u8>) -> bool {
         let Some(first) = self.peer else {
             return false;
         };
-        let view = Frame::new_unchecked(&frame[..]);
-        let (id, payload) = (view.msg_id(), view.payload().to_vec());
+        let seq = {
+            let mut sequences = self
+                .sequences
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            let next = sequences
+                .entry((header.system_id, header.component_id))
+                .or_insert(0);
+            let seq = *next;
+            *next = next.wrapping_add(1);
+            seq
+        };
+        let mut view = Frame::new_unchecked(&mut frame[..]);
+        let id = view.msg_id();
+        let Some(message) = self.mapping.dialect().message(id) else {
+            return false;
+        };
+        view.set_seq(seq);
+        view.fill_checksum(message.crc_extra);
+        let payload = view.payload().to_vec();
+        let name = message.name.clone();
         if !self.input.deliver(first, frame).await {
             return false;
         }
         self.counters.sent.fetch_add(1, Ordering::Relaxed);
-        if let Some(m) = self.mapping.dialect().message(id) {
-            let name = m.name.clone();
-            self.lock_store().update(header, &name, id, &payload);
-        }
+        self.lock_store().update(header, &name, id, &payload);
         true
     }
 
@@ -214,6 +234,7 @@ pub(crate) async fn serve(
         peer: peer.first(),
         clients: AtomicUsize::new(0),
         counters: WebCounters::default(),
+        sequences: Mutex::new(HashMap::new()),
     });
     tokio::spawn(read_link(peer, Arc::clone(&shared)));
     let api = api::routes();
