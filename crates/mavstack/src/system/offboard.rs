@@ -1,10 +1,10 @@
 //! [`Offboard`]: a setpoint stream owned by the library. [`Offboard::start`] sends the
 //! latest [`Setpoint`] at a fixed rate from a task of its own (never from the caller's: a
-//! slow caller does not starve the stream, and PX4 leaves OFFBOARD after 0.5 s without a
-//! setpoint), switches the vehicle into PX4's OFFBOARD or ArduPilot's GUIDED once setpoints
+//! slow caller does not starve the stream, and PX4 1.16 leaves OFFBOARD 1 s, its
+//! COM_OF_LOSS_T, after the last setpoint), switches the vehicle into PX4's OFFBOARD or ArduPilot's GUIDED once setpoints
 //! flow, and holds position when the session stops — also when it is dropped (a program
-//! that crashes outright leaves the vehicle to its own failsafe: PX4 leaves OFFBOARD 0.5 s
-//! after the last setpoint, ArduPilot stops after its GUIDED timeout).
+//! that crashes outright leaves the vehicle to its own failsafe: PX4 falls back to Position
+//! mode 1 s after the last setpoint, ArduPilot stops after its GUIDED timeout, 3 s).
 //!
 //! Setpoints: velocity and position in the local NED frame (the origin of the vehicle's
 //! LOCAL_POSITION_NED), velocity in the body frame, and attitude with thrust.
@@ -21,8 +21,8 @@ use tokio::sync::watch;
 use super::{System, SystemError, lock};
 use crate::modes::Flavour;
 
-/// The slowest stream [`Offboard::start`] accepts (Hz): PX4 drops OFFBOARD after 0.5 s
-/// without a setpoint.
+/// The slowest stream [`Offboard::start`] accepts (Hz): PX4 wants setpoints at 2 Hz or more,
+/// and leaves OFFBOARD 1 s (COM_OF_LOSS_T) after the last.
 pub const MIN_RATE_HZ: f32 = 2.0;
 
 /// The fastest stream [`Offboard::start`] accepts (Hz).
@@ -326,7 +326,7 @@ impl Offboard {
         if !(rate_hz.is_finite() && (MIN_RATE_HZ..=MAX_RATE_HZ).contains(&rate_hz)) {
             return Err(SystemError::Invalid(format!(
                 "offboard: rate {rate_hz} Hz is not within {MIN_RATE_HZ}-{MAX_RATE_HZ} Hz \
-                 (PX4 leaves OFFBOARD after 0.5 s without a setpoint)"
+                 (PX4 leaves OFFBOARD 1 s after the last setpoint)"
             )));
         }
         first.check()?;
