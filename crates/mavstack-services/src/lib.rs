@@ -47,6 +47,8 @@
 //! | [`ftp`] | FILE_TRANSFER_PROTOCOL | [`ftp::FtpClient`] | [`ftp::FtpServer`] over a [`ftp::Backend`] ([`ftp::MemoryBackend`]) |
 //! | [`log_transfer`] | LOG_REQUEST_LIST, LOG_ENTRY, LOG_REQUEST_DATA, LOG_DATA, LOG_ERASE, LOG_REQUEST_END | [`log_transfer::LogClient`] (list, download with gaps asked again, erase) | [`log_transfer::LogServer`] over a [`log_transfer::LogStore`] ([`log_transfer::MemoryLogs`]), paced per tick |
 //! | [`plan`] | — | [`plan::to_vehicle`], [`plan::from_vehicle`], [`plan::same`]: a plan file's mission as each autopilot stores it (ArduPilot's home at 0, PX4's none) | — |
+//! | [`rtcm`] | GPS_RTCM_DATA | [`rtcm::RtcmSender`] (a message in up to 4 fragments, a sequence id each), [`rtcm::Deframer`] (RTCM3 frames in a byte stream, by their CRC-24Q) | [`rtcm::Reassembler`] |
+//! | [`shell`] | SERIAL_CONTROL | [`shell::ShellClient`] (a session with the SHELL device: 70-byte chunks, polling), [`shell::ShellCommand`] (one command line, its output) | — |
 //! | [`statustext`] | STATUSTEXT | [`statustext::Lines`] (chunks put together, text made safe to show) | — |
 //! | [`timesync`] | TIMESYNC | [`timesync::Timesync`] (estimates the offset) | the same type answers requests |
 //!
@@ -139,7 +141,9 @@ pub mod mission_json;
 pub mod param;
 pub mod plan;
 mod ranges;
+pub mod rtcm;
 mod rtt;
+pub mod shell;
 pub mod statustext;
 pub mod stream;
 pub mod timesync;
