@@ -24,6 +24,7 @@ mod cli_router_conf;
 mod cli_router_dialect;
 mod cli_router_exit;
 mod cli_secrets;
+mod cli_web;
 mod interop_bridge;
 mod interop_codec;
 mod interop_conform;

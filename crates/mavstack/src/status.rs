@@ -3,11 +3,13 @@
 //! One object describes a node: `t_s` (seconds since it started), `links` (per router link:
 //! name, peer, version, frames and bytes each way, conversions, drops by reason, sequence
 //! loss per source), `routes` (sysid/compid → link, age) and `systems` (each component's
-//! latest HEARTBEAT and the link it came on). `mavstack router --stats` prints it.
-//! `GET /api/status` returns it with what the web service ([`crate::web`]) adds: per
-//! system its `mode` by name (the autopilot's mode table), `track` (recent
-//! `[lat, lon, height above home]` from GLOBAL_POSITION_INT, one a second) and `statustext`
-//! (the last lines: `severity`, `text`, `unix_s`), and `web` (the service's counters).
+//! latest HEARTBEAT, its `mode` by name when the autopilot's mode table has it, and the link
+//! it came on). `mavstack router --stats` prints it. `GET /api/status` returns it with what
+//! the web service ([`crate::web`]) adds: `vehicles` (every component whose HEARTBEAT the
+//! service saw, the node's own included: its HEARTBEAT's fields, `mode`, `age_s`, `track`,
+//! recent `[lat, lon, height above home]` from GLOBAL_POSITION_INT one a second, and
+//! `statustext`, the last lines as `severity`, `text`, `unix_s`) and `web` (the service's
+//! counters).
 //! `GET /api/events` streams that once a second, and the page at `GET /` draws it beside
 //! the telemetry it reads from the mavlink2rest API (`GET /mavlink`), rates computed from
 //! successive objects.
@@ -113,6 +115,7 @@ pub fn status_json(report: &NodeReport) -> Value {
                 "armed": h.armed(),
                 "base_mode": h.base_mode,
                 "custom_mode": h.custom_mode,
+                "mode": mode_name(h.autopilot, h.mav_type, h.custom_mode),
                 "system_status": h.system_status,
                 "link": s.link,
                 "peer": s.peer,
@@ -128,32 +131,42 @@ pub fn status_json(report: &NodeReport) -> Value {
     })
 }
 
-/// The status object with what the web service adds (see the [module docs](self)).
+/// The status object with what the web service adds: `vehicles` and `web`.
 fn full_json(report: &NodeReport, shared: &Shared) -> Value {
     let mut value = status_json(report);
-    if let Some(Value::Array(systems)) = value.get_mut("systems") {
-        let store = shared.lock_store();
-        for (system, s) in systems.iter_mut().zip(&report.systems) {
-            let h = &s.heartbeat;
-            let mode = mode_name(h.autopilot, h.mav_type, h.custom_mode);
+    let store = shared.lock_store();
+    let vehicles: Vec<Value> = store
+        .heartbeats()
+        .into_iter()
+        .map(|(sysid, compid, h, age_s)| {
             let track: Vec<Value> = store
-                .track(h.sysid, h.compid)
+                .track(sysid, compid)
                 .into_iter()
                 .map(|(lat, lon, height)| json!([lat, lon, tenths(height)]))
                 .collect();
             let texts: Vec<Value> = store
-                .texts(h.sysid, h.compid)
+                .texts(sysid, compid)
                 .into_iter()
                 .map(|t| json!({"severity": t.severity, "text": t.text, "unix_s": t.unix_s}))
                 .collect();
-            if let Value::Object(map) = system {
-                map.insert("mode".into(), mode.map_or(Value::Null, Value::from));
-                map.insert("track".into(), Value::Array(track));
-                map.insert("statustext".into(), Value::Array(texts));
-            }
-        }
-    }
+            json!({
+                "sysid": sysid,
+                "compid": compid,
+                "type": h.r#type.0,
+                "autopilot": h.autopilot.0,
+                "armed": h.base_mode.0 & 0x80 != 0,
+                "custom_mode": h.custom_mode,
+                "mode": mode_name(h.autopilot.0, h.r#type.0, h.custom_mode),
+                "system_status": h.system_status.0,
+                "age_s": tenths(age_s),
+                "track": track,
+                "statustext": texts,
+            })
+        })
+        .collect();
+    drop(store);
     if let Value::Object(map) = &mut value {
+        map.insert("vehicles".into(), Value::Array(vehicles));
         map.insert("web".into(), shared.counters_json());
     }
     value

@@ -8,7 +8,7 @@ use std::collections::{BTreeMap, VecDeque};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
 use mavstack_core::Message as _;
-use mavstack_dialects::common::{GlobalPositionInt, Statustext};
+use mavstack_dialects::common::{GlobalPositionInt, Heartbeat, Statustext};
 use serde_json::{Map, Value as Json};
 
 use super::json::{Header, JsonMapping};
@@ -162,6 +162,23 @@ impl Store {
     ) -> Option<Json> {
         let e = self.components.get(&(s, c))?.messages.get(name)?;
         entry_json(mapping, e)
+    }
+
+    /// Every component whose HEARTBEAT was seen: (sysid, compid, the latest, its age in
+    /// seconds).
+    pub(crate) fn heartbeats(&self) -> Vec<(u8, u8, Heartbeat, f64)> {
+        self.components
+            .iter()
+            .filter_map(|(&(s, c), component)| {
+                let e = component.messages.get("HEARTBEAT")?;
+                Some((
+                    s,
+                    c,
+                    Heartbeat::decode(&e.payload),
+                    e.last_mono.elapsed().as_secs_f64(),
+                ))
+            })
+            .collect()
     }
 
     /// The recent track of component `(s, c)`: (lat, lon, height above home).
