@@ -3,7 +3,7 @@
 
 use core::f32::consts::TAU;
 
-use super::{Behaviour, Flight, Position};
+use super::{Flight, Position};
 
 /// Gravity, m/s², for attitude setpoints: a tilt of θ accelerates the craft by g·tan θ.
 const G: f32 = 9.81;
@@ -63,11 +63,6 @@ impl Flight {
             self.drift = [0.0; 2];
         }
         self.demand = demand;
-    }
-
-    /// What the craft follows now.
-    pub fn demand(&self) -> Option<Demand> {
-        self.demand
     }
 
     /// One step of a demand.
@@ -149,11 +144,6 @@ impl Flight {
         self.drift = [0.0; 2];
         self.say("Landed");
         let _ = self.arm(false, true);
-    }
-
-    /// Whether the current mode follows a velocity demand (pilot and guided modes).
-    pub fn follows_demands(&self) -> bool {
-        matches!(self.mode.behaviour, Behaviour::Manual | Behaviour::Guided)
     }
 }
 
