@@ -23,6 +23,10 @@ use crate::flight::{Flight, HOME_AMSL, Position};
 use crate::modes::{self, Behaviour, Mode};
 use crate::{Autopilot, events};
 
+/// The flight software version both flavours give (AUTOPILOT_VERSION, the shell's `ver`):
+/// 4.1.0, a release.
+pub(crate) const FLIGHT_SW_VERSION: u32 = 0x0401_00ff;
+
 mod mode_commands;
 
 /// The vehicle's clock: the time since it started, which it reads as a flight stack reads
@@ -276,7 +280,7 @@ impl Craft {
         }
         AutopilotVersion {
             capabilities,
-            flight_sw_version: 0x0401_00ff,
+            flight_sw_version: FLIGHT_SW_VERSION,
             vendor_id: 0x1209,
             product_id: 0x5741,
             uid: 0x6d61_7673_7461_636b,

@@ -33,6 +33,7 @@ pub mod params;
 
 mod control;
 mod craft;
+mod nsh;
 mod vehicle;
 
 pub use vehicle::Vehicle;

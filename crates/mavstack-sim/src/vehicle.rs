@@ -17,6 +17,7 @@ use mavstack_services::mission::{
     MissionConfig, MissionServer, MissionServerEvent, StrayItems, UploadPacing,
 };
 use mavstack_services::param::{Encoding, Name, ParamServer, ParamServerEvent, Value};
+use mavstack_services::rtcm::{self, Reassembler, ReassemblyStats};
 use mavstack_services::stream::StreamScheduler;
 use mavstack_services::timesync::{Timesync, TimesyncConfig};
 use mavstack_services::{Address, Outgoing, Service};
@@ -24,6 +25,7 @@ use mavstack_services::{Address, Outgoing, Service};
 use crate::control::Control;
 use crate::craft::{self, Boot, Craft};
 use crate::flight::{Flight, FlightEvent, HOME_AMSL, Tuning};
+use crate::nsh::Nsh;
 use crate::{Autopilot, SimConfig, events, logs};
 
 /// Peers that appear later than this after the start get a HEARTBEAT of their own.
@@ -102,6 +104,10 @@ pub struct Vehicle {
     started: Instant,
     /// The `id` of the last STATUSTEXT sent in chunks.
     text_id: u16,
+    /// The shell over SERIAL_CONTROL (the PX4 flavour's).
+    nsh: Option<Nsh>,
+    /// RTK corrections received in GPS_RTCM_DATA.
+    rtcm: Reassembler,
 }
 
 impl Vehicle {
@@ -176,6 +182,8 @@ impl Vehicle {
             next_step: now,
             started: now,
             text_id: 0,
+            nsh: px4.then(Nsh::default),
+            rtcm: Reassembler::default(),
         };
         vehicle.retune();
         vehicle.restore_home_item();
@@ -266,6 +274,7 @@ impl Vehicle {
                     .handle_message(now, own, &mut craft.flight, message);
             }
         }
+        self.companion(from, message);
         self.commands.handle_message(now, from, message);
         self.params.handle_message(now, from, message);
         self.missions.handle_message(now, from, message);
@@ -441,6 +450,44 @@ impl Vehicle {
         self.log.push_back(text);
     }
 
+    /// The shell's input (the PX4 flavour's) and RTK corrections, with a log line for each
+    /// command line run and each RTCM message put together.
+    fn companion(&mut self, from: Address, message: &MavMessage) {
+        match message {
+            MavMessage::SerialControl(m) => {
+                if let Some(nsh) = &mut self.nsh
+                    && nsh.handle(from, m)
+                {
+                    while let Some(line) = nsh.poll_ran() {
+                        self.log.push_back(format!("shell ({from}): {line}"));
+                    }
+                }
+            }
+            MavMessage::GpsRtcmData(m) => {
+                if let Some(message) = self.rtcm.handle(m) {
+                    let s = self.rtcm.stats();
+                    let number = rtcm::message_number(&message)
+                        .map_or_else(|| "data".to_owned(), |n| format!("RTCM {n}"));
+                    self.log.push_back(format!(
+                        "rtk: {number}, {} bytes; {} messages, {} bytes, {} fragments \
+                         discarded",
+                        message.len(),
+                        s.messages,
+                        s.bytes,
+                        s.fragments_discarded
+                    ));
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// What it has received in GPS_RTCM_DATA: messages put together, fragments used and
+    /// discarded.
+    pub fn rtcm_received(&self) -> ReassemblyStats {
+        self.rtcm.stats()
+    }
+
     /// Says what the log server did (a download's first request, not each gap's).
     fn note_logs(&mut self) {
         while let Some(e) = self.logs.poll_event() {
@@ -491,6 +538,7 @@ impl Vehicle {
             .or_else(|| self.timesync.poll_transmit())
             .or_else(|| self.files.as_mut().and_then(Service::poll_transmit))
             .or_else(|| self.logs.poll_transmit())
+            .or_else(|| self.nsh.as_mut().and_then(Nsh::poll_transmit))
     }
 
     /// When [`Vehicle::handle_timeout`] is next due.
