@@ -1,0 +1,284 @@
+#!/usr/bin/env python3
+"""Microservice operations in connected sessions, timed from the call to the result: the Rust
+API (`examples/bench_ops.rs`), `mavstack.aio`, MAVSDK 4.1.0 (native binding) and pymavlink
+2.4.50 on the same vehicle, on a clean UDP link and through tests-interop/lossy_relay.py
+(20 % of the datagrams dropped each way, 100 ms each way).
+
+usage: bench_ops.py --port P --name NAME [--rust BIN] [--tools rust,aio,mavsdk,pymavlink]
+                    [--links clean,lossy] [--items 100] [--out FILE.json] [--md FILE.md]
+
+The vehicle sends UDP to 127.0.0.1:P (PX4 SITL: 14550; `mavstack vehicle udpout:127.0.0.1:P`;
+ArduPilot SITL with `--serial1 udpclient:127.0.0.1:P`). Each tool connects first (untimed),
+then, each timed alone:
+  params    the whole parameter table (aio: `params.get_all(via="list")`, PARAM_REQUEST_LIST
+            as the others do; the Rust API `params().get_all()`; MAVSDK get_all_params;
+            pymavlink: PARAM_REQUEST_LIST, then PARAM_REQUEST_READ for the gaps until complete)
+  upload    home + N waypoints (MAVSDK's mission_raw; pymavlink: the MISSION_REQUEST_INT loop)
+  download  the same plan read back
+  command   DO_SET_MODE to the vehicle's hold mode, the median of 10 round trips (MAVSDK:
+            action.hold())
+A step not done in --timeout seconds (default 120) is 'timed out'. Prints a Markdown table.
+"""
+import argparse
+import asyncio
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+
+from lossy_relay import LossyRelay  # noqa: E402
+
+STEPS = ["params", "upload", "download", "command"]
+
+
+def free_udp():
+    import socket
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def plan(home, n):
+    """(lat, lon, alt) of home then n waypoints."""
+    return [home] + [(home[0] + 0.00005 * (i % 20), home[1] + 0.00005 * (i // 20), 20.0)
+                     for i in range(1, n + 1)]
+
+
+def hold_params(autopilot):
+    # DO_SET_MODE's params for the hold mode: PX4 AUTO.LOITER (main 4, sub 3), ArduPilot LOITER 5.
+    return (1.0, 4.0, 3.0) if autopilot == 12 else (1.0, 5.0, 0.0)
+
+
+async def timed(coro, timeout):
+    t = time.monotonic()
+    try:
+        await asyncio.wait_for(coro, timeout)
+    except asyncio.TimeoutError:
+        return "timed out"
+    except Exception as e:  # noqa: BLE001 - the table says what failed
+        return "failed: %s" % str(e)[:80]
+    return time.monotonic() - t
+
+
+async def bench_aio(url, n, timeout):
+    import mavstack.aio as aio
+    out = {}
+    async with aio.connect(url) as gcs:
+        v = await gcs.vehicle(timeout=60)
+        out["params"] = await timed(v.params.get_all(via="list"), timeout)
+        home = await v.home()
+        h = (home.lat_deg, home.lon_deg, home.alt_m) if home else (-35.363261, 149.16523, 584.0)
+        items = [aio.MissionItem(16, frame=0 if i == 0 else 3, x=int(lat * 1e7), y=int(lon * 1e7), z=alt)
+                 for i, (lat, lon, alt) in enumerate(plan(h, n))]
+        out["upload"] = await timed(v.mission.upload(items), timeout)
+        out["download"] = await timed(v.mission.download(), timeout)
+        rtts = []
+        for _ in range(10):
+            t = time.monotonic()
+            r = await v.command("DO_SET_MODE", *hold_params(v.autopilot))
+            if str(r) != "ACCEPTED":
+                break
+            rtts.append(time.monotonic() - t)
+        out["command"] = statistics.median(rtts) if rtts else "failed"
+    return out
+
+
+async def bench_mavsdk(url, n, timeout):
+    from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
+    from mavsdk.asyncio.plugins.action import ActionAsync
+    from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
+    from mavsdk.asyncio.plugins.param import ParamAsync
+    from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+    from mavsdk.plugins.mission_raw import MissionItem
+
+    cfg = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
+    m = Mavsdk(cfg)
+    await m.add_any_connection(url)
+    system = await m.first_autopilot(timeout_s=60)
+    out = {}
+    try:
+        param, mission, action = ParamAsync(system), MissionRawAsync(system), ActionAsync(system)
+        out["params"] = await timed(param.get_all_params(), timeout)
+        telemetry = TelemetryAsync(system)
+        home = None
+        try:
+            home = await asyncio.wait_for(telemetry.home(), 5)
+        except Exception:  # noqa: BLE001 - a default home then
+            pass
+        h = (home.latitude_deg, home.longitude_deg, home.absolute_altitude_m) if home else None
+        if h is None or any(x != x for x in h):  # no home, or NaN
+            h = (-35.363261, 149.16523, 584.0)
+        items = [MissionItem(i, 0 if i == 0 else 3, 16, 1 if i == 0 else 0, 1, 0.0, 0.0, 0.0, float("nan"),
+                             int(lat * 1e7), int(lon * 1e7), float(alt), 0)
+                 for i, (lat, lon, alt) in enumerate(plan(h, n))]
+        out["upload"] = await timed(mission.upload_mission(items), timeout)
+        out["download"] = await timed(mission.download_mission(), timeout)
+        rtts = []
+        for _ in range(10):
+            t = time.monotonic()
+            try:
+                await asyncio.wait_for(action.hold(), timeout)
+            except Exception:  # noqa: BLE001
+                break
+            rtts.append(time.monotonic() - t)
+        out["command"] = statistics.median(rtts) if rtts else "failed"
+    finally:
+        m.destroy()
+    return out
+
+
+def bench_pymavlink(url, n, timeout):
+    from pymavlink import mavutil
+    c = mavutil.mavlink_connection(url, source_system=255, source_component=190)
+    hb = c.wait_heartbeat(timeout=60)
+    ts, tc = c.target_system, c.target_component
+    out = {}
+
+    def deadline():
+        return time.monotonic() + timeout
+
+    t = time.monotonic()
+    c.mav.param_request_list_send(ts, tc)
+    got, count, end, last = {}, None, deadline(), time.monotonic()
+    while time.monotonic() < end:
+        m = c.recv_match(type="PARAM_VALUE", blocking=True, timeout=0.5)
+        if m is not None:
+            got[m.param_index] = m.param_value
+            count = m.param_count
+            last = time.monotonic()
+        if count is not None and len(got) >= count:
+            break
+        if count is not None and time.monotonic() - last > 0.5:
+            for i in range(count):
+                if i not in got:
+                    c.mav.param_request_read_send(ts, tc, b"", i)
+            last = time.monotonic()
+    out["params"] = time.monotonic() - t if count and len(got) >= count else "timed out"
+
+    home = (-35.363261, 149.16523, 584.0)
+    pts = plan(home, n)
+    t = time.monotonic()
+    c.mav.mission_count_send(ts, tc, len(pts), 0)
+    end, done = deadline(), False
+    while time.monotonic() < end:
+        m = c.recv_match(type=["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], blocking=True, timeout=1)
+        if m is None:
+            continue
+        if m.get_type() == "MISSION_ACK":
+            done = m.type == 0
+            break
+        lat, lon, alt = pts[m.seq]
+        c.mav.mission_item_int_send(ts, tc, m.seq, 0 if m.seq == 0 else 3, 16, 0, 1, 0, 0, 0, 0,
+                                    int(lat * 1e7), int(lon * 1e7), alt, 0)
+    out["upload"] = time.monotonic() - t if done else "failed"
+
+    t = time.monotonic()
+    c.mav.mission_request_list_send(ts, tc, 0)
+    end, count, items = deadline(), None, {}
+    while time.monotonic() < end:
+        m = c.recv_match(type=["MISSION_COUNT", "MISSION_ITEM_INT"], blocking=True, timeout=0.5)
+        if m is not None and m.get_type() == "MISSION_COUNT":
+            count = m.count
+        elif m is not None:
+            items[m.seq] = m
+        if count is not None and len(items) >= count:
+            c.mav.mission_ack_send(ts, tc, 0, 0)
+            break
+        if count is not None:
+            nxt = next(i for i in range(count) if i not in items)
+            c.mav.mission_request_int_send(ts, tc, nxt, 0)
+    out["download"] = time.monotonic() - t if count is not None and len(items) >= count else "timed out"
+
+    p = hold_params(hb.autopilot)
+    rtts = []
+    for _ in range(10):
+        t = time.monotonic()
+        c.mav.command_long_send(ts, tc, 176, 0, p[0], p[1], p[2], 0, 0, 0, 0)
+        m = c.recv_match(type="COMMAND_ACK", blocking=True, timeout=3)
+        if m is None or m.command != 176:
+            break
+        rtts.append(time.monotonic() - t)
+    out["command"] = statistics.median(rtts) if rtts else "failed"
+    c.close()
+    return out
+
+
+def bench_rust(binary, url, n, timeout):
+    try:
+        p = subprocess.run([binary, url, str(n)], capture_output=True, text=True, timeout=timeout * 4 + 60)
+        r = json.loads(p.stdout.splitlines()[-1])
+    except (subprocess.TimeoutExpired, ValueError, IndexError) as e:
+        return {s: "failed: %s" % type(e).__name__ for s in STEPS}
+    return {"params": r["params_s"], "upload": r["upload_s"], "download": r["download_s"],
+            "command": r["command_s"]}
+
+
+def run_tool(tool, link, a):
+    """One tool's session on one link: the URL it listens on, through the relay when lossy."""
+    relay = None
+    port = a.port
+    if link == "lossy":
+        tool_port = free_udp()
+        relay = LossyRelay(("127.0.0.1", a.port), ("127.0.0.1", tool_port), loss=0.2, seed=7,
+                           delay=0.1)
+        relay.start()
+        port = tool_port
+    try:
+        if tool == "rust":
+            return bench_rust(a.rust, "udpin:127.0.0.1:%d" % port, a.items, a.timeout)
+        if tool == "aio":
+            return asyncio.run(bench_aio("udpin:127.0.0.1:%d" % port, a.items, a.timeout))
+        if tool == "mavsdk":
+            return asyncio.run(bench_mavsdk("udpin://127.0.0.1:%d" % port, a.items, a.timeout))
+        return bench_pymavlink("udpin:127.0.0.1:%d" % port, a.items, a.timeout)
+    finally:
+        if relay is not None:
+            relay.stop()
+
+
+def fmt(v):
+    return "%.1f" % (v * 1000) if isinstance(v, float) else str(v)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--port", type=int, required=True)
+    ap.add_argument("--name", required=True)
+    ap.add_argument("--rust", help="the bench_ops example's binary")
+    ap.add_argument("--tools", default="rust,aio,mavsdk,pymavlink")
+    ap.add_argument("--links", default="clean,lossy")
+    ap.add_argument("--items", type=int, default=100)
+    ap.add_argument("--timeout", type=float, default=120.0)
+    ap.add_argument("--out")
+    ap.add_argument("--md")
+    a = ap.parse_args()
+    rows = []
+    for link in a.links.split(","):
+        for tool in a.tools.split(","):
+            if tool == "rust" and not a.rust:
+                continue
+            r = run_tool(tool, link, a)
+            rows.append({"target": a.name, "link": link, "tool": tool, **r})
+            print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
+    head = "| target | link | tool | params (ms) | upload %d (ms) | download (ms) | command (ms) |" % a.items
+    lines = [head, "| --- | --- | --- | --- | --- | --- | --- |"]
+    lines += ["| %s | %s | %s | %s |" % (r["target"], r["link"], r["tool"],
+                                         " | ".join(fmt(r.get(s)) for s in STEPS)) for r in rows]
+    print("\n".join(lines))
+    if a.out:
+        with open(a.out, "w") as f:
+            json.dump(rows, f, indent=1)
+    if a.md:
+        with open(a.md, "w") as f:
+            f.write("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
