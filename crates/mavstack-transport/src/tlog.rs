@@ -14,10 +14,11 @@
 //! - [`Spool`] runs a [`Writer`] over a file on a thread of its own behind a bounded queue,
 //!   for writers that must never wait for the disk (a router's log, a file link); it also
 //!   names a router's logs (`mavstack-YYYYmmdd-HHMMSS.tlog`, UTC, never overwriting one).
-//! - [`Reader`] yields `(timestamp, frame)` records, and reads past damage exactly as
-//!   pymavlink does (`mavstack_core::tlog::Recovery`), so a damaged log gives the frames and
-//!   timestamps pymavlink gives. A replayer gets each record's timestamp to pace the frames as
-//!   they were recorded.
+//! - [`Reader`] yields `(timestamp, frame)` records, and reads past damage as pymavlink does
+//!   (`mavstack_core::tlog::Recovery`), so a damaged log gives the frames and timestamps
+//!   pymavlink gives, and never loses a valid record where pymavlink does (the record after a
+//!   MAVLink 1 frame with a payload under 4 bytes). A replayer gets each record's timestamp to
+//!   pace the frames as they were recorded.
 //!
 //! ```
 //! use mavstack_transport::tlog::{Reader, Writer};
