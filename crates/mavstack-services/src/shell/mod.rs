@@ -322,6 +322,13 @@ impl ShellCommand {
         Some(result)
     }
 
+    /// Gives up: the session is closed (one SERIAL_CONTROL without RESPOND), and there will
+    /// be no result.
+    pub fn cancel(&mut self) {
+        self.taken = true;
+        self.client.close();
+    }
+
     /// The transcript so far (bytes received, whether echoed, the text).
     #[must_use]
     pub const fn transcript(&self) -> &Transcript {

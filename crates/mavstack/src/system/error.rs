@@ -7,6 +7,8 @@ use mavstack_services::ftp::param_pck::{DecodeError, EncodeError};
 use mavstack_services::log_transfer::LogError;
 use mavstack_services::mission::MissionError;
 use mavstack_services::param::ParamError;
+use mavstack_services::rtcm::RtcmError;
+use mavstack_services::shell::ShellError;
 
 /// Why an operation on a [`System`](super::System) failed.
 #[derive(Debug, thiserror::Error)]
@@ -131,6 +133,21 @@ pub enum SystemError {
         what: String,
         /// What the system said meanwhile (STATUSTEXT, EVENT texts).
         statustext: Vec<String>,
+    },
+    /// RTK corrections that cannot be sent: nothing was sent.
+    #[error("RTCM corrections not sent")]
+    Rtcm(#[from] RtcmError),
+    /// The shell gave no output.
+    #[error("shell")]
+    Shell(#[from] ShellError),
+    /// Reading or writing something of ours failed (an RTCM source).
+    #[error("{what}")]
+    Io {
+        /// What failed.
+        what: String,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
     },
     /// The request could not start (another like it is running, a link that cannot do it).
     #[error("{0}")]

@@ -3,8 +3,8 @@
 //! MAVSDK's plugin shape: [`params`](System::params), [`mission`](System::mission),
 //! [`commands`](System::commands), [`modes`](System::modes), [`action`](System::action),
 //! [`offboard`](System::offboard), [`manual_control`](System::manual_control),
-//! [`telemetry`](System::telemetry), [`ftp`](System::ftp), [`logs`](System::logs) and
-//! [`signing`](System::signing).
+//! [`telemetry`](System::telemetry), [`ftp`](System::ftp), [`logs`](System::logs),
+//! [`signing`](System::signing), [`rtk`](System::rtk) and [`shell`](System::shell).
 //!
 //! ```no_run
 //! # async fn run() -> Result<(), Box<dyn core::error::Error>> {
@@ -57,8 +57,10 @@ mod modes;
 mod offboard;
 mod params;
 mod rates;
+mod rtk;
 mod run;
 mod said;
+mod shell;
 mod signing;
 mod state;
 mod telemetry;
@@ -83,6 +85,8 @@ pub use params::{
     AUTO_FTP_RETRIES, CAPABILITIES_WAIT, Change, LoadReport, Params, ParamsVia, typed_value,
 };
 pub use rates::{RateMethod, RateRequest};
+pub use rtk::{RtcmReader, RtcmSource, RtcmSourceError, Rtk, RtkReport};
+pub use shell::{Shell, ShellSession};
 pub use signing::{Signing, SigningCheck};
 pub use telemetry::{Position, Sample, Telemetry, TelemetryStream};
 
@@ -152,6 +156,10 @@ struct Locks {
     ftp: tokio::sync::Mutex<()>,
     logs: tokio::sync::Mutex<()>,
     commands: tokio::sync::Mutex<()>,
+    /// The system has one shell.
+    shell: tokio::sync::Mutex<()>,
+    /// GPS_RTCM_DATA's sequence ids, held while a message's fragments go out.
+    rtk: tokio::sync::Mutex<mavstack_services::rtcm::RtcmSender>,
 }
 
 impl Drop for Inner {
@@ -324,6 +332,18 @@ impl System {
         Signing::new(self.clone())
     }
 
+    /// RTK corrections to it (GPS_RTCM_DATA).
+    #[must_use]
+    pub fn rtk(&self) -> Rtk {
+        Rtk::new(self.clone())
+    }
+
+    /// Its shell over MAVLink (SERIAL_CONTROL, as PX4's nsh).
+    #[must_use]
+    pub fn shell(&self) -> Shell {
+        Shell::new(self.clone())
+    }
+
     // ----- shared by the handles ---------------------------------------------------------
 
     /// A snapshot of what is known of it.
@@ -395,7 +415,10 @@ impl System {
     /// Whether it is armed, waiting up to [`ARMED_WAIT`] for a HEARTBEAT that says so (an
     /// arming just acknowledged shows in the next HEARTBEAT, up to a second later).
     async fn armed_soon(&self) -> bool {
-        self.armed() || self.wait_state(ARMED_WAIT, |s| s.armed() == Some(true)).await
+        self.armed()
+            || self
+                .wait_state(ARMED_WAIT, |s| s.armed() == Some(true))
+                .await
     }
 
     /// Whether its latest HEARTBEAT says it is armed (`false` before one came).
