@@ -24,6 +24,9 @@ const LIST_ROUNDS: usize = 3;
 /// How long a mode set may take to show in HEARTBEAT (or CURRENT_MODE).
 const CURRENT_WAIT: Duration = Duration::from_secs(5);
 
+/// How long what a vehicle says after refusing a mode is still collected.
+const SAID_AFTER: Duration = Duration::from_millis(500);
+
 /// MAV_MODE_PROPERTY_NOT_USER_SELECTABLE.
 const NOT_USER_SELECTABLE: u32 = 2;
 
@@ -249,8 +252,9 @@ impl Modes {
     /// As [`set`](Self::set).
     pub async fn set_mode(&self, mode: &Mode) -> Result<(), SystemError> {
         let said_before = self.system.said_count();
+        let acks_before = self.system.state().ack_count;
         let commands = self.system.commands();
-        let mut sent = false;
+        let mut sent = None;
         if mode.vehicle_standard
             && let Some(standard) = mode.standard
         {
@@ -259,7 +263,7 @@ impl Modes {
                 [f32::from(standard.0), 0., 0., 0., 0., 0., 0.],
             );
             match commands.send(command).await {
-                Ok(_) => sent = true,
+                Ok(_) => sent = Some(MavCmd::DO_SET_STANDARD_MODE),
                 Err(SystemError::Command {
                     reason:
                         CommandError::Rejected {
@@ -271,21 +275,37 @@ impl Modes {
                 Err(e) => return Err(e),
             }
         }
-        if !sent {
-            commands
-                .send(self.set_mode_command(mode.custom_mode)?)
-                .await?;
-        }
+        let sent = match sent {
+            Some(command) => command,
+            None => {
+                commands
+                    .send(self.set_mode_command(mode.custom_mode)?)
+                    .await?;
+                MavCmd::DO_SET_MODE
+            }
+        };
+        // PX4 acknowledges twice: ACCEPTED from its MAVLink receiver at once, then its
+        // commander's verdict. A refusal after the first answer ends the wait.
         let custom = mode.custom_mode;
-        if !self
+        let reported = self
             .system
             .wait_state(CURRENT_WAIT, |s| {
-                s.heartbeat
-                    .as_ref()
-                    .is_some_and(|(hb, _)| hb.custom_mode == custom)
+                s.custom_mode() == Some(custom) || s.refusal_after(sent, acks_before).is_some()
             })
-            .await
-        {
+            .await;
+        let refusal = self.system.state().refusal_after(sent, acks_before);
+        if let Some(ack) = refusal {
+            tokio::time::sleep(SAID_AFTER).await;
+            return Err(SystemError::Command {
+                command: super::command_name(sent),
+                reason: CommandError::Rejected {
+                    result: ack.result,
+                    result_param2: ack.result_param2,
+                },
+                statustext: self.system.said_since(said_before).await,
+            });
+        }
+        if !reported {
             return Err(SystemError::NotDone {
                 what: format!(
                     "mode {}: accepted, but the vehicle did not report it within {} s",

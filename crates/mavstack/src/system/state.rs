@@ -12,8 +12,8 @@ use std::collections::{BTreeMap, VecDeque};
 
 use mavstack_core::MessageSet as _;
 use mavstack_dialects::common::{
-    Event, ExtendedSysState, GlobalPositionInt, Heartbeat, HomePosition, LocalPositionNed,
-    MavLandedState, MavMessage, MavModeFlag, MavProtocolCapability,
+    CommandAck, Event, ExtendedSysState, GlobalPositionInt, Heartbeat, HomePosition,
+    LocalPositionNed, MavLandedState, MavMessage, MavModeFlag, MavProtocolCapability,
 };
 use mavstack_services::Address;
 use mavstack_services::statustext::Lines;
@@ -24,6 +24,10 @@ use crate::node::Subscription;
 
 /// Lines kept of what the system said (STATUSTEXT and EVENT).
 const SAID_KEPT: usize = 64;
+
+/// COMMAND_ACKs kept (for answers that come after the first: PX4 acknowledges DO_SET_MODE
+/// twice, from its MAVLink receiver and then from its commander).
+const ACKS_KEPT: usize = 16;
 
 /// Event sequence numbers remembered, so that an event sent again counts once.
 const SEEN_EVENTS: usize = 64;
@@ -83,6 +87,10 @@ pub(crate) struct State {
     pub(crate) said_count: u64,
     /// When each message id last came from it.
     pub(crate) last_seen: BTreeMap<u32, Instant>,
+    /// COMMAND_ACKs it sent us, numbered from 1 (the last `acks` of them kept).
+    pub(crate) acks: VecDeque<(u64, CommandAck)>,
+    /// How many COMMAND_ACKs it has sent us.
+    pub(crate) ack_count: u64,
     /// The node stopped: nothing more will come.
     pub(crate) stopped: bool,
     lines: Lines,
@@ -101,13 +109,34 @@ impl State {
     /// CURRENT_MODE on a change but also at a low rate, so either can be the fresher).
     pub(crate) fn custom_mode(&self) -> Option<u32> {
         match (&self.current_mode, &self.heartbeat) {
-            (Some((m, at)), Some((hb, hb_at))) => {
-                Some(if at >= hb_at { m.custom_mode } else { hb.custom_mode })
-            }
+            (Some((m, at)), Some((hb, hb_at))) => Some(if at >= hb_at {
+                m.custom_mode
+            } else {
+                hb.custom_mode
+            }),
             (Some((m, _)), None) => Some(m.custom_mode),
             (None, Some((hb, _))) => Some(hb.custom_mode),
             (None, None) => None,
         }
+    }
+
+    /// The first refusal of `command` among the acknowledgements after number `after`.
+    pub(crate) fn refusal_after(
+        &self,
+        command: mavstack_dialects::common::MavCmd,
+        after: u64,
+    ) -> Option<CommandAck> {
+        self.acks
+            .iter()
+            .filter(|(n, a)| *n > after && a.command == command)
+            .map(|(_, a)| *a)
+            .find(|a| {
+                !matches!(
+                    a.result,
+                    mavstack_dialects::common::MavResult::ACCEPTED
+                        | mavstack_dialects::common::MavResult::IN_PROGRESS
+                )
+            })
     }
 
     /// What it said after thing number `after`, oldest first.
@@ -140,6 +169,15 @@ impl State {
                 }
             }
             MavMessage::Event(e) => self.event(from, own, e),
+            MavMessage::CommandAck(ack)
+                if ack.target_system == 0 || ack.target_system == own.system =>
+            {
+                if self.acks.len() == ACKS_KEPT {
+                    self.acks.pop_front();
+                }
+                self.ack_count += 1;
+                self.acks.push_back((self.ack_count, *ack));
+            }
             MavMessage::ComponentMetadata(m) if ours => {
                 let end = m.uri.iter().position(|&b| b == 0).unwrap_or(m.uri.len());
                 self.metadata_uri = Some(String::from_utf8_lossy(&m.uri[..end]).into_owned());
