@@ -1,5 +1,5 @@
-//! The seed corpora of the `router_conf`, `link_options`, `link_spec`, `conform_wire` and
-//! `events` fuzz targets, replayed on stable.
+//! The seed corpora of the `router_conf`, `link_options`, `link_spec`, `conform_wire`,
+//! `events` and `web_json` fuzz targets, replayed on stable.
 
 use std::path::Path;
 
@@ -73,4 +73,10 @@ fn the_fake_protocol_version_seed_fails_the_framing_rule() {
         "{}",
         framing.evidence
     );
+}
+
+#[cfg(feature = "http")]
+#[test]
+fn web_json_seeds() {
+    replay("web_json", mavstack::web::json::fuzz_web_json);
 }

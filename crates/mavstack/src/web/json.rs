@@ -629,3 +629,75 @@ fn field_value(field: &Field, kind: &Kind, json: &Json) -> Result<Value, JsonErr
         _ => number(field, json),
     }
 }
+
+/// Fuzzing entry point for the JSON → message path, on the built-in `ardupilotmega`
+/// mapping. The first byte picks the input's form:
+///
+/// - even: the rest is the text of a request (`{"header","message"}`). What reads is a frame
+///   whose own object, written back, reads to the very same frame (the header, the id and
+///   every payload byte): valid objects round-trip; anything else must be an error, never a
+///   panic.
+/// - odd: the rest chooses a message (two bytes of index) and its payload (the bytes after);
+///   the object written for a payload whose text fields are UTF-8 must read back, and the
+///   payload read writes the same object again (NaN's bits and other non-canonical floats
+///   aside, which only the object compares).
+///
+/// # Panics
+/// When a property fails (a bug).
+#[cfg(feature = "fuzzing")]
+#[doc(hidden)]
+pub fn fuzz_web_json(data: &[u8]) {
+    let mapping = super::default_mapping();
+    let Some((&form, rest)) = data.split_first() else {
+        return;
+    };
+    if form % 2 == 0 {
+        let Ok(text) = core::str::from_utf8(rest) else {
+            return;
+        };
+        let Ok(value) = serde_json::from_str::<Json>(text) else {
+            return;
+        };
+        let Ok((header, frame)) = mapping.parse_request(&value) else {
+            return;
+        };
+        let view = mavstack_core::wire::Frame::new_checked(&frame[..]).expect("a whole frame");
+        let object = mapping
+            .message_json(view.msg_id(), view.payload())
+            .expect("a message the mapping just read");
+        let again = request_json(header, object);
+        let (header2, frame2) = mapping
+            .parse_request(&again)
+            .unwrap_or_else(|e| panic!("our own object is refused: {e}: {again}"));
+        assert_eq!(header2, header);
+        assert_eq!(frame2, frame, "{again}");
+        return;
+    }
+    if rest.len() < 2 {
+        return;
+    }
+    let messages = &mapping.dialect().messages;
+    let index = usize::from(u16::from_le_bytes([rest[0], rest[1]])) % messages.len();
+    let message = &messages[index];
+    let payload = &rest[2..];
+    let mut buf = [0u8; MAX_PAYLOAD_LEN];
+    let n = payload.len().min(message.max_len);
+    buf[..n].copy_from_slice(&payload[..n]);
+    let text_ok = message.fields.iter().all(|f| {
+        f.ty.primitive != PrimitiveType::Char
+            || f.ty.array_len.is_none()
+            || matches!(codec::decode_field(f, &buf), Value::Text(t) if core::str::from_utf8(&t).is_ok())
+    });
+    if !text_ok {
+        return;
+    }
+    let object = mapping
+        .message_json(message.id, payload)
+        .expect("a message of the dialect");
+    let (id, back) = mapping
+        .parse_message(&object)
+        .unwrap_or_else(|e| panic!("{}: our own object is refused: {e}: {object}", message.name));
+    assert_eq!(id, message.id);
+    let again = mapping.message_json(id, &back).expect("the same message");
+    assert_eq!(again, object, "{}", message.name);
+}
