@@ -179,3 +179,47 @@ fn mavsdk_native_binding_flies_a_session_through_the_router() {
 fn mavsdk_grpc_with_mavsdk_server_flies_a_session_through_the_router() {
     run_with("gcs_mavsdk.py", &["--api", "grpc"], true);
 }
+
+/// MAVSDK's Action and Offboard (native binding) fly the simulator's PX4 flavour as they fly
+/// PX4 1.16 SITL: the same answers and flight modes, step by step, as the transcript recorded
+/// from PX4 SITL (`tests-interop/fixtures/mavsdk_flying_px4.json`; `mavsdk_flying.py`).
+#[test]
+fn mavsdk_action_and_offboard_fly_the_px4_flavour_as_px4_sitl() {
+    static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+    let _turn = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    require_pymavlink();
+    require_clients();
+    let port = std::net::UdpSocket::bind("127.0.0.1:0")
+        .and_then(|s| s.local_addr())
+        .expect("a free port")
+        .port();
+    let mut vehicle = Command::new(env!("CARGO_BIN_EXE_mavstack"))
+        .args([
+            "vehicle",
+            &format!("udpout:127.0.0.1:{port}"),
+            "--autopilot",
+            "px4",
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("the vehicle starts");
+    let fixture = support::script("fixtures/mavsdk_flying_px4.json");
+    let url = format!("udpin://127.0.0.1:{port}");
+    let out = std::panic::catch_unwind(|| {
+        run_script(
+            "mavsdk_flying.py",
+            &[
+                OsStr::new(&url),
+                OsStr::new("--expect"),
+                fixture.as_os_str(),
+            ],
+        )
+    });
+    let _ = vehicle.kill();
+    let _ = vehicle.wait();
+    let out = out.unwrap_or_else(|e| std::panic::resume_unwind(e));
+    println!("{}", out.lines().last().unwrap_or_default());
+}

@@ -554,6 +554,20 @@ impl Flight {
             self.velocity = [0.0; 3];
             self.say("Landed");
             let _ = self.arm(false, true);
+            self.after_landing();
+        }
+    }
+
+    /// PX4 leaves its landing mode (Land, Return) for Hold once it has landed and disarmed
+    /// (MAVSDK saw HOLD after `land` on PX4 1.16 SITL; tests-interop/fixtures); ArduPilot
+    /// stays in it.
+    fn after_landing(&mut self) {
+        let landing = matches!(
+            self.mode().behaviour,
+            Behaviour::Land | Behaviour::ReturnToLaunch
+        );
+        if self.autopilot == Autopilot::Px4 && landing {
+            self.set_mode(modes::with_behaviour(Autopilot::Px4, Behaviour::Hold));
         }
     }
 

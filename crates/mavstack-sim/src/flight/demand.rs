@@ -144,6 +144,7 @@ impl Flight {
         self.drift = [0.0; 2];
         self.say("Landed");
         let _ = self.arm(false, true);
+        self.after_landing();
     }
 }
 
