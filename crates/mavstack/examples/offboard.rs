@@ -55,7 +55,8 @@ async fn fly(vehicle: &System) -> Result<(), Error> {
         .position(Duration::from_secs(3))
         .await
         .ok_or("no position")?;
-    let moved = mavstack::system::distance_m(start.lat_deg, start.lon_deg, end.lat_deg, end.lon_deg);
+    let moved =
+        mavstack::system::distance_m(start.lat_deg, start.lon_deg, end.lat_deg, end.lon_deg);
     let mode = vehicle.modes().current().await.map(|m| m.name);
     println!(
         "offboard ended after {sent} setpoints: moved {moved:.1} m north, now {}",

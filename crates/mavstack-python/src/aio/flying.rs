@@ -48,7 +48,8 @@ pub(super) fn setpoint(kind: &str, v: &[Option<f32>]) -> PyResult<Setpoint> {
             )));
         }
     };
-    sp.check().map_err(|e| PyValueError::new_err(e.to_string()))?;
+    sp.check()
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok(sp)
 }
 

@@ -120,7 +120,12 @@ pub(crate) struct AioVehicle {
 type ModeTuple = (String, Option<String>, u32, bool);
 
 fn mode_tuple(m: &mavstack::system::Mode) -> ModeTuple {
-    (m.name.clone(), m.standard_name(), m.custom_mode, m.selectable)
+    (
+        m.name.clone(),
+        m.standard_name(),
+        m.custom_mode,
+        m.selectable,
+    )
 }
 
 impl AioVehicle {
@@ -443,7 +448,9 @@ impl AioVehicle {
     /// The mode it is in (`None` before a HEARTBEAT came).
     fn mode(&self, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
         self.run(waker, settle, move |system| async move {
-            Ok(build(system.modes().current().await.as_ref().map(mode_tuple)))
+            Ok(build(
+                system.modes().current().await.as_ref().map(mode_tuple),
+            ))
         })
     }
 
@@ -460,7 +467,12 @@ impl AioVehicle {
         self.run(waker, settle, move |system| async move {
             system
                 .action()
-                .takeoff(height, |h| progress(f64::from(h).max(0.0) as u64, u64::from(height.max(0.0) as u32)))
+                .takeoff(height, |h| {
+                    progress(
+                        f64::from(h).max(0.0) as u64,
+                        u64::from(height.max(0.0) as u32),
+                    )
+                })
                 .await
                 .map_err(system_error)?;
             Ok(build(()))
@@ -470,7 +482,13 @@ impl AioVehicle {
     /// `land`, `return_home`, `hold`: settles once the vehicle reports the mode; `land` and
     /// `return_home` with `wait` settle once it has landed and disarmed.
     #[pyo3(signature = (what, wait, waker, settle))]
-    fn fly(&self, what: &str, wait: bool, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
+    fn fly(
+        &self,
+        what: &str,
+        wait: bool,
+        waker: PyRef<'_, AioWaker>,
+        settle: Py<PyAny>,
+    ) -> PyResult<Op> {
         let what = match what {
             "land" | "return_home" | "hold" => what.to_owned(),
             other => return Err(PyValueError::new_err(format!("no action {other:?}"))),
@@ -521,7 +539,9 @@ impl AioVehicle {
     fn position(&self, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
         self.run(waker, settle, move |system| async move {
             let p = system.telemetry().position(Duration::from_secs(3)).await;
-            Ok(build(p.map(|p| (p.lat_deg, p.lon_deg, p.height_m, p.alt_m))))
+            Ok(build(
+                p.map(|p| (p.lat_deg, p.lon_deg, p.height_m, p.alt_m)),
+            ))
         })
     }
 
