@@ -29,6 +29,8 @@ mod progress;
 mod radio_cmd;
 mod remote;
 mod router_cmd;
+mod rtk_cmd;
+mod shell_cmd;
 mod signing_cmd;
 mod vehicle_cmd;
 
@@ -118,6 +120,11 @@ enum Command {
         #[command(subcommand)]
         action: ftp_cmd::FtpAction,
     },
+    /// A system's shell over MAVLink (PX4's nsh): interactive, or one `--command` and its
+    /// output.
+    Shell(shell_cmd::ShellArgs),
+    /// Forward an RTCM3 stream (TCP, serial or a file) to a vehicle as RTK corrections.
+    Rtk(rtk_cmd::RtkArgs),
 }
 
 /// A failure with the exit code it maps to.
@@ -179,6 +186,8 @@ fn main() -> ExitCode {
         Command::Log { action } => log_cmd::run(action),
         Command::Signing { action } => signing_cmd::signing(&action),
         Command::Ftp { action } => ftp_cmd::ftp(&action),
+        Command::Shell(args) => shell_cmd::shell(&args),
+        Command::Rtk(args) => rtk_cmd::rtk(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
