@@ -54,6 +54,14 @@ Scenarios (in this order, each independent of the ones before but the flight, la
                what each checks): the vehicle's modes set by name and by standard name; take
                off 10 m, goto 30 m north, land; offboard velocity and position setpoints; sticks
                in a position mode
+  shell        `mavstack shell CONN --command "ver all"` (SERIAL_CONTROL to the SHELL device):
+               the version lines PX4's `ver all` prints; n/a on ArduPilot, which has no SHELL
+               device (its SERIAL_CONTROL reaches serial ports only) and does not answer
+  rtk          `mavstack rtk CONN --from FILE`: an RTCM3 stream (frames of 25, 360, 720 and 20
+               bytes between garbage) sent as 9 GPS_RTCM_DATA (360 bytes ending with an empty
+               fragment); on PX4, `listener gps_inject_data` through the shell then shows the
+               last one as sent (length, flags and bytes); elsewhere the vehicle gives no
+               readout (ArduPilot counts the fragments it used in its log, GPA.RTCMFU)
   restart      (with --restart CMD, a command that kills the vehicle and starts it again; last)
                `mavstack listen CONN --rate ATTITUDE:4` running while the vehicle is restarted:
                it keeps running (a TCP link reconnects), hears the new instance's HEARTBEAT
@@ -339,6 +347,46 @@ class Runner:
 
     def manual(self):
         self.flying("manual")
+
+    def shell(self):
+        rc, out, err, s = self.mavstack("shell", self.conn, "--command", "ver all", "--json", "--timeout", "15")
+        if rc != 0 and "no answer from the shell" in err and "ardupilot" in self.name:
+            return self.report("shell", "n/a", s, "ArduPilot has no SHELL device: %s" % err.strip()[-160:])
+        try:
+            output = json.loads(out.splitlines()[0])["output"]
+        except (ValueError, IndexError, KeyError):
+            return self.report("shell", "fail", s, "exit %s: %s" % (rc, err.strip()[-300:]))
+        version = [line for line in output.splitlines() if line.startswith("PX4 version:")]
+        ok = rc == 0 and bool(version) and "nsh>" not in output and "pxh>" not in output
+        self.report("shell", "pass" if ok else "fail", s, "%d lines, %s" % (len(output.splitlines()),
+                                                                           version or output[:200]))
+
+    def rtk(self):
+        frames = [rtcm3_frame(1005, 25), rtcm3_frame(1077, 360), rtcm3_frame(1087, 720), rtcm3_frame(1230, 20)]
+        with tempfile.TemporaryDirectory(prefix="fs-rtk-") as work:
+            path = os.path.join(work, "base.rtcm3")
+            with open(path, "wb") as f:
+                f.write(b"garbage" + frames[0] + frames[1] + b"\x00\xd3" + frames[2] + frames[3])
+            rc, out, err, s = self.mavstack("rtk", self.conn, "--from", path, "--json", "--timeout", "15")
+        try:
+            r = json.loads(out.splitlines()[-1])
+        except (ValueError, IndexError):
+            return self.report("rtk", "fail", s, "exit %s: %s" % (rc, err.strip()[-300:]))
+        sent = (r.get("sent"), r.get("messages"), r.get("sent_bytes"))
+        if rc != 0 or sent != (4, 9, 1125):
+            return self.report("rtk", "fail", s, "exit %s, sent %s: %s" % (rc, r, err.strip()[-200:]))
+        detail = "4 frames in 9 GPS_RTCM_DATA"
+        rc2, out2, err2, s2 = self.mavstack("shell", self.conn, "--command", "listener gps_inject_data",
+                                            "--timeout", "15")
+        if rc2 == 0 and "TOPIC: gps_inject_data" in out2:
+            # The listener may print an older message first: the last one printed is the newest.
+            last = out2.split("TOPIC: gps_inject_data")[-1]
+            want_data = ", ".join(str(b) for b in frames[3])
+            ok = "len: 20" in last and ("data: [%s," % want_data) in last and "flags: " in last
+            return self.report("rtk", "pass" if ok else "fail", s + s2,
+                               "%s; PX4's gps_inject_data %s" % (detail, "holds the last one as sent" if ok
+                                                                 else "differs: %s" % last[:300]))
+        self.report("rtk", "pass", s, "%s; no readout on this vehicle" % detail)
 
     def pymavlink_scripts(self):
         """The scripts written for pymavlink (crates/mavstack-python/tests/pymavlink_scripts),
@@ -781,6 +829,20 @@ def _tlog_msgs(path):
 
 
 
+def rtcm3_frame(number, total):
+    """An RTCM3 frame of `total` bytes whose message number is `number` (CRC-24Q here)."""
+    payload = bytes([number >> 4, (number & 15) << 4]) + bytes((i * 37 + number) % 256 for i in range(total - 8))
+    head = bytes([0xD3, (len(payload) >> 8) & 3, len(payload) & 0xFF]) + payload
+    crc = 0
+    for b in head:
+        crc ^= b << 16
+        for _ in range(8):
+            crc <<= 1
+            if crc & 0x1000000:
+                crc ^= 0x1864CFB
+    return head + (crc & 0xFFFFFF).to_bytes(3, "big")
+
+
 def flight_steps(runner):
     """The `flight` example's steps, each a scenario row: rates, then the flight."""
     if not runner.flight_bin:
@@ -853,7 +915,7 @@ def compare_plans(sent, got):
 
 SCENARIOS = ["probe", "conform", "params", "param_set", "mission", "arm_refused", "signing", "router", "record",
              "aio", "pymavlink_scripts", "signed_router", "modes", "takeoff_goto", "offboard", "manual",
-             "flight", "restart"]
+             "shell", "rtk", "flight", "restart"]
 
 
 def main():
