@@ -625,6 +625,23 @@ class Vehicle:
         t = await _call(lambda lp, s: self._native.home(lp, s))
         return None if t is None else Home(*t)
 
+    async def inject_rtcm(self, data: Union[bytes, bytearray, memoryview]) -> int:
+        """Sends one RTCM message (usually one RTCM3 frame, up to 720 bytes) as RTK
+        corrections in GPS_RTCM_DATA: up to 180 bytes in one message, longer in fragments
+        of 180 with the vehicle's next sequence id (an empty last one when the length is a
+        multiple of 180). Returns how many GPS_RTCM_DATA it took;
+        :class:`InvalidValueError` for an empty message or one over 720 bytes (nothing
+        sent)."""
+        return await _call(lambda lp, s: self._native.inject_rtcm(bytes(data), lp, s))  # type: ignore[no-any-return]
+
+    async def shell(self, command: str, timeout: float = 30.0) -> str:
+        """Runs one command line on the vehicle's shell (SERIAL_CONTROL to the SHELL device,
+        as PX4's nsh) and returns its output: what the shell printed between the echo of
+        the line and the next prompt, safe to print. :class:`TimeoutError` when the shell
+        never answers (ArduPilot has none) or the prompt does not come back within
+        ``timeout`` seconds; :class:`InvalidValueError` for a line with a line break."""
+        return await _call(lambda lp, s: self._native.shell(command, float(timeout), lp, s))  # type: ignore[no-any-return]
+
     def offboard(self, rate_hz: float = 20.0) -> _OffboardBlock:
         """``async with vehicle.offboard(rate_hz=20) as ob``: a setpoint stream (zero
         velocity at first), PX4 OFFBOARD or ArduPilot GUIDED once setpoints flow; leaving

@@ -44,6 +44,7 @@ use mavstack::services::command::{
 use mavstack::services::heartbeat::HeartbeatEvent;
 use mavstack::services::mission::MissionError;
 use mavstack::services::param::{Encoding, Name, ParamError, ParamServer, Value};
+use mavstack::services::shell::ShellError;
 use mavstack::services::{Address, Outgoing, Service};
 use mavstack::system::{Discovery, ParamsVia, System, SystemError, Wanted, command_name};
 use mavstack::transport::clock;
@@ -108,6 +109,8 @@ fn system_error(e: SystemError) -> AioError {
         } => "timeout",
         SystemError::Command { .. } => "command",
         SystemError::UnknownMode { .. } => "mode",
+        SystemError::Rtcm(_) | SystemError::Shell(ShellError::LineBreak) => "value",
+        SystemError::Shell(ShellError::NoAnswer { .. }) => "timeout",
         SystemError::Stopped => "closed",
         _ => "error",
     };

@@ -535,6 +535,48 @@ impl AioVehicle {
         })
     }
 
+    /// Sends one RTCM message (up to 720 bytes) in GPS_RTCM_DATA with the vehicle's next
+    /// sequence id; settles with how many GPS_RTCM_DATA it took.
+    fn inject_rtcm(
+        &self,
+        data: &[u8],
+        waker: PyRef<'_, AioWaker>,
+        settle: Py<PyAny>,
+    ) -> PyResult<Op> {
+        let data = data.to_vec();
+        self.run(waker, settle, move |system| async move {
+            let sent = system.rtk().inject(&data).await.map_err(system_error)?;
+            Ok(build(sent))
+        })
+    }
+
+    /// Runs one command line on the vehicle's shell (SERIAL_CONTROL, as PX4's nsh) and
+    /// settles with its output; `timeout` seconds for the prompt to come back.
+    fn shell(
+        &self,
+        command: String,
+        timeout: f64,
+        waker: PyRef<'_, AioWaker>,
+        settle: Py<PyAny>,
+    ) -> PyResult<Op> {
+        let limit = Duration::try_from_secs_f64(timeout)
+            .ok()
+            .filter(|d| !d.is_zero() && d.as_secs() <= 86_400)
+            .ok_or_else(|| {
+                PyValueError::new_err(format!(
+                    "timeout {timeout}: a number of seconds above 0, at most 86400"
+                ))
+            })?;
+        self.run(waker, settle, move |system| async move {
+            let output = system
+                .shell()
+                .run(&command, limit)
+                .await
+                .map_err(system_error)?;
+            Ok(build(output))
+        })
+    }
+
     /// Where it is: `(lat, lon, height above home, altitude)`, or `None`.
     fn position(&self, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
         self.run(waker, settle, move |system| async move {
