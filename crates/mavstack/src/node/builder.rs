@@ -348,7 +348,7 @@ impl NodeBuilder {
         };
         #[cfg(feature = "http")]
         if let (Some(listener), Some(peer)) = (http, web_peer) {
-            tokio::spawn(crate::web::serve(listener, node.handle(), peer, self.web));
+            crate::web::spawn(listener, node.handle(), peer, self.web);
         }
         #[cfg(not(feature = "http"))]
         drop(http);

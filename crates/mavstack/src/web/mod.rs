@@ -211,12 +211,57 @@ impl Shared {
     }
 }
 
+/// Starts the service for the node behind `handle` on a thread of its own, with a runtime of
+/// its own: however busy its clients keep it, the node's runtime (TCP and serial links,
+/// handles, subscriptions) never waits for it. It ends when the node stops.
+pub(crate) fn spawn(
+    listener: TcpListener,
+    handle: NodeHandle,
+    peer: ExternalPeer,
+    options: WebOptions,
+) {
+    let listener = match listener.into_std() {
+        Ok(l) => l,
+        Err(e) => {
+            tracing::warn!("web service: {e}");
+            return;
+        }
+    };
+    let started = std::thread::Builder::new()
+        .name("mavstack-web".into())
+        .spawn(move || {
+            let runtime = match tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+            {
+                Ok(rt) => rt,
+                Err(e) => {
+                    tracing::warn!("web service: runtime: {e}");
+                    return;
+                }
+            };
+            runtime.block_on(async move {
+                match TcpListener::from_std(listener) {
+                    Ok(listener) => {
+                        if let Err(e) = serve(listener, handle, peer, options).await {
+                            tracing::warn!("web service: {e}");
+                        }
+                    }
+                    Err(e) => tracing::warn!("web service: {e}"),
+                }
+            });
+        });
+    if let Err(e) = started {
+        tracing::warn!("web service: thread: {e}");
+    }
+}
+
 /// Serves the page, the status JSON and the API for the node behind `handle` on `listener`
 /// until the node stops; `peer` is the far end of the node's `web` link.
 ///
 /// # Errors
 /// An error of the listener.
-pub(crate) async fn serve(
+async fn serve(
     listener: TcpListener,
     handle: NodeHandle,
     peer: ExternalPeer,

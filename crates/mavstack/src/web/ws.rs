@@ -55,9 +55,10 @@ pub(crate) async fn upgrade(
         .on_upgrade(move |socket| client(socket, shared, filter, slot))
 }
 
-/// One client: frames whose name matches `filter` out, objects in. The client reads from
-/// the shared ring of the newest frames: one that falls behind loses the oldest (counted)
-/// and never holds the node or the other clients back.
+/// One client: frames whose name matches `filter` out, objects in, until either side closes
+/// or the node stops. The client reads from the shared ring of the newest frames: one that
+/// falls behind loses the oldest (counted) and never holds the node or the other clients
+/// back.
 async fn client(mut socket: WebSocket, shared: Arc<Shared>, filter: Regex, _slot: Slot) {
     let mut frames = shared.frames.subscribe();
     // Whether each message id passes the filter, decided once.
@@ -78,6 +79,7 @@ async fn client(mut socket: WebSocket, shared: Arc<Shared>, filter: Regex, _slot
                 }
                 Err(RecvError::Closed) => break,
             },
+            () = shared.node.closed() => break,
             incoming = socket.recv() => match incoming {
                 Some(Ok(Message::Text(text))) => {
                     let reply = receive(&shared, text.as_str()).await;
