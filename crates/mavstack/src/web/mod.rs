@@ -22,7 +22,8 @@
 //!
 //! Bounds: each WebSocket client reads from a ring of the newest frames (a client that falls
 //! behind loses the oldest, counted, and never holds the node back); at most
-//! [`WebOptions::max_clients`] WebSockets at once; request bodies up to
+//! [`WebOptions::max_clients`] WebSockets and [`WebOptions::max_connections`] connections at
+//! once; request bodies up to
 //! [`WebOptions::body_limit`]; with [`WebOptions::token`], every request must carry it
 //! (`Authorization: Bearer TOKEN`, or `?token=TOKEN` where a browser cannot set a header).
 //!
@@ -30,6 +31,7 @@
 
 mod api;
 pub mod json;
+mod limit;
 mod store;
 mod ws;
 
@@ -66,6 +68,9 @@ pub struct WebOptions {
     pub token: Option<String>,
     /// WebSocket clients at once (default 64); more are refused with 503.
     pub max_clients: usize,
+    /// Open connections at once, WebSockets included (default 128); more wait in the
+    /// listener's backlog until one closes.
+    pub max_connections: usize,
     /// Frames a WebSocket client may fall behind before it loses the oldest (default 1024).
     pub client_queue: usize,
     /// The largest request body in bytes (default 64 KiB); larger ones get 413.
@@ -80,6 +85,7 @@ impl Default for WebOptions {
         Self {
             token: None,
             max_clients: 64,
+            max_connections: 128,
             client_queue: 1024,
             body_limit: 64 * 1024,
             mapping: None,
@@ -297,7 +303,7 @@ async fn serve(
         tracing::info!("status page and mavlink2rest API on http://{addr}/");
     }
     let stop = handle.clone();
-    axum::serve(listener, app)
+    axum::serve(limit::Limited::new(listener, options.max_connections), app)
         .with_graceful_shutdown(async move { stop.closed().await })
         .await
 }
