@@ -27,7 +27,7 @@ enum Escape {
 
 /// Turns a shell's bytes into text that cannot move a terminal's cursor or colour it:
 /// escape sequences (`ESC [ ... final`, and ESC with one byte) dropped, carriage returns and
-/// NULs dropped, other control characters U+FFFD, tabs and line feeds kept, UTF-8 decoded
+/// NULs dropped, other control characters (C1 ones, encoded in UTF-8, too) U+FFFD, tabs and line feeds kept, UTF-8 decoded
 /// across chunk boundaries (a broken sequence is U+FFFD).
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Cleaner {
@@ -72,7 +72,11 @@ impl Cleaner {
                 self.utf8.push(b);
                 if self.utf8.len() == self.need {
                     match core::str::from_utf8(&self.utf8) {
-                        Ok(s) => s.chars().for_each(&mut *out),
+                        // C1 controls (U+0080-U+009F, 8-bit CSI among them) too.
+                        Ok(s) => s
+                            .chars()
+                            .map(|c| if c.is_control() { '\u{FFFD}' } else { c })
+                            .for_each(&mut *out),
                         Err(_) => out('\u{FFFD}'),
                     }
                     self.utf8.clear();
@@ -271,6 +275,9 @@ mod tests {
         assert_eq!(t.text(), "red\u{fffd} é \u{fffd}\u{fffd}");
         let t = fed("x", &[b"x\n\xe2\x82"]);
         assert_eq!(t.text(), "\u{fffd}");
+        // U+009B, a CSI of its own to some terminals.
+        let t = fed("x", &[b"x\n\xc2\x9b2J"]);
+        assert_eq!(t.text(), "\u{fffd}2J");
     }
 
     #[test]
