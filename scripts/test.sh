@@ -79,6 +79,8 @@ example mission_upload "uploaded 6 items from the built-in plan" "read back 6 it
 example companion "companion ← ATTITUDE from 1/1" "ground station ← MAV_SYS_ID = 1 (through the companion)" \
     "companion link fc" "companion link gcs"
 example vehicle_in_test "RTL_ALT set to 3000, arming MAV_RESULT_ACCEPTED"
+example offboard "px4 simulator found" "took off: " "offboard: 3 m/s north" \
+    "now Hold" "landed and disarmed"
 
 step "fleet test: 1,000 vehicles through their bridges and mosquitto (about 60 s)"
 # tests-interop/fleet_test.py --check: every command answered (with telemetry and without),
