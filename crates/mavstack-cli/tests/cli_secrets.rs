@@ -85,6 +85,8 @@ fn no_command_prints_a_signing_key() {
     std::fs::write(&plan, "QGC WPL 110\n").expect("writes");
     let params = dir.path().join("p.parm");
     std::fs::write(&params, "RTL_ALT 1500\n").expect("writes");
+    let rtcm = dir.path().join("base.rtcm3");
+    std::fs::write(&rtcm, [0xD3u8, 0, 0, 0x47, 0xEA, 0x4B]).expect("writes");
     let link = || format!("udpin:127.0.0.1:{}?key={KEY}", free_port());
     let gcs = |words: &[&str]| {
         let mut args: Vec<String> = words.iter().map(|w| (*w).to_owned()).collect();
@@ -100,6 +102,7 @@ fn no_command_prints_a_signing_key() {
     let tlog = tlog.display().to_string();
     let plan = plan.display().to_string();
     let params = params.display().to_string();
+    let rtcm = rtcm.display().to_string();
     let cases = vec![
         gcs(&["param", "list", "LINK"]),
         gcs(&["param", "get", "LINK", "RTL_ALT"]),
@@ -114,6 +117,8 @@ fn no_command_prints_a_signing_key() {
         gcs(&["log", "download", "LINK", "--latest"]),
         gcs(&["signing", "setup", "LINK", "--key", KEY]),
         gcs(&["signing", "remove", "LINK", "--key", KEY]),
+        gcs(&["shell", "LINK", "--command", "ver all"]),
+        gcs(&["rtk", "LINK", "--from", &rtcm]),
         gcs(&["probe", "LINK"]),
         Case {
             names_link: false,
