@@ -140,3 +140,33 @@ impl Drop for ManualSession {
         self.stream.abort();
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sticks_out_of_range_are_refused_and_scaled_to_the_protocols_units() {
+        let wild = Sticks {
+            x: 1.5,
+            ..Sticks::CENTRED
+        };
+        assert!(matches!(wild.check(), Err(SystemError::Invalid(m)) if m.contains('x')));
+        let nan = Sticks {
+            z: f32::NAN,
+            ..Sticks::CENTRED
+        };
+        assert!(nan.check().is_err());
+        let MavMessage::ManualControl(m) = Sticks {
+            x: 0.5,
+            y: -1.0,
+            z: 0.5,
+            r: 0.0,
+            buttons: 3,
+        }
+        .message(1) else {
+            panic!("MANUAL_CONTROL");
+        };
+        assert_eq!((m.x, m.y, m.z, m.r, m.buttons), (500, -1000, 500, 0, 3));
+    }
+}

@@ -517,3 +517,78 @@ impl Drop for OffboardSession {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn setpoints_that_cannot_be_flown_are_refused_by_name() {
+        let nan = Setpoint::VelocityNed {
+            north: f32::NAN,
+            east: 0.0,
+            down: 0.0,
+            yaw_deg: None,
+        };
+        assert!(matches!(nan.check(), Err(SystemError::Invalid(m)) if m.contains("north")));
+        let fast = Setpoint::VelocityBody {
+            forward: 0.0,
+            right: 101.0,
+            down: 0.0,
+            yaw_rate_dps: 0.0,
+        };
+        assert!(matches!(fast.check(), Err(SystemError::Invalid(m)) if m.contains("right")));
+        let tilted = Setpoint::Attitude {
+            roll_deg: 0.0,
+            pitch_deg: 95.0,
+            yaw_deg: 0.0,
+            thrust: 0.5,
+        };
+        assert!(matches!(tilted.check(), Err(SystemError::Invalid(m)) if m.contains("pitch")));
+        let thrust = Setpoint::Attitude {
+            roll_deg: 0.0,
+            pitch_deg: 0.0,
+            yaw_deg: 0.0,
+            thrust: 1.5,
+        };
+        assert!(matches!(thrust.check(), Err(SystemError::Invalid(m)) if m.contains("thrust")));
+        assert!(Setpoint::STILL.check().is_ok());
+    }
+
+    #[test]
+    fn each_setpoint_ignores_what_it_does_not_set() {
+        use PositionTargetTypemask as M;
+        let v = Setpoint::VelocityNed {
+            north: 3.0,
+            east: 0.0,
+            down: 0.0,
+            yaw_deg: None,
+        };
+        let MavMessage::SetPositionTargetLocalNed(m) = v.message((1, 1), 0) else {
+            panic!("a local setpoint");
+        };
+        assert!(m.type_mask.contains(M::X_IGNORE | M::YAW_IGNORE));
+        assert!(!m.type_mask.contains(M::VX_IGNORE));
+        assert_eq!((m.vx, m.coordinate_frame), (3.0, MavFrame::LOCAL_NED));
+        let p = Setpoint::PositionNed {
+            north: 0.0,
+            east: 10.0,
+            down: -10.0,
+            yaw_deg: Some(90.0),
+        };
+        let MavMessage::SetPositionTargetLocalNed(m) = p.message((1, 1), 0) else {
+            panic!("a local setpoint");
+        };
+        assert!(m.type_mask.contains(M::VX_IGNORE) && !m.type_mask.contains(M::YAW_IGNORE));
+        assert!((m.yaw - core::f32::consts::FRAC_PI_2).abs() < 1e-6);
+    }
+
+    #[test]
+    fn quaternions_of_level_and_of_a_quarter_turn() {
+        assert_eq!(quaternion(0.0, 0.0, 0.0), [1.0, 0.0, 0.0, 0.0]);
+        let q = quaternion(0.0, 0.0, core::f32::consts::FRAC_PI_2);
+        let half = core::f32::consts::FRAC_1_SQRT_2;
+        assert!((q[0] - half).abs() < 1e-6 && (q[3] - half).abs() < 1e-6);
+        assert!(q[1].abs() < 1e-6 && q[2].abs() < 1e-6);
+    }
+}
