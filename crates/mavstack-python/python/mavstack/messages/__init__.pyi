@@ -2541,6 +2541,36 @@ class TypedReceiver:
         self,
         condition: Optional[str] = ...,
         *,
+        type: Literal["AVAILABLE_MODES"],
+        blocking: bool = ...,
+        timeout: Optional[float] = ...,
+    ) -> Optional[_d.MAVLink_available_modes_message]: ...
+
+    @overload
+    def recv_match(
+        self,
+        condition: Optional[str] = ...,
+        *,
+        type: Literal["CURRENT_MODE"],
+        blocking: bool = ...,
+        timeout: Optional[float] = ...,
+    ) -> Optional[_d.MAVLink_current_mode_message]: ...
+
+    @overload
+    def recv_match(
+        self,
+        condition: Optional[str] = ...,
+        *,
+        type: Literal["AVAILABLE_MODES_MONITOR"],
+        blocking: bool = ...,
+        timeout: Optional[float] = ...,
+    ) -> Optional[_d.MAVLink_available_modes_monitor_message]: ...
+
+    @overload
+    def recv_match(
+        self,
+        condition: Optional[str] = ...,
+        *,
         type: Literal["WHEEL_DISTANCE"],
         blocking: bool = ...,
         timeout: Optional[float] = ...,
@@ -3860,6 +3890,15 @@ class TypedLatest:
     def __getitem__(self, name: Literal["RESPONSE_EVENT_ERROR"], /) -> _d.MAVLink_response_event_error_message: ...
 
     @overload
+    def __getitem__(self, name: Literal["AVAILABLE_MODES"], /) -> _d.MAVLink_available_modes_message: ...
+
+    @overload
+    def __getitem__(self, name: Literal["CURRENT_MODE"], /) -> _d.MAVLink_current_mode_message: ...
+
+    @overload
+    def __getitem__(self, name: Literal["AVAILABLE_MODES_MONITOR"], /) -> _d.MAVLink_available_modes_monitor_message: ...
+
+    @overload
     def __getitem__(self, name: Literal["WHEEL_DISTANCE"], /) -> _d.MAVLink_wheel_distance_message: ...
 
     @overload
@@ -4786,6 +4825,15 @@ class TypedMessages(Dict[str, MAVLinkMessage]):
 
     @overload
     def __getitem__(self, name: Literal["RESPONSE_EVENT_ERROR"], /) -> _d.MAVLink_response_event_error_message: ...
+
+    @overload
+    def __getitem__(self, name: Literal["AVAILABLE_MODES"], /) -> _d.MAVLink_available_modes_message: ...
+
+    @overload
+    def __getitem__(self, name: Literal["CURRENT_MODE"], /) -> _d.MAVLink_current_mode_message: ...
+
+    @overload
+    def __getitem__(self, name: Literal["AVAILABLE_MODES_MONITOR"], /) -> _d.MAVLink_available_modes_monitor_message: ...
 
     @overload
     def __getitem__(self, name: Literal["WHEEL_DISTANCE"], /) -> _d.MAVLink_wheel_distance_message: ...

@@ -4355,6 +4355,41 @@ class MAVLink_response_event_error_message(MAVLinkMessage):
     """Why. (enum MAV_EVENT_ERROR_REASON)"""
 
 
+class MAVLink_available_modes_message(MAVLinkMessage):
+    """One of the flight modes the vehicle has; sent for each on request (MAV_CMD_REQUEST_MESSAGE, param2 0 for all, else the index). (id 435)"""
+
+    number_modes: int
+    """How many modes the vehicle has."""
+    mode_index: int
+    """This mode's index, from 1."""
+    standard_mode: int
+    """The standard mode it is, or 0. (enum MAV_STANDARD_MODE)"""
+    custom_mode: int
+    """The autopilot's own number for it (HEARTBEAT's custom_mode)."""
+    properties: int
+    """What kind of mode it is. (enum MAV_MODE_PROPERTY)"""
+    mode_name: str
+    """Its name, NUL-terminated (may be empty for a standard mode)."""
+
+
+class MAVLink_current_mode_message(MAVLinkMessage):
+    """The mode the vehicle is in; sent on every change and at a low rate. (id 436)"""
+
+    standard_mode: int
+    """The standard mode it is, or 0. (enum MAV_STANDARD_MODE)"""
+    custom_mode: int
+    """The autopilot's own number for it."""
+    intended_custom_mode: int
+    """The mode last asked for (it differs after a failsafe); 0 when not known."""
+
+
+class MAVLink_available_modes_monitor_message(MAVLinkMessage):
+    """A new sequence number says the list of AVAILABLE_MODES changed: ask for it again. (id 437)"""
+
+    seq: int
+    """Rises by one with every change of the list."""
+
+
 class MAVLink_wheel_distance_message(MAVLinkMessage):
     """Cumulative distance traveled for each reported wheel. (id 9000)"""
 
@@ -10284,6 +10319,55 @@ class MAVLink(_standard.MAVLink):
         force_mavlink1: bool = ...,
     ) -> None:
         """RESPONSE_EVENT_ERROR (id 413), fields in XML order."""
+        ...
+
+    def available_modes_encode(
+        self,
+        number_modes: int,
+        mode_index: int,
+        standard_mode: int,
+        custom_mode: int,
+        properties: int,
+        mode_name: Union[str, bytes],
+    ) -> MAVLink_available_modes_message:
+        """AVAILABLE_MODES (id 435), fields in XML order."""
+        ...
+    def available_modes_send(
+        self,
+        number_modes: int,
+        mode_index: int,
+        standard_mode: int,
+        custom_mode: int,
+        properties: int,
+        mode_name: Union[str, bytes],
+        force_mavlink1: bool = ...,
+    ) -> None:
+        """AVAILABLE_MODES (id 435), fields in XML order."""
+        ...
+
+    def current_mode_encode(
+        self,
+        standard_mode: int,
+        custom_mode: int,
+        intended_custom_mode: int,
+    ) -> MAVLink_current_mode_message:
+        """CURRENT_MODE (id 436), fields in XML order."""
+        ...
+    def current_mode_send(
+        self,
+        standard_mode: int,
+        custom_mode: int,
+        intended_custom_mode: int,
+        force_mavlink1: bool = ...,
+    ) -> None:
+        """CURRENT_MODE (id 436), fields in XML order."""
+        ...
+
+    def available_modes_monitor_encode(self, seq: int) -> MAVLink_available_modes_monitor_message:
+        """AVAILABLE_MODES_MONITOR (id 437), fields in XML order."""
+        ...
+    def available_modes_monitor_send(self, seq: int, force_mavlink1: bool = ...) -> None:
+        """AVAILABLE_MODES_MONITOR (id 437), fields in XML order."""
         ...
 
     def wheel_distance_encode(
