@@ -596,3 +596,23 @@ fn status_page_in_chromium_shows_the_vehicle_flown_through_the_api() {
         "{out}"
     );
 }
+
+#[test]
+fn a_non_loopback_address_needs_a_token_or_http_public() {
+    for args in [
+        &["--http", "0.0.0.0:0"][..],
+        &["--http", "127.0.0.1:0", "--http-token", ""][..],
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_mavstack"))
+            .args(["router", "udpin:127.0.0.1:0"])
+            .args(args)
+            .output()
+            .expect("runs");
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("--http"), "{err}");
+        if args[1] == "0.0.0.0:0" {
+            assert!(err.contains("--http-token"), "{err}");
+        }
+    }
+}
