@@ -133,6 +133,7 @@ pub mod command;
 pub mod ftp;
 #[cfg(feature = "fuzzing")]
 mod fuzzing;
+pub mod gimbal;
 pub mod heartbeat;
 pub mod log_transfer;
 pub mod mission;
