@@ -144,11 +144,11 @@ fn list_fetch_phases_are_types() {
         panic!()
     };
     assert_eq!((col.count(), col.missing()), (10, 2));
-    // The inactivity timer re-requests exactly the gaps, by index. It adapts to the link:
-    // an instant round trip and a burst with no gaps give 4 × the 20 ms floor, not the
-    // 2 s ceiling.
+    // The inactivity timer re-requests exactly the gaps, by index. It adapts to the
+    // stream: a burst with no gaps (the last index came) gives the 20 ms floor, not the 2 s
+    // ceiling.
     let t = c.poll_timeout().unwrap();
-    assert_eq!(t, T0 + Duration::from_millis(80));
+    assert_eq!(t, T0 + Duration::from_millis(20));
     c.handle_timeout(t);
     let asks: Vec<i16> = core::iter::from_fn(|| c.poll_transmit())
         .map(|o| match o.message {

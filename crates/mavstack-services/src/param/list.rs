@@ -62,11 +62,16 @@ pub struct Collecting {
 }
 
 impl Collecting {
-    /// How long the stream may pause before its gaps are re-requested: long enough for
-    /// 32 of its usual gaps and a round trip, at most [`ParamConfig::list_timeout`].
+    /// How long the stream may pause before its gaps are re-requested: 32 of its usual
+    /// gaps (a vehicle sends its table in bursts), only 4 once the last index came (the
+    /// table goes out in index order: nothing more of the stream is on its way), at least
+    /// [`Rtt::FLOOR`], at most [`ParamConfig::list_timeout`] (also before a gap is known).
+    /// The round trip does not count: the stream's values are spaced by the sender, and a
+    /// pause that waited for four round trips cost seconds on a slow link.
     fn stream_wait(&self, config: &ParamConfig) -> Duration {
-        let gaps = Duration::from_micros(self.gap_us.map_or(u64::MAX, |g| g.saturating_mul(32)));
-        gaps.max(4 * self.rtt.timeout(config.list_timeout))
+        let ended = self.values.last().is_some_and(Option::is_some);
+        let gaps: u64 = if ended { 4 } else { 32 };
+        Duration::from_micros(self.gap_us.map_or(u64::MAX, |g| g.saturating_mul(gaps)))
             .max(Rtt::FLOOR)
             .min(config.list_timeout)
     }
