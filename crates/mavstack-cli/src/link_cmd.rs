@@ -9,8 +9,11 @@ use std::sync::Arc;
 use anyhow::{Context as _, anyhow};
 use clap::Args;
 use core::time::Duration;
+use mavstack::modes::Flavour;
+use mavstack_core::Message as _;
 use mavstack_core::parse::{Item, SliceParser};
 use mavstack_core::wire::Frame;
+use mavstack_dialects::common::{Heartbeat, MavAutopilot, MavModeFlag};
 use mavstack_transport::conn::FileFormat;
 use mavstack_transport::frame::FrameStats;
 use mavstack_transport::{
@@ -294,6 +297,8 @@ struct Row {
 /// The messages seen, by (sysid, compid, msgid).
 struct Table {
     rows: BTreeMap<(u8, u8, u32), Row>,
+    /// Each autopilot's mode by name and whether it is armed, from its latest HEARTBEAT.
+    states: BTreeMap<(u8, u8), (String, bool)>,
     drawn: Instant,
     terminal: bool,
 }
@@ -302,6 +307,7 @@ impl Table {
     fn new() -> Self {
         Self {
             rows: BTreeMap::new(),
+            states: BTreeMap::new(),
             drawn: Instant::now(),
             terminal: io::stdout().is_terminal(),
         }
@@ -314,6 +320,17 @@ impl Table {
             .or_default();
         row.count += 1;
         row.version = frame.version().number();
+        if frame.msg_id() == Heartbeat::ID {
+            let hb = Heartbeat::decode(frame.payload());
+            if hb.autopilot != MavAutopilot::INVALID {
+                let mode = Flavour::of(hb.autopilot, hb.r#type)
+                    .and_then(|f| mavstack::modes::name_of(f, hb.custom_mode))
+                    .map_or_else(|| format!("custom mode {}", hb.custom_mode), str::to_owned);
+                let armed = hb.base_mode.contains(MavModeFlag::SAFETY_ARMED);
+                self.states
+                    .insert((frame.sysid(), frame.compid()), (mode, armed));
+            }
+        }
     }
 
     fn draw(&mut self, dialect: &Dialect, out: &mut impl io::Write) -> io::Result<()> {
@@ -322,6 +339,12 @@ impl Table {
         let mut text = String::new();
         if self.terminal {
             text.push_str("\x1b[H\x1b[2J");
+        }
+        for (&(sysid, compid), (mode, armed)) in &self.states {
+            text.push_str(&format!(
+                "{sysid:>5} {compid:>6}  mode {mode}, {}\n",
+                if *armed { "armed" } else { "disarmed" }
+            ));
         }
         text.push_str(
             "sysid compid  msgid name                              v     count    rate/s\n",

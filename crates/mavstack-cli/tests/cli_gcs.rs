@@ -500,3 +500,33 @@ fn listen_asks_the_vehicle_for_the_rates_given() {
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("--rate"));
 }
+
+/// `listen --table` names each autopilot's mode and says whether it is armed, from its
+/// HEARTBEAT, in the autopilot's own names.
+#[test]
+fn listen_table_names_the_mode() {
+    for (autopilot, mode) in [("ardupilot", "STABILIZE"), ("px4", "AUTO.LOITER")] {
+        let port = free_port();
+        // The vehicle sends to the listener (a listener on udpout would never be heard).
+        let mut vehicle = Command::new(env!("CARGO_BIN_EXE_mavstack"))
+            .args(["vehicle", &format!("udpout:127.0.0.1:{port}")])
+            .args(["--autopilot", autopilot])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("the vehicle starts");
+        let out = Command::new(env!("CARGO_BIN_EXE_mavstack"))
+            .args(["listen", &format!("udpin:127.0.0.1:{port}"), "--table"])
+            // Until two HEARTBEATs came, however long that takes.
+            .args(["--filter", "HEARTBEAT", "--count", "2"])
+            .output()
+            .expect("mavstack runs");
+        let _ = vehicle.kill();
+        let _ = vehicle.wait();
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            text.contains(&format!("mode {mode}, disarmed")),
+            "{autopilot}: {text}"
+        );
+    }
+}
