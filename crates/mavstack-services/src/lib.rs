@@ -48,6 +48,8 @@
 //! | [`log_transfer`] | LOG_REQUEST_LIST, LOG_ENTRY, LOG_REQUEST_DATA, LOG_DATA, LOG_ERASE, LOG_REQUEST_END | [`log_transfer::LogClient`] (list, download with gaps asked again, erase) | [`log_transfer::LogServer`] over a [`log_transfer::LogStore`] ([`log_transfer::MemoryLogs`]), paced per tick |
 //! | [`plan`] | — | [`plan::to_vehicle`], [`plan::from_vehicle`], [`plan::same`]: a plan file's mission as each autopilot stores it (ArduPilot's home at 0, PX4's none) | — |
 //! | [`rtcm`] | GPS_RTCM_DATA | [`rtcm::RtcmSender`] (a message in up to 4 fragments, a sequence id each), [`rtcm::Deframer`] (RTCM3 frames in a byte stream, by their CRC-24Q) | [`rtcm::Reassembler`] |
+//! | [`gimbal`] | GIMBAL_MANAGER_*, GIMBAL_DEVICE_*, DO_GIMBAL_MANAGER_PITCHYAW / _CONFIGURE, DO_SET_ROI_LOCATION / _NONE | [`gimbal::GimbalDiscovery`], [`gimbal::GimbalInfo`] (the commands, checked against the manager's limits), [`gimbal::Attitude`] (quaternion → degrees in the frame the flags say) | [`gimbal::GimbalManager`] (a manager for a device its owner drives) |
+//! | [`camera`] | CAMERA_*, STORAGE_INFORMATION, VIDEO_STREAM_*, IMAGE_* / VIDEO_* commands, PARAM_EXT_* | [`camera::PhotoCapture`] (a photo to its CAMERA_IMAGE_CAPTURED, a lost one asked for again), [`camera::ParamExtClient`], [`camera::CameraDefinition`] (definition files, bounded, positioned errors) | [`camera::CameraServer`], [`camera::ParamExtServer`] |
 //! | [`shell`] | SERIAL_CONTROL | [`shell::ShellClient`] (a session with the SHELL device: 70-byte chunks, polling), [`shell::ShellCommand`] (one command line, its output) | — |
 //! | [`statustext`] | STATUSTEXT | [`statustext::Lines`] (chunks put together, text made safe to show) | — |
 //! | [`timesync`] | TIMESYNC | [`timesync::Timesync`] (estimates the offset) | the same type answers requests |
@@ -129,6 +131,7 @@ extern crate alloc;
 #[cfg(feature = "std")]
 extern crate std;
 
+pub mod camera;
 pub mod command;
 pub mod ftp;
 #[cfg(feature = "fuzzing")]

@@ -184,9 +184,10 @@ impl Attitude {
             YawFrame::Vehicle => (own, other),
             YawFrame::Earth => (other, own),
         };
+        // A rate too large for f32 in degrees is as unknown as NaN.
         let dps = |r: f32| {
-            let d = f64::from(r) * DEG_PER_RAD;
-            d.is_finite().then_some(d as f32)
+            let d = (f64::from(r) * DEG_PER_RAD) as f32;
+            d.is_finite().then_some(d)
         };
         Some(Self {
             euler,
