@@ -125,6 +125,8 @@ def main():
                 time.sleep(0.5)
             time.sleep(a.linger)
             if a.artifacts:
+                # A fresh checkout has no artifacts directory until a test makes it.
+                os.makedirs(a.artifacts, exist_ok=True)
                 driver.screenshot(os.path.join(a.artifacts, "vehicle-page.png"))
             if not card:
                 raise RuntimeError("the page shows no vehicle 1/1")
