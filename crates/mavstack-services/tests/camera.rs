@@ -586,3 +586,85 @@ fn requests_for_the_camera_through_a_command_client() {
     });
     assert!(done.unwrap().is_ok());
 }
+
+/// A camera that refuses REQUEST_MESSAGE for everything but CAMERA_INFORMATION and
+/// CAMERA_CAPTURE_STATUS, as MAVSDK's camera server does.
+struct OldCamera(CameraServer);
+
+impl Service for OldCamera {
+    fn handle_message(&mut self, now: Instant, from: Address, message: &MavMessage) -> bool {
+        if let MavMessage::CommandLong(c) = message
+            && c.command == MavCmd::REQUEST_MESSAGE
+            && !matches!(c.param1 as u32, 259 | 262)
+        {
+            let refused = CommandLong {
+                param1: 999_999.0,
+                ..*c
+            };
+            return self
+                .0
+                .handle_message(now, from, &MavMessage::CommandLong(refused));
+        }
+        self.0.handle_message(now, from, message)
+    }
+    fn handle_timeout(&mut self, now: Instant) {
+        self.0.handle_timeout(now);
+    }
+    fn poll_transmit(&mut self) -> Option<Outgoing> {
+        self.0.poll_transmit()
+    }
+    fn poll_timeout(&self) -> Option<Instant> {
+        self.0.poll_timeout()
+    }
+}
+
+#[test]
+fn messages_asked_the_older_way_where_request_message_is_refused() {
+    use mavstack_services::camera::MessageFetch;
+    for (id, legacy) in [(261, true), (260, true), (262, false)] {
+        let fetch = MessageFetch::start(T0, GCS, CAMERA, id, 0.0, Default::default());
+        let mut pair = Pair::new(
+            fetch,
+            GCS,
+            OldCamera(CameraServer::new(T0, config())),
+            CAMERA,
+            Knobs::clean(),
+            10,
+        );
+        let mut result = None;
+        pair.drive_until(Duration::from_secs(10), |f, _, _| {
+            result = f.poll_result();
+            result.is_some()
+        });
+        let got = result.unwrap().unwrap();
+        assert_eq!(got.len(), 1, "{id}");
+        assert_eq!(mavstack_core::MessageSet::id(&got[0]), id);
+        // The older command is one more exchange.
+        let exchanges = if legacy { 4 } else { 2 };
+        assert_eq!(pair.ab.sent, exchanges / 2, "{id}");
+    }
+}
+
+#[test]
+fn cameras_of_a_system_found() {
+    use mavstack_services::camera::CameraDiscovery;
+    use mavstack_services::gimbal::DiscoveryConfig;
+    let discovery = CameraDiscovery::new(T0, 1, &[1, 100], DiscoveryConfig::default());
+    let mut pair = Pair::new(
+        discovery,
+        GCS,
+        CameraServer::new(T0, config()),
+        CAMERA,
+        Knobs::clean(),
+        11,
+    );
+    let mut found = None;
+    pair.drive_until(Duration::from_secs(10), |d, _, _| {
+        found = d.poll_result();
+        found.is_some()
+    });
+    let found = found.unwrap();
+    assert_eq!(found.len(), 1);
+    assert_eq!(found[0].component, CAMERA);
+    assert_eq!(found[0].model, "Simulated camera");
+}

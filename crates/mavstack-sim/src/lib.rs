@@ -33,6 +33,7 @@ pub mod params;
 
 mod control;
 mod craft;
+mod gimbal;
 mod nsh;
 mod vehicle;
 

@@ -12,6 +12,7 @@ use mavstack_dialects::common::{
 use mavstack_services::command::CommandServer;
 use mavstack_services::ftp::param_pck::TableFile;
 use mavstack_services::ftp::{DirBackend, FtpServer, Overlay, ServerConfig};
+use mavstack_services::gimbal::VehicleState;
 use mavstack_services::log_transfer::{LogServer, LogServerEvent};
 use mavstack_services::mission::{
     MissionConfig, MissionServer, MissionServerEvent, StrayItems, UploadPacing,
@@ -25,6 +26,7 @@ use mavstack_services::{Address, Outgoing, Service};
 use crate::control::Control;
 use crate::craft::{self, Boot, Craft};
 use crate::flight::{Flight, FlightEvent, HOME_AMSL, Tuning};
+use crate::gimbal::SimGimbal;
 use crate::nsh::Nsh;
 use crate::{Autopilot, SimConfig, events, logs};
 
@@ -108,6 +110,8 @@ pub struct Vehicle {
     nsh: Option<Nsh>,
     /// RTK corrections received in GPS_RTCM_DATA.
     rtcm: Reassembler,
+    /// The gimbal (its manager in the autopilot's component).
+    gimbal: SimGimbal,
 }
 
 impl Vehicle {
@@ -184,6 +188,7 @@ impl Vehicle {
             text_id: 0,
             nsh: px4.then(Nsh::default),
             rtcm: Reassembler::default(),
+            gimbal: SimGimbal::new(now, config.own),
         };
         vehicle.retune();
         vehicle.restore_home_item();
@@ -275,7 +280,15 @@ impl Vehicle {
             }
         }
         self.companion(from, message);
-        self.commands.handle_message(now, from, message);
+        // The gimbal manager's commands are its own: the autopilot does not answer them too.
+        let gimbals = self.gimbal.handle_message(now, from, message)
+            && matches!(
+                message,
+                MavMessage::CommandLong(_) | MavMessage::CommandInt(_)
+            );
+        if !gimbals {
+            self.commands.handle_message(now, from, message);
+        }
         self.params.handle_message(now, from, message);
         self.missions.handle_message(now, from, message);
         self.timesync.handle_message(now, from, message);
@@ -295,6 +308,15 @@ impl Vehicle {
             let craft = self.commands.handler_mut();
             craft.control.step(at, &mut craft.flight);
             craft.flight.step(STEP.as_secs_f64());
+            let (position, home) = (craft.flight.position(), craft.flight.home());
+            let vehicle = VehicleState {
+                lat: position.lat,
+                lon: position.lon,
+                alt_amsl: f64::from(HOME_AMSL + position.alt),
+                heading_deg: craft.flight.heading().to_degrees(),
+            };
+            let home_amsl = f64::from(HOME_AMSL + home.alt);
+            self.gimbal.step(at, STEP, vehicle, home_amsl);
             self.next_step += STEP;
         }
         self.commands.handle_timeout(now);
@@ -345,6 +367,9 @@ impl Vehicle {
     /// Carries what one part did over to the others, and queues what is due.
     fn settle(&mut self, now: Instant) {
         self.apply_uploads();
+        while let Some(line) = self.gimbal.poll_log() {
+            self.log.push_back(line);
+        }
         while let Some(e) = self.params.poll_event() {
             if let ParamServerEvent::Changed { from, name, value } = e {
                 self.log
@@ -539,6 +564,7 @@ impl Vehicle {
             .or_else(|| self.files.as_mut().and_then(Service::poll_transmit))
             .or_else(|| self.logs.poll_transmit())
             .or_else(|| self.nsh.as_mut().and_then(Nsh::poll_transmit))
+            .or_else(|| self.gimbal.poll_transmit())
     }
 
     /// When [`Vehicle::handle_timeout`] is next due.
@@ -568,6 +594,11 @@ impl Vehicle {
     pub fn greeting(&self, now: Instant) -> Option<MavMessage> {
         (now.saturating_duration_since(self.started) >= GREETING_AFTER)
             .then(|| MavMessage::Heartbeat(self.commands.handler().heartbeat()))
+    }
+
+    /// Where its gimbal looks: pitch and yaw from the vehicle's nose, degrees.
+    pub fn gimbal_angles(&self) -> (f32, f32) {
+        self.gimbal.angles()
     }
 
     /// The parameter table's size.

@@ -135,6 +135,8 @@ pub mod router_conf;
 #[cfg(feature = "services")]
 pub mod serve;
 #[cfg(feature = "sim")]
+pub mod sim_camera;
+#[cfg(feature = "sim")]
 pub mod sim_vehicle;
 #[cfg(feature = "http")]
 pub mod status;

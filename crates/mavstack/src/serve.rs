@@ -32,6 +32,19 @@
 //! requester's address for answers without target fields); broadcasts go on every link.
 //! Handshake requests are the links' own ([`LinkRole::Vehicle`](crate::router::LinkRole)):
 //! the service never sees them.
+//!
+//! Payloads a companion computer serves as components of their own: [`Camera`] (the camera
+//! protocol, its owner taking the photos) and [`Gimbal`] (a gimbal manager in front of a
+//! device its owner drives). A component of its own is a node of its own; [`joined`] links
+//! it to another node in the same process (the camera of `mavstack vehicle --camera`).
+
+mod camera;
+mod gimbal;
+mod joined;
+
+pub use camera::{Camera, DEFINITION_PATH};
+pub use gimbal::Gimbal;
+pub use joined::joined;
 
 use core::time::Duration;
 

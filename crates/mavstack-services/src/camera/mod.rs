@@ -18,14 +18,16 @@
 //!  REQUEST_MESSAGE(CAMERA_IMAGE_CAPTURED, i) ─►  CAMERA_IMAGE_CAPTURED(index i) again
 //! ```
 //!
-//! **Client**: [`CameraInfo`] and the other message views; [`PhotoCapture`], one photo to
-//! its CAMERA_IMAGE_CAPTURED; [`ParamExtClient`] for the settings; [`CameraDefinition`] reads
+//! **Client**: [`CameraDiscovery`] finds a system's cameras; [`CameraInfo`] and the other
+//! message views; [`MessageFetch`] asks for one of a camera's messages (falling back to the
+//! older commands); [`PhotoCapture`], one photo to its CAMERA_IMAGE_CAPTURED; [`ParamExtClient`] for the settings; [`CameraDefinition`] reads
 //! a definition file (bounded, with positioned errors) and checks values against it.
 //! **Server**: [`CameraServer`], a camera that asks its owner to take each photo and record,
 //! and [`ParamExtServer`] for its settings.
 
 mod capture;
 mod definition;
+mod discovery;
 mod messages;
 mod param_ext;
 mod server;
@@ -39,6 +41,7 @@ pub use definition::{
     CameraDefinition, DefinitionError, DefinitionErrorKind, MAX_DEFINITION_LEN, MAX_OPTIONS,
     MAX_SETTINGS, OptionRange, Setting, SettingError, SettingOption,
 };
+pub use discovery::{CameraDiscovery, MessageFetch, legacy_request};
 pub use messages::{
     CameraInfo, CaptureStatus, ImageCaptured, StorageInfo, VideoStream, firmware_version, mode_name,
 };

@@ -9,9 +9,10 @@ use core::time::Duration;
 use mavstack_core::Message as _;
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::{
-    CameraCaptureStatus, CameraImageCaptured, CameraInformation, CameraMode, CameraSettings,
-    Heartbeat, MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult, MavState, MavType,
-    StorageInformation, VideoStreamInformation, VideoStreamStatus, VideoStreamStatusFlags,
+    CameraCapFlags, CameraCaptureStatus, CameraImageCaptured, CameraInformation, CameraMode,
+    CameraSettings, Heartbeat, MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult, MavState,
+    MavType, StorageInformation, StorageStatus, StorageType, VideoStreamInformation,
+    VideoStreamStatus, VideoStreamStatusFlags,
 };
 
 use super::definition::CameraDefinition;
@@ -43,6 +44,47 @@ pub struct CameraConfig {
     /// How long its owner may take to take a photo before the photo counts as failed
     /// (default 5 s).
     pub photo_timeout: Duration,
+}
+
+impl CameraConfig {
+    /// A photo and video camera at `own` called `vendor` `model`: firmware unknown,
+    /// one storage of `storage_mib` MiB, no video stream, no definition, its own HEARTBEAT.
+    #[must_use]
+    pub fn new(own: Address, vendor: &str, model: &str, storage_mib: f32) -> Self {
+        let flags = CameraCapFlags::CAPTURE_IMAGE.0
+            | CameraCapFlags::CAPTURE_VIDEO.0
+            | CameraCapFlags::HAS_MODES.0
+            | CameraCapFlags::CAN_CAPTURE_IMAGE_IN_VIDEO_MODE.0;
+        Self {
+            info: CameraInfo {
+                component: own,
+                vendor: String::from(vendor),
+                model: String::from(model),
+                firmware: None,
+                focal_length_mm: None,
+                sensor_mm: None,
+                resolution: None,
+                flags: CameraCapFlags(flags),
+                definition_uri: String::new(),
+                definition_version: 0,
+                gimbal_device_id: 0,
+            },
+            storage: StorageInfo {
+                id: 1,
+                count: 1,
+                status: StorageStatus::READY,
+                total_mib: storage_mib,
+                used_mib: 0.0,
+                available_mib: storage_mib,
+                kind: StorageType::OTHER,
+                name: String::from("files"),
+            },
+            streams: Vec::new(),
+            definition: None,
+            heartbeat: true,
+            photo_timeout: Duration::from_secs(5),
+        }
+    }
 }
 
 /// A photo the owner is to take ([`CameraEvent::TakePhoto`]), then report with

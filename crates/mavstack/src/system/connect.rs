@@ -259,6 +259,52 @@ impl System {
         };
         Ok(system)
     }
+
+    /// Another component of the same system (a camera, a gimbal manager), reached over the
+    /// same link: a handle of its own, with its own state and one operation of each service
+    /// at a time of its own. Its autopilot and type are those of its HEARTBEAT when one was
+    /// heard (else MAV_AUTOPILOT_INVALID and MAV_TYPE_GENERIC).
+    pub async fn component(&self, component: u8) -> Self {
+        let inner = &self.inner;
+        let target = Address::new(inner.target.system, component);
+        let heard = self.state().components.get(&component).copied();
+        let (autopilot, mav_type) = heard.unwrap_or((MavAutopilot::INVALID, MavType::GENERIC));
+        let frames = inner.node.subscribe().await;
+        let (state, _) = watch::channel(State::default());
+        let tracker = tokio::spawn(state::track(frames, state.clone(), inner.own, target));
+        Self {
+            inner: Arc::new(Inner {
+                node: inner.node.clone(),
+                own: inner.own,
+                target,
+                link: inner.link,
+                link_name: inner.link_name.clone(),
+                autopilot,
+                mav_type,
+                found_in: inner.found_in,
+                handshake: None,
+                state,
+                tasks: Mutex::new(vec![tracker.abort_handle()]),
+                retries: AtomicU8::new(self.retries()),
+                ftp_seq: Mutex::new(clock_seed()),
+                locks: Locks::default(),
+                event_texts: tokio::sync::Mutex::default(),
+                logs: Mutex::new(None),
+                rates: Mutex::default(),
+            }),
+        }
+    }
+
+    /// The components of the system heard so far (by their HEARTBEAT), with their
+    /// autopilot and type.
+    #[must_use]
+    pub fn components(&self) -> Vec<(u8, MavAutopilot, MavType)> {
+        self.state()
+            .components
+            .iter()
+            .map(|(&c, &(a, t))| (c, a, t))
+            .collect()
+    }
 }
 
 /// Sends MAV_CMD_REQUEST_MESSAGE(HEARTBEAT) to the wanted system (any system's autopilot,

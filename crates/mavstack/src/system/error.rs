@@ -1,9 +1,11 @@
 //! [`SystemError`]: why an operation on a remote system failed, with its cause kept as the
 //! error's source so that a caller can print the chain down to the OS error.
 
+use mavstack_services::camera::{CaptureError, DefinitionError, ParamExtError, SettingError};
 use mavstack_services::command::CommandError;
 use mavstack_services::ftp::FtpError;
 use mavstack_services::ftp::param_pck::{DecodeError, EncodeError};
+use mavstack_services::gimbal::GimbalError;
 use mavstack_services::log_transfer::LogError;
 use mavstack_services::mission::MissionError;
 use mavstack_services::param::ParamError;
@@ -140,6 +142,28 @@ pub enum SystemError {
     /// The shell gave no output.
     #[error("shell")]
     Shell(#[from] ShellError),
+    /// A gimbal request that cannot be sent (an angle outside the gimbal's limits, NaN):
+    /// nothing was sent.
+    #[error("gimbal request not sent")]
+    Gimbal(#[from] GimbalError),
+    /// A photo without its CAMERA_IMAGE_CAPTURED.
+    #[error("photo")]
+    Photo(#[from] CaptureError),
+    /// A camera setting that was not read or written (PARAM_EXT_*).
+    #[error("camera settings")]
+    CameraSettings(#[from] ParamExtError),
+    /// A camera setting value that the camera's definition does not allow: nothing was sent.
+    #[error("camera setting not sent")]
+    CameraSetting(#[from] SettingError),
+    /// A camera definition file that cannot be read.
+    #[error("camera definition {uri}")]
+    CameraDefinition {
+        /// Where it is.
+        uri: String,
+        /// What is wrong with it.
+        #[source]
+        source: DefinitionError,
+    },
     /// Reading or writing something of ours failed (an RTCM source).
     #[error("{what}")]
     Io {

@@ -4,7 +4,8 @@
 //! [`commands`](System::commands), [`modes`](System::modes), [`action`](System::action),
 //! [`offboard`](System::offboard), [`manual_control`](System::manual_control),
 //! [`telemetry`](System::telemetry), [`ftp`](System::ftp), [`logs`](System::logs),
-//! [`signing`](System::signing), [`rtk`](System::rtk) and [`shell`](System::shell).
+//! [`signing`](System::signing), [`rtk`](System::rtk), [`shell`](System::shell),
+//! [`gimbals`](System::gimbals) and [`cameras`](System::cameras).
 //!
 //! ```no_run
 //! # async fn run() -> Result<(), Box<dyn core::error::Error>> {
@@ -45,11 +46,13 @@ use tokio::sync::watch;
 use tokio::task::AbortHandle;
 
 mod action;
+mod camera;
 mod commands;
 mod connect;
 mod discovery;
 mod error;
 mod ftp;
+mod gimbal;
 mod logs;
 mod manual;
 mod mission;
@@ -66,6 +69,7 @@ mod state;
 mod telemetry;
 
 pub use action::{Action, GOTO_RADIUS_M, MAX_HEIGHT_M, TAKEOFF_REACHED, distance_m};
+pub use camera::{Camera, Cameras, SettingView};
 pub use commands::{
     CommandOutcome, Commands, FORCE_DISARM, SHORTCUTS, command_id, command_name, result_name,
     to_int,
@@ -74,6 +78,7 @@ pub use connect::{ConnectOptions, Session};
 pub use discovery::Discovery;
 pub use error::SystemError;
 pub use ftp::{Ftp, FtpPathOp};
+pub use gimbal::{Gimbal, GimbalControl, Gimbals};
 pub use logs::{FTP_LOG_DIRS, Logs, LogsVia, ftp_log_path};
 pub use manual::{ManualControl, ManualSession, Sticks};
 pub use mission::Mission;
@@ -342,6 +347,18 @@ impl System {
     #[must_use]
     pub fn shell(&self) -> Shell {
         Shell::new(self.clone())
+    }
+
+    /// Its gimbals (the gimbal protocol v2).
+    #[must_use]
+    pub fn gimbals(&self) -> Gimbals {
+        Gimbals::new(self.clone())
+    }
+
+    /// Its cameras (the camera protocol v2).
+    #[must_use]
+    pub fn cameras(&self) -> Cameras {
+        Cameras::new(self.clone())
     }
 
     // ----- shared by the handles ---------------------------------------------------------

@@ -13,7 +13,8 @@ use std::collections::{BTreeMap, VecDeque};
 use mavstack_core::MessageSet as _;
 use mavstack_dialects::common::{
     CommandAck, Event, ExtendedSysState, GlobalPositionInt, Heartbeat, HomePosition,
-    LocalPositionNed, MavLandedState, MavMessage, MavModeFlag, MavProtocolCapability,
+    LocalPositionNed, MavAutopilot, MavLandedState, MavMessage, MavModeFlag, MavProtocolCapability,
+    MavType,
 };
 use mavstack_services::Address;
 use mavstack_services::statustext::Lines;
@@ -87,6 +88,8 @@ pub(crate) struct State {
     pub(crate) said_count: u64,
     /// When each message id last came from it.
     pub(crate) last_seen: BTreeMap<u32, Instant>,
+    /// The system's components heard (HEARTBEAT), with their autopilot and type.
+    pub(crate) components: BTreeMap<u8, (MavAutopilot, MavType)>,
     /// COMMAND_ACKs it sent us, numbered from 1 (the last `acks` of them kept).
     pub(crate) acks: VecDeque<(u64, CommandAck)>,
     /// How many COMMAND_ACKs it has sent us.
@@ -161,6 +164,10 @@ impl State {
     pub(crate) fn note(&mut self, from: Address, own: Address, target: Address, msg: &MavMessage) {
         let now = Instant::now();
         let ours = from.component == target.component;
+        if let MavMessage::Heartbeat(hb) = msg {
+            self.components
+                .insert(from.component, (hb.autopilot, hb.r#type));
+        }
         match msg {
             MavMessage::Heartbeat(hb) if ours => self.heartbeat = Some((*hb, now)),
             MavMessage::Statustext(text) => {
