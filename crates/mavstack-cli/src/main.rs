@@ -6,6 +6,7 @@
 //!
 //! Architecture: `docs/architecture.md` in the repository.
 
+mod camera_cmd;
 mod codec_cmd;
 mod command_cmd;
 mod conform_cmd;
@@ -14,6 +15,7 @@ mod dialect_cmd;
 mod fast_count;
 mod fly_cmd;
 mod ftp_cmd;
+mod gimbal_cmd;
 mod link_cmd;
 mod listen_rates;
 mod log_cmd;
@@ -125,6 +127,12 @@ enum Command {
     Shell(shell_cmd::ShellArgs),
     /// Forward an RTCM3 stream (TCP, serial or a file) to a vehicle as RTK corrections.
     Rtk(rtk_cmd::RtkArgs),
+    /// A system's gimbals (gimbal protocol v2): list, point by angles, rates or at a
+    /// location, read where they look.
+    Gimbal(gimbal_cmd::GimbalArgs),
+    /// A system's cameras (camera protocol v2): list, take a photo, record, intervals,
+    /// modes, settings.
+    Camera(camera_cmd::CameraArgs),
 }
 
 /// A failure with the exit code it maps to.
@@ -188,6 +196,8 @@ fn main() -> ExitCode {
         Command::Ftp { action } => ftp_cmd::ftp(&action),
         Command::Shell(args) => shell_cmd::shell(&args),
         Command::Rtk(args) => rtk_cmd::rtk(&args),
+        Command::Gimbal(args) => gimbal_cmd::gimbal(&args),
+        Command::Camera(args) => camera_cmd::camera(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

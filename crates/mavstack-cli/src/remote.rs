@@ -45,8 +45,9 @@ pub(crate) struct RemoteArgs {
     /// Signing link id (with `--key`).
     #[arg(long, default_value_t = 0)]
     pub(crate) link_id: u8,
-    /// Print results as JSON (one object per line).
-    #[arg(long)]
+    /// Print results as JSON (one object per line). Accepted after a subcommand too
+    /// (`camera CONN photo --json`).
+    #[arg(long, global = true)]
     pub(crate) json: bool,
 }
 

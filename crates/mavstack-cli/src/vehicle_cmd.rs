@@ -11,6 +11,7 @@ use anyhow::{Context as _, anyhow};
 use clap::Args;
 use mavstack::router::{LinkRole, ProtocolVersionSupport, VersionMode};
 use mavstack::services::ftp::DirBackend;
+use mavstack::sim_camera::SimCamera;
 use mavstack::sim_vehicle::SimVehicle;
 use mavstack::{LinkSpec, Node, NodeBuilder};
 use mavstack_channel::SigningConfig;
@@ -102,6 +103,11 @@ pub(crate) struct VehicleArgs {
     /// (LOG_* only). LOG_ERASE hides them; the files stay.
     #[arg(long, value_name = "DIR")]
     log_dir: Option<std::path::PathBuf>,
+    /// A camera beside the vehicle, as a component of its own (component 100): the camera
+    /// protocol with the simulated camera's definition file (over MAVFTP); each photo is an
+    /// image file written into DIR.
+    #[arg(long, value_name = "DIR")]
+    camera: Option<std::path::PathBuf>,
     /// Print what happens (link versions, handshakes, rejections, modes, parameter sets,
     /// plans) to stderr.
     #[arg(long, short)]
@@ -250,17 +256,46 @@ pub(crate) fn vehicle(args: &VehicleArgs) -> Result<(), Failure> {
         ftp_files: files,
         log_dir,
     };
+    if let Some(dir) = &args.camera
+        && !dir.is_dir()
+    {
+        return Err(Failure::Input(anyhow!(
+            "--camera {}: not a directory",
+            dir.display()
+        )));
+    }
     runtime()?.block_on(async {
         let log = stderr_log(args.verbose);
-        let vehicle = SimVehicle::start_logged(builder, config, log)
+        // The camera's node, joined to the vehicle's.
+        let (builder, to_vehicle) = match &args.camera {
+            Some(_) => {
+                let (to_camera, to_vehicle) = mavstack::serve::joined("vehicle", "camera");
+                (
+                    builder.opened_link(to_camera.0, to_camera.1),
+                    Some(to_vehicle),
+                )
+            }
+            None => (builder, None),
+        };
+        let vehicle = SimVehicle::start_logged(builder, config, log.clone())
             .await
             .map_err(fail)?;
+        let camera = match (to_vehicle, &args.camera) {
+            (Some(link), Some(dir)) => {
+                let own = Address::new(args.sysid, mavstack::sim_camera::CAMERA_COMPONENT);
+                Some(SimCamera::start(link, own, dir, log).await.map_err(fail)?)
+            }
+            _ => None,
+        };
         if let Some(addr) = vehicle.node().http_addr() {
             eprintln!("mavstack vehicle: status page on http://{addr}/");
         }
         tokio::select! {
             () = interrupted() => {}
             () = vehicle.node().closed() => {}
+        }
+        if let Some(camera) = camera {
+            camera.shutdown().await.map_err(fail)?;
         }
         vehicle.shutdown().await.map(drop).map_err(fail)
     })

@@ -18,6 +18,7 @@ mod cli_gcs;
 mod cli_input;
 mod cli_logging;
 mod cli_logs;
+mod cli_payload;
 mod cli_probe;
 mod cli_router;
 mod cli_router_conf;

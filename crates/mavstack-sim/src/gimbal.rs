@@ -6,8 +6,8 @@
 //! GIMBAL_DEVICE_ATTITUDE_STATUS (10 Hz) go out, as a flight stack streams them once a
 //! gimbal is configured.
 
-use std::collections::VecDeque;
 use core::time::Duration;
+use std::collections::VecDeque;
 
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::{GimbalDeviceErrorFlags, MavMessage};
