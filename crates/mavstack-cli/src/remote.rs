@@ -15,7 +15,8 @@ use serde_json::json;
 use crate::vehicle_cmd::secret_key;
 use crate::{Failure, fail};
 
-/// How to reach the remote system.
+/// How to reach the remote system. The options are accepted after a subcommand too
+/// (`camera CONN photo --json --timeout 3`).
 #[derive(Clone, Debug, Args)]
 pub(crate) struct RemoteArgs {
     /// The ground station's side of the link, with link options after `?` (quote it):
@@ -23,30 +24,29 @@ pub(crate) struct RemoteArgs {
     /// tcp:HOST:PORT, serial:DEV:BAUD; `?key=HEX` signs, `?name=...` names it.
     pub(crate) conn: String,
     /// The system to talk to (default: the first autopilot heard).
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub(crate) target_system: Option<u8>,
     /// The component to talk to (default: the one whose HEARTBEAT was heard).
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub(crate) target_component: Option<u8>,
     /// Seconds to wait for the target's HEARTBEAT (from 0.001 to 86400).
-    #[arg(long, default_value_t = 10.0, value_parser = crate::link_cmd::timeout_arg)]
+    #[arg(long, global = true, default_value_t = 10.0, value_parser = crate::link_cmd::timeout_arg)]
     pub(crate) timeout: f64,
     /// Our system id.
-    #[arg(long, default_value_t = 255)]
+    #[arg(long, global = true, default_value_t = 255)]
     pub(crate) sysid: u8,
     /// Our component id.
-    #[arg(long, default_value_t = 190)]
+    #[arg(long, global = true, default_value_t = 190)]
     pub(crate) compid: u8,
     /// Sign with this key (64 hex digits), for vehicles that accept only signed frames
     /// (`signing setup`: the key to set up; `signing remove`: the key in use). The same as
     /// the link option `key`.
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub(crate) key: Option<String>,
     /// Signing link id (with `--key`).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, global = true, default_value_t = 0)]
     pub(crate) link_id: u8,
-    /// Print results as JSON (one object per line). Accepted after a subcommand too
-    /// (`camera CONN photo --json`).
+    /// Print results as JSON (one object per line).
     #[arg(long, global = true)]
     pub(crate) json: bool,
 }

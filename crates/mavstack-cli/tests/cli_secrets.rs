@@ -119,6 +119,10 @@ fn no_command_prints_a_signing_key() {
         gcs(&["signing", "remove", "LINK", "--key", KEY]),
         gcs(&["shell", "LINK", "--command", "ver all"]),
         gcs(&["rtk", "LINK", "--from", &rtcm]),
+        gcs(&["gimbal", "LINK", "list"]),
+        gcs(&["gimbal", "LINK", "set", "-10", "0"]),
+        gcs(&["camera", "LINK", "list"]),
+        gcs(&["camera", "LINK", "photo", "--json"]),
         gcs(&["probe", "LINK"]),
         Case {
             names_link: false,

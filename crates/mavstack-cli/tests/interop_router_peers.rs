@@ -32,3 +32,31 @@ fn a_flood_of_new_sources_leaves_at_most_max_peers_and_a_ground_station_still_ge
         "{out}"
     );
 }
+
+/// `tests-interop/router_scale.py` in small (the full run, 1,000 peers, is by hand): 40 peers
+/// with frames packed by pymavlink on one `udpin` link with `isolate_peers=true` and a ground
+/// station on a `udpout` link; every frame reaches the ground station, no peer gets another's,
+/// each gets the ground station's HEARTBEATs and its own command only, and `--stats` shows one
+/// link, route and system per peer.
+#[test]
+fn peers_of_an_isolated_link_reach_the_ground_station_and_not_each_other() {
+    require_pymavlink();
+    let bin = env!("CARGO_BIN_EXE_mavstack");
+    let args = [
+        "--peers",
+        "40",
+        "--rate",
+        "10",
+        "--seconds",
+        "4",
+        "--procs",
+        "2",
+        "--mavstack",
+        bin,
+    ];
+    let out = run_script(
+        "router_scale.py",
+        &args.iter().map(OsStr::new).collect::<Vec<_>>(),
+    );
+    assert!(out.trim_end().ends_with("ok"), "{out}");
+}
