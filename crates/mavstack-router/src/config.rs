@@ -187,6 +187,13 @@ pub struct LinkConfig {
     /// The link gets every frame of the network, targeted ones included wherever their target
     /// is (a vehicle's fleet bridge link: the broker sees the whole network). Default off.
     pub monitor: bool,
+    /// The peers of this link (the clients of a server link) forward nothing to each other:
+    /// the `isolate_peers` option, read by the driver, which puts them all in one
+    /// [`group`](Self::group). Default off.
+    pub isolate_peers: bool,
+    /// Links of one group forward nothing to each other, broadcast or targeted (`None`, the
+    /// default: in no group). A fleet's vehicles sharing a port need not hear each other.
+    pub group: Option<u32>,
 }
 
 impl LinkConfig {
@@ -207,6 +214,8 @@ impl LinkConfig {
             queue_frames: 1024,
             pack: false,
             monitor: false,
+            isolate_peers: false,
+            group: None,
         }
     }
 

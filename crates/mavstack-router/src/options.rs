@@ -61,6 +61,7 @@ pub const NAMES: &[&str] = &[
     "bytes_per_s",
     "queue",
     "pack",
+    "isolate_peers",
 ];
 
 /// Parses `options` (the text after `?`, `&`-separated `name=value` pairs; may be empty)
@@ -119,6 +120,7 @@ pub fn parse(
             "secure" => link.secure = boolean(name, value)?,
             "trusted" => link.trusted = boolean(name, value)?,
             "pack" => link.pack = boolean(name, value)?,
+            "isolate_peers" => link.isolate_peers = boolean(name, value)?,
             "name" => {
                 if value.is_empty() {
                     return Err(err(name, "empty"));

@@ -5,25 +5,25 @@ use alloc::vec::Vec;
 use core::time::Duration;
 
 use mavstack_channel::{
-    Channel, CommandEncoding, ConfigError, Event as ChannelEvent, HandshakeError, HandshakeMethod,
-    HandshakeOutcome, LinkVersion, ProtocolVersionAnswer, ReceivedFrame, Rejected, SigningConfig,
-    SigningSetup, SwitchCause, Target,
+    Channel, CommandEncoding, ConfigError, HandshakeError, HandshakeMethod, HandshakeOutcome,
+    LinkVersion, ProtocolVersionAnswer, ReceivedFrame, Rejected, SigningConfig, SigningSetup,
+    SwitchCause, Target,
 };
 use mavstack_core::MessageTable;
 use mavstack_core::message::Message as _;
-use mavstack_core::signing;
 use mavstack_core::time::Instant;
 use mavstack_core::wire::MAX_FRAME_LEN;
-use mavstack_dialects::common::{AutopilotVersion, Heartbeat, MavProtocolCapability, SetupSigning};
+use mavstack_dialects::common::{AutopilotVersion, MavProtocolCapability};
 
-use crate::config::{LinkConfig, LocalDelivery, RouterConfig, VersionMode};
-use crate::convert::{self, Origin, Plan};
+use crate::config::{LinkConfig, RouterConfig, VersionMode};
 use crate::dedup::Dedup;
 use crate::dialect::{is_control, target_of};
 use crate::limit::Limiter;
-use crate::log_readers::{LOG_DATA, LOG_REQUEST_DATA, LOG_REQUEST_END, LogReaders};
+use crate::log_readers::LogReaders;
 use crate::queue::OutQueue;
 use crate::route::{Route, Routes};
+
+mod forward;
 use crate::stats::{Counters, DropReason, LinkMode, LinkStatus};
 use crate::systems::{SystemInfo, Systems};
 
@@ -149,6 +149,25 @@ pub struct Transmit {
     pub len: usize,
 }
 
+/// What choosing a frame's destinations needs of a link, kept apart from its state (a few
+/// bytes per link, so that a broadcast among a thousand links reads one small table).
+#[derive(Clone, Copy, Debug, Default)]
+struct Member {
+    /// A link has this index now.
+    live: bool,
+    /// [`LinkConfig::monitor`].
+    monitor: bool,
+    /// [`LinkConfig::group`].
+    group: Option<u32>,
+}
+
+impl Member {
+    /// Whether a frame from a link of `group` may go to this one.
+    fn takes_from(self, group: Option<u32>) -> bool {
+        self.live && (group.is_none() || self.group != group)
+    }
+}
+
 struct LinkState {
     config: LinkConfig,
     channel: Channel,
@@ -209,6 +228,10 @@ pub struct Router {
     config: RouterConfig,
     dialect: MessageTable,
     links: Vec<Option<LinkState>>,
+    /// Per link index, beside `links`.
+    members: Vec<Member>,
+    /// Links whose channel may have a timer running (a handshake was started on them).
+    timed: Vec<LinkId>,
     routes: Routes,
     systems: Systems,
     log_readers: LogReaders,
@@ -233,6 +256,8 @@ impl Router {
             config,
             dialect,
             links: Vec::new(),
+            members: Vec::new(),
+            timed: Vec::new(),
             routes: Routes::default(),
             systems: Systems::default(),
             log_readers: LogReaders::default(),
@@ -264,6 +289,11 @@ impl Router {
             self.dialect,
         )?;
         channel.hold_setup_signing(self.setup_signing_held);
+        let member = Member {
+            live: true,
+            monitor: config.monitor,
+            group: config.group,
+        };
         let state = LinkState {
             limiter: Limiter::new(&config.limits),
             config,
@@ -272,13 +302,15 @@ impl Router {
             counters: Counters::default(),
             ready: false,
         };
-        let index = match self.links.iter().position(Option::is_none) {
+        let index = match self.members.iter().position(|m| !m.live) {
             Some(i) => {
                 self.links[i] = Some(state);
+                self.members[i] = member;
                 i
             }
             None => {
                 self.links.push(Some(state));
+                self.members.push(member);
                 self.links.len() - 1
             }
         };
@@ -290,19 +322,23 @@ impl Router {
     /// Returns its final status counters, or `None` for an unknown id.
     pub fn remove_link(&mut self, link: LinkId) -> Option<Counters> {
         let state = self.links.get_mut(link.index())?.take()?;
+        if let Some(m) = self.members.get_mut(link.index()) {
+            *m = Member::default();
+        }
         self.routes.remove_link(link);
         self.systems.forget_link(link);
         self.log_readers.forget_link(link);
         self.ready.retain(|&l| l != link);
+        self.timed.retain(|&l| l != link);
         Some(state.counters)
     }
 
     /// The ids of the links there are now.
     pub fn links(&self) -> impl Iterator<Item = LinkId> + '_ {
-        self.links
+        self.members
             .iter()
             .enumerate()
-            .filter(|(_, l)| l.is_some())
+            .filter(|(_, m)| m.live)
             .map(|(i, _)| LinkId(u32::try_from(i).unwrap_or(u32::MAX)))
     }
 
@@ -385,303 +421,10 @@ impl Router {
             let drained = self.drain_channel(now, id);
             self.drain_channel_transmits(now, id);
             if data.is_empty() || (n == 0 && !drained) {
-                return;
+                break;
             }
         }
-    }
-
-    /// Handles every event of `id`'s channel; returns whether there was any.
-    fn drain_channel(&mut self, now: Instant, id: LinkId) -> bool {
-        let mut any = false;
-        loop {
-            let Some(event) = self.link_mut(id).and_then(|l| l.channel.poll_event()) else {
-                return any;
-            };
-            any = true;
-            match event {
-                ChannelEvent::Frame(frame) => self.route(now, id, &frame),
-                ChannelEvent::Rejected(rejected) => {
-                    self.push_event(Event::Rejected { link: id, rejected });
-                }
-                ChannelEvent::VersionChanged { from, to, cause } => {
-                    self.push_event(Event::VersionChanged {
-                        link: id,
-                        from,
-                        to,
-                        cause,
-                    });
-                }
-                ChannelEvent::ProtocolVersionRequested {
-                    sysid,
-                    compid,
-                    answer,
-                    ..
-                } => self.push_event(Event::ProtocolVersionRequested {
-                    link: id,
-                    from: (sysid, compid),
-                    answer,
-                }),
-                ChannelEvent::Handshake(outcome) => {
-                    self.push_event(Event::Handshake { link: id, outcome });
-                }
-                ChannelEvent::SigningSetup {
-                    sysid,
-                    compid,
-                    setup,
-                } => self.push_event(Event::SigningSetup {
-                    link: id,
-                    from: (sysid, compid),
-                    setup,
-                }),
-                ChannelEvent::PersistTimestamp { timestamp } => {
-                    self.push_event(Event::PersistTimestamp {
-                        link: id,
-                        timestamp,
-                    });
-                }
-                _ => {}
-            }
-        }
-    }
-
-    /// Queues what `id`'s channel sends on its own (a vehicle link's handshake answers) as
-    /// control traffic of that link.
-    fn drain_channel_transmits(&mut self, now: Instant, id: LinkId) {
-        let Some(l) = self.link_mut(id) else { return };
-        if !l.channel.has_transmits() {
-            return;
-        }
-        let mut buf = [0u8; MAX_FRAME_LEN];
-        let mut queued = false;
-        while let Some(t) = l.channel.poll_transmit(now, &mut buf) {
-            if l.queue.push(true, &buf[..t.len], l.config.queue_frames) {
-                l.counters.tx_frames += 1;
-                l.counters.tx_bytes += t.len as u64;
-                queued = true;
-            } else {
-                l.counters.dropped.count(DropReason::QueueFull);
-            }
-        }
-        if queued && !l.ready {
-            l.ready = true;
-            self.ready.push_back(id);
-        }
-    }
-
-    fn push_event(&mut self, event: Event) {
-        if self.events.len() >= EVENT_CAPACITY {
-            self.events_dropped += 1;
-        } else {
-            self.events.push_back(event);
-        }
-    }
-
-    /// Routes one accepted frame from `src`.
-    fn route(&mut self, now: Instant, src: LinkId, received: &ReceivedFrame) {
-        let frame = received.frame.view();
-        let (sysid, compid, msg_id) = (frame.sysid(), frame.compid(), frame.msg_id());
-        let Some(l) = self.link_mut(src) else { return };
-        l.counters.rx_frames += 1;
-        l.counters.rx_bytes += frame.frame_len() as u64;
-        if !l.config.filters_in.passes(msg_id, sysid, compid) {
-            l.counters.dropped.count(DropReason::Filtered);
-            return;
-        }
-        let origin = Origin {
-            trusted: l.config.trusted,
-            verified: received.auth.is_authenticated(),
-        };
-        let secure = l.config.secure;
-        if sysid != 0 && compid != 0 {
-            self.routes
-                .learn(now, (sysid, compid), src, self.config.route_move_after);
-            if msg_id == Heartbeat::ID && received.crc_checked {
-                self.systems
-                    .heard(now, (sysid, compid), src, frame.payload());
-            }
-        }
-        let info = if received.crc_checked {
-            self.dialect.info(msg_id)
-        } else {
-            None
-        };
-        let (tsys, tcomp) = target_of(info, frame.payload());
-        let duplicate = self
-            .dedup
-            .as_mut()
-            .is_some_and(|d| d.seen(now, frame.as_bytes()));
-
-        let mut dests = core::mem::take(&mut self.scratch);
-        dests.clear();
-        let own = (self.config.system_id, self.config.component_id);
-        let for_us = tsys == 0 || (tsys == own.0 && (tcomp == 0 || tcomp == own.1));
-        match msg_id {
-            LOG_REQUEST_DATA if tsys != 0 => self.log_readers.asked(now, tsys, src),
-            LOG_REQUEST_END if tsys != 0 => self.log_readers.ended(tsys, src),
-            _ => {}
-        }
-        let log_reader = if msg_id == LOG_DATA {
-            self.log_readers
-                .reader(now, sysid)
-                .filter(|&l| l != src && self.link(l).is_some())
-        } else {
-            None
-        };
-        if let Some(reader) = log_reader {
-            // LOG_DATA has no target: it goes to the link reading the log (and monitors).
-            dests.push(reader);
-            self.add_monitors(&mut dests);
-            dests.retain(|&l| l != src);
-        } else if tsys == 0 {
-            dests.extend(self.links().filter(|&l| l != src));
-        } else {
-            let known = self
-                .routes
-                .links_to(now, self.config.route_ttl, tsys, tcomp, &mut dests);
-            self.add_monitors(&mut dests);
-            dests.retain(|&l| l != src);
-            let local = self.config.local != LocalDelivery::None && tsys == own.0;
-            if !known
-                && !local
-                && let Some(l) = self.link_mut(src)
-            {
-                l.counters.dropped.count(DropReason::UnknownTarget);
-            }
-        }
-        if !self.config.forward {
-            dests.clear();
-        }
-        if msg_id == SetupSigning::ID && (!secure || tsys == 0) {
-            // Never broadcast, and only from a link marked secure.
-            for &d in &dests {
-                if let Some(l) = self.link_mut(d) {
-                    l.counters.dropped.count(DropReason::SetupSigning);
-                }
-            }
-            dests.clear();
-        }
-        if duplicate {
-            for &d in &dests {
-                if let Some(l) = self.link_mut(d) {
-                    l.counters.dropped.count(DropReason::Duplicate);
-                }
-            }
-        } else {
-            let control = is_control(msg_id);
-            for &d in &dests {
-                self.forward(now, d, received, info, origin, control);
-            }
-            let deliver = match self.config.local {
-                LocalDelivery::None => false,
-                LocalDelivery::Addressed => for_us,
-                LocalDelivery::All => true,
-            };
-            if deliver {
-                self.push_event(Event::Local {
-                    link: src,
-                    frame: received.clone(),
-                });
-            }
-        }
-        self.scratch = dests;
-    }
-
-    /// Adds every monitor link (a vehicle's fleet bridge link), which gets every frame,
-    /// targeted or not.
-    fn add_monitors(&self, dests: &mut Vec<LinkId>) {
-        for (i, l) in self.links.iter().enumerate() {
-            if let Some(l) = l
-                && l.config.monitor
-            {
-                let id = LinkId(u32::try_from(i).unwrap_or(u32::MAX));
-                if !dests.contains(&id) {
-                    dests.push(id);
-                }
-            }
-        }
-    }
-
-    /// Puts one frame onto link `dst`, converted as its framing needs.
-    fn forward(
-        &mut self,
-        now: Instant,
-        dst: LinkId,
-        received: &ReceivedFrame,
-        info: Option<&mavstack_core::MessageInfo>,
-        origin: Origin,
-        control: bool,
-    ) {
-        let frame = received.frame.view();
-        let Some(out) = self.link_mut(dst) else {
-            return;
-        };
-        let (sysid, compid, msg_id) = (frame.sysid(), frame.compid(), frame.msg_id());
-        if !out.config.filters_out.passes(msg_id, sysid, compid) {
-            return out.counters.dropped.count(DropReason::Filtered);
-        }
-        if !control && !out.limiter.allow_message(now, sysid, compid, msg_id) {
-            return out.counters.dropped.count(DropReason::RateLimited);
-        }
-        let mode = out.mode();
-        let channel = &out.channel;
-        let verifies_here = || {
-            channel
-                .signing()
-                .is_some_and(|s| signing::verify(&frame, s.primary_key()).is_ok())
-        };
-        let plan = match convert::plan(&frame, info.is_some(), mode, origin, verifies_here) {
-            Ok(plan) => plan,
-            Err(reason) => return out.counters.dropped.count(reason),
-        };
-        // Set up only for a conversion: a frame that goes as it is is not copied here.
-        let mut buf;
-        let bytes: &[u8] = match (plan, info) {
-            (Plan::AsIs, _) => frame.as_bytes(),
-            (Plan::Reframe { version, sign }, Some(info)) => {
-                buf = [0u8; MAX_FRAME_LEN];
-                let len = match convert::reframe(&frame, info, version, sign, &mut buf) {
-                    Ok(len) => len,
-                    Err(reason) => return out.counters.dropped.count(reason),
-                };
-                let signature = if sign {
-                    mavstack_core::wire::SIGNATURE_LEN
-                } else {
-                    0
-                };
-                if !out.limiter.spend(now, len + signature, control) {
-                    return out.counters.dropped.count(DropReason::RateLimited);
-                }
-                let len = if sign {
-                    match out.channel.sign_frame(now, &mut buf, len) {
-                        Some(len) => len,
-                        None => return out.counters.dropped.count(DropReason::CannotConvert),
-                    }
-                } else {
-                    len
-                };
-                convert::count(&mut out.counters.conversions, &frame, version, sign);
-                out.counters.converted += 1;
-                &buf[..len]
-            }
-            (Plan::Reframe { .. }, None) => {
-                return out.counters.dropped.count(DropReason::CannotConvert);
-            }
-        };
-        if plan == Plan::AsIs && !out.limiter.spend(now, bytes.len(), control) {
-            return out.counters.dropped.count(DropReason::RateLimited);
-        }
-        if !out.queue.push(control, bytes, out.config.queue_frames) {
-            return out.counters.dropped.count(DropReason::QueueFull);
-        }
-        if plan == Plan::AsIs {
-            out.counters.unchanged += 1;
-        }
-        out.counters.tx_frames += 1;
-        out.counters.tx_bytes += bytes.len() as u64;
-        if !out.ready {
-            out.ready = true;
-            self.ready.push_back(dst);
-        }
+        self.note_timer(id);
     }
 
     // ----- the router's own messages ------------------------------------------------------
@@ -820,6 +563,7 @@ impl Router {
             .link_mut(link)
             .ok_or(HandshakeError::NotGroundStation)?;
         l.channel.start_handshake(now, target, method, encoding)?;
+        self.note_timer(link);
         self.drain_channel_transmits(now, link);
         Ok(())
     }
@@ -907,10 +651,9 @@ impl Router {
     #[must_use]
     pub fn poll_timeout(&self) -> Option<Instant> {
         let channels = self
-            .links
+            .timed
             .iter()
-            .flatten()
-            .filter_map(|l| l.channel.poll_timeout())
+            .filter_map(|&id| self.link(id)?.channel.poll_timeout())
             .min();
         let sweep = self.next_sweep.filter(|_| !self.routes.is_empty());
         match (channels, sweep) {
@@ -926,20 +669,36 @@ impl Router {
             self.systems.expire(now, self.config.route_ttl);
             self.next_sweep = Some(now + SWEEP);
         }
-        let ids: Vec<LinkId> = self
-            .links()
-            .filter(|&id| {
-                self.link(id)
-                    .and_then(|l| l.channel.poll_timeout())
-                    .is_some_and(|t| now >= t)
-            })
-            .collect();
-        for id in ids {
-            if let Some(l) = self.link_mut(id) {
-                l.channel.handle_timeout(now);
+        let mut timed = core::mem::take(&mut self.timed);
+        for &id in &timed {
+            let due = self
+                .link(id)
+                .and_then(|l| l.channel.poll_timeout())
+                .is_some_and(|t| now >= t);
+            if due {
+                if let Some(l) = self.link_mut(id) {
+                    l.channel.handle_timeout(now);
+                }
+                self.drain_channel(now, id);
+                self.drain_channel_transmits(now, id);
             }
-            self.drain_channel(now, id);
-            self.drain_channel_transmits(now, id);
+        }
+        // Links whose timers have all ended leave the list.
+        timed.retain(|&id| {
+            self.link(id)
+                .is_some_and(|l| l.channel.poll_timeout().is_some())
+        });
+        self.timed = timed;
+    }
+
+    /// Puts `id` on the list of links with a timer, if its channel has one now.
+    fn note_timer(&mut self, id: LinkId) {
+        if self
+            .link(id)
+            .is_some_and(|l| l.channel.poll_timeout().is_some())
+            && !self.timed.contains(&id)
+        {
+            self.timed.push(id);
         }
     }
 }

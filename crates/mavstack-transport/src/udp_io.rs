@@ -106,6 +106,16 @@ impl UdpIo {
         return false;
     }
 
+    /// Whether a caller's poll reported the socket and no read has found it drained since
+    /// (always false for a socket the runtime watches: only polling it tells).
+    pub(crate) const fn is_readable(&self) -> bool {
+        #[cfg(target_os = "linux")]
+        if let Watch::Polled { readable, .. } = &self.watch {
+            return *readable;
+        }
+        false
+    }
+
     /// The caller's poll reported the socket: a datagram may be waiting.
     pub(crate) fn set_readable(&mut self) {
         #[cfg(target_os = "linux")]

@@ -35,6 +35,8 @@ pub(crate) struct Waiter {
     timer: TimerFd,
     /// The deadline the timer is armed for (and has not fired yet).
     armed: Option<Instant>,
+    /// The waker was woken since [`Waiter::take_woken`] last looked.
+    woken: bool,
 }
 
 impl Waiter {
@@ -60,6 +62,7 @@ impl Waiter {
             wake,
             timer,
             armed: None,
+            woken: false,
         })
     }
 
@@ -78,6 +81,15 @@ impl Waiter {
         &self.waker
     }
 
+    /// Whether the waker was woken since the last call: something on the runtime's side
+    /// (a command, a helper task's message) may be waiting. While it is not, that side need
+    /// not be polled: what it registered the waker for has not happened.
+    pub(crate) const fn take_woken(&mut self) -> bool {
+        let woken = self.woken;
+        self.woken = false;
+        woken
+    }
+
     /// Waits until a socket is reported, the waker is woken or `deadline` has passed (a
     /// spurious return is possible: the caller looks again). Calls `readable` with the slot
     /// index of each socket reported.
@@ -91,6 +103,19 @@ impl Waiter {
         readable: impl FnMut(usize),
     ) -> io::Result<()> {
         self.arm(deadline, now)?;
+        self.poll(EpollTimeout::NONE, readable)
+    }
+
+    /// The deadline the timer is armed for and has not reported yet.
+    pub(crate) const fn armed(&self) -> Option<Instant> {
+        self.armed
+    }
+
+    /// Waits like [`Waiter::wait`] with the timer as it is (armed for [`Waiter::armed`]).
+    ///
+    /// # Errors
+    /// The poll failed (an interruption is not an error: it returns).
+    pub(crate) fn wait_armed(&mut self, readable: impl FnMut(usize)) -> io::Result<()> {
         self.poll(EpollTimeout::NONE, readable)
     }
 
@@ -116,6 +141,7 @@ impl Waiter {
                     // Cleared before the caller looks at the runtime's side: a wake after
                     // this read wakes the next wait.
                     let _ = self.wake.0.read();
+                    self.woken = true;
                 }
                 TIMER => {
                     let _ = self.timer.wait();

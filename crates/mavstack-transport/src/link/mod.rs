@@ -431,6 +431,19 @@ impl Link {
         }
     }
 
+    /// Like [`Link::poll_ready`], without polling anything or registering a waker: whether
+    /// input is known to be waiting now (a socket the caller's poll reported, see
+    /// [`Link::set_readable`]; a helper task's message taken already; a writer that failed).
+    /// A driver whose waker has not been woken since [`Link::poll_ready`] last returned
+    /// pending learns all it can with this.
+    #[must_use]
+    pub fn ready_now(&self) -> bool {
+        match &self.kind {
+            Kind::Udp(udp) => udp.socket.is_readable(),
+            Kind::Tasks(tasks) => tasks.pending.is_some() || tasks.failed.is_some(),
+        }
+    }
+
     /// Takes a UDP link's socket off the runtime's reactor, for a driver on a thread of its
     /// own that waits on its own poll (one `epoll_wait` per wake-up and no runtime between
     /// it and the socket). Returns the descriptor that poll is to watch, level-triggered,

@@ -126,9 +126,11 @@ impl Udp {
                     return delivered;
                 }
             };
+            // One reading of the clock for the datagrams of one receive.
+            let now = clock::now();
             for i in 0..got.count {
                 if let Some((bytes, from)) = self.rx.get(i) {
-                    self.peers.deliver(input, bytes, from, stats, table);
+                    self.peers.deliver(now, input, bytes, from, stats, table);
                 }
             }
             delivered += got.count;
@@ -183,13 +185,13 @@ impl Udp {
 impl UdpPeers {
     pub(super) fn deliver<I: Input>(
         &mut self,
+        now: Instant,
         input: &mut I,
         data: &[u8],
         from: SocketAddr,
         stats: &mut LinkStats,
         table: &PeerTable,
     ) {
-        let now = clock::now();
         stats.rx_chunks += 1;
         stats.rx_bytes += data.len() as u64;
         let id = match self.target {

@@ -285,11 +285,16 @@ impl NodeBuilder {
                 config.role = role;
             }
             io.set_packing(config.pack);
+            if config.isolate_peers {
+                // Every peer of the link is a router link made from this template: one group.
+                config.group = u32::try_from(slots.len()).ok();
+            }
             local_addrs.push(io.local_addr());
             slots.push(Slot {
                 io,
                 template: config,
                 peers: PeerLinks::default(),
+                polled: false,
             });
         }
         let log = match self.log_dir {

@@ -25,6 +25,9 @@ pub(super) struct Slot {
     pub(super) io: Link,
     pub(super) template: LinkConfig,
     pub(super) peers: PeerLinks,
+    /// Its socket is on the node thread's own poll (`NodeBuilder::own_thread`), not the
+    /// runtime's.
+    pub(super) polled: bool,
 }
 
 pub(super) struct Driver {
@@ -161,33 +164,52 @@ impl Driver {
     }
 
     /// Polls every running link and the command queue with `cx`; marks the links that may
-    /// have input in `ready` and takes a command. Whether anything was ready.
+    /// have input in `ready` and takes a command. Whether anything was ready, and whether
+    /// the runtime's side (the commands, helper-task links) is to be polled again next time
+    /// (it had something: a poll that finds something registers no waker). With `runtime` false that
+    /// side is only looked at ([`Link::ready_now`]), not polled: the caller knows that the
+    /// waker it registered last time has not been woken since.
     pub(super) fn poll_inputs(
         &mut self,
         cx: &mut core::task::Context<'_>,
         ready: &mut [bool],
         command: &mut Option<Option<Command>>,
-    ) -> bool {
+        runtime: bool,
+    ) -> (bool, bool) {
         let mut any = false;
+        let mut from_runtime = false;
         for (slot, r) in self.slots.iter_mut().zip(ready.iter_mut()) {
-            if slot.io.finished().is_none() && slot.io.poll_ready(cx).is_ready() {
+            if slot.io.finished().is_some() {
+                continue;
+            }
+            let input = if runtime {
+                slot.io.poll_ready(cx).is_ready()
+            } else {
+                slot.io.ready_now()
+            };
+            if input {
                 *r = true;
                 any = true;
+                from_runtime |= !slot.polled;
             }
         }
-        if command.is_none()
+        if runtime
+            && command.is_none()
             && let core::task::Poll::Ready(c) = self.commands.poll_recv(cx)
         {
             *command = Some(c);
             any = true;
         }
-        any
+        // A command taken (now or on an earlier look of this turn) left the queue unpolled
+        // until it answers pending: poll it again next time.
+        (any, from_runtime || command.is_some())
     }
 
-    /// One turn after a wake-up: reads the ready links, runs what is due, forwards, and
-    /// carries out `command` (`Some(None)`: every handle is gone).
+    /// One turn after a wake-up at `now`: reads the ready links and forwards at once, then
+    /// runs what is due and carries out `command` (`Some(None)`: every handle is gone).
     pub(super) fn turn(
         &mut self,
+        now: Instant,
         ready: &mut [bool],
         command: Option<Option<Command>>,
         timer: bool,
@@ -199,7 +221,9 @@ impl Driver {
                 worked |= io.dispatch(&mut feed);
             }
         }
-        let now = clock::now();
+        // What the input brought goes out first: the heartbeat, the timers and the events
+        // (subscribers, the log) can wait the few microseconds.
+        self.flush();
         if let Some(hb) = &mut self.heartbeat
             && hb.due(now)
         {

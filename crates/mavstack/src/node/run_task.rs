@@ -32,7 +32,7 @@ impl Driver {
             let mut timer = false;
             let mut waited = false;
             core::future::poll_fn(|cx| {
-                let mut any = self.poll_inputs(cx, &mut ready, &mut command);
+                let (mut any, _) = self.poll_inputs(cx, &mut ready, &mut command, true);
                 if deadline.is_some() && sleep.as_mut().poll(cx).is_ready() {
                     timer = true;
                     any = true;
@@ -46,14 +46,16 @@ impl Driver {
             })
             .await;
             // Woken from idle under a steady stream: let the next datagrams arrive first.
+            let mut now = clock::now();
             let input = ready.iter().any(|&r| r);
-            let busy = input && self.moderation.busy(clock::now());
+            let busy = input && self.moderation.busy(now);
             let inputs_before = self.moderation.inputs;
             if busy && waited && self.moderation.mode == InputModeration::Timer {
                 tokio::time::sleep(Moderation::PAUSE).await;
+                now = clock::now();
             }
             timer_fired = timer;
-            let worked = match self.turn(&mut ready, command, timer) {
+            let worked = match self.turn(now, &mut ready, command, timer) {
                 Ok(Turn::Go { worked }) => worked,
                 Ok(Turn::Stop) => break Ok(()),
                 Err(e) => break Err(e),

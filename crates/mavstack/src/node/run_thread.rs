@@ -27,6 +27,7 @@ impl Driver {
         for (i, slot) in self.slots.iter_mut().enumerate() {
             if let Some(fd) = slot.io.watch_externally().map_err(polling)? {
                 waiter.watch(fd, i).map_err(polling)?;
+                slot.polled = true;
             }
         }
         let waker = waiter.waker().clone();
@@ -34,29 +35,46 @@ impl Driver {
         self.start_links();
         let mut ready = vec![false; self.slots.len()];
         let mut bulk = false;
+        // Poll the runtime's side (commands, helper-task links) on the next look: at the
+        // start, after the waker was woken, and after that side had something (it may have
+        // more, and a poll that found something registered no waker).
+        let mut runtime = true;
         loop {
             let mut command = None;
             let mut waited = false;
             // Waiting changes none of the node's deadlines: worked out once per turn.
             let mut deadline = None;
             let (timer, now) = loop {
-                let any = self.poll_inputs(&mut cx, &mut ready, &mut command);
-                let now = clock::now();
+                let polled = core::mem::take(&mut runtime) | waiter.take_woken();
+                let (any, from_runtime) =
+                    self.poll_inputs(&mut cx, &mut ready, &mut command, polled);
+                runtime = from_runtime;
                 let deadline = *deadline.get_or_insert_with(|| self.next_deadline());
-                let due = deadline.is_some_and(|d| now >= d);
                 let slots = &mut self.slots;
                 let mut mark = |i: usize| {
                     if let Some(slot) = slots.get_mut(i) {
                         slot.io.set_readable();
                     }
                 };
+                if !any && deadline == waiter.armed() {
+                    // Nothing to do, and the timer is set for the deadline (it wakes the
+                    // poll once due): wait without reading the clock.
+                    waited = true;
+                    waiter.wait_armed(mark).map_err(polling)?;
+                    continue;
+                }
+                let now = clock::now();
+                let due = deadline.is_some_and(|d| now >= d);
                 if any || due {
                     if !waited {
                         // Input left from the last turn: the other sockets' readiness is
                         // looked at too, so that a link that always has more cannot starve
                         // them (one `epoll_wait` more per turn, only while input is left).
                         waiter.look(&mut mark).map_err(polling)?;
-                        self.poll_inputs(&mut cx, &mut ready, &mut command);
+                        let polled = core::mem::take(&mut runtime) | waiter.take_woken();
+                        let (_, from_runtime) =
+                            self.poll_inputs(&mut cx, &mut ready, &mut command, polled);
+                        runtime = from_runtime;
                     }
                     break (due, now);
                 }
@@ -76,10 +94,13 @@ impl Driver {
             let inputs_before = self.moderation.inputs;
             // Under a steady stream the thread reads in bursts: nothing else runs on it, so
             // both kinds of moderation sleep it (no wake-ups while datagrams pile up).
-            if busy && waited && self.moderation.mode == InputModeration::Timer {
+            let now = if busy && waited && self.moderation.mode == InputModeration::Timer {
                 std::thread::sleep(Moderation::PAUSE);
-            }
-            let Turn::Go { worked } = self.turn(&mut ready, command, timer)? else {
+                clock::now()
+            } else {
+                now
+            };
+            let Turn::Go { worked } = self.turn(now, &mut ready, command, timer)? else {
                 return Ok(());
             };
             if self.moderation.pause_after(busy, worked, inputs_before) {
