@@ -123,6 +123,13 @@ def parse(path):
     return includes, messages
 
 
+def same(a, b):
+    """Whether two definitions of a message are alike: its name and its fields' names,
+    types and order."""
+    return a.name == b.name and [(f.name, f.base, f.array) for f in a.fields] == \
+        [(f.name, f.base, f.array) for f in b.fields]
+
+
 def load(defs, name):
     """The messages of dialect ``name`` (its file and include closure) in id order, each with
     ``origin``, the stem of the file whose definition counts, and the dialect's direct
@@ -148,8 +155,13 @@ def load(defs, name):
                 if not ids & {m.id for m in supplement}:
                     messages = messages + supplement
         for m in messages:
-            if m.id not in by_id:
+            first = by_id.get(m.id)
+            # A message defined again, identically, by a file the first one includes (moved
+            # into common.xml, development.xml keeping its copy) is the include's, so that
+            # the dialects' stubs agree on its class.
+            if first is None or (depth > first.depth and same(first, m)):
                 m.origin = stem
+                m.depth = depth
                 by_id[m.id] = m
         for inc in includes:
             visit(os.path.join(os.path.dirname(path), inc), depth + 1)

@@ -56,6 +56,13 @@ from mavstack import _native
 from mavstack._native import MAVLinkMessage
 
 __all__ = [
+    "Camera",
+    "CameraError",
+    "CameraInfo",
+    "CameraRequest",
+    "CameraServer",
+    "CameraSetting",
+    "CaptureStatus",
     "CommandError",
     "CommandRequest",
     "CommandResult",
@@ -63,6 +70,10 @@ __all__ = [
     "ConnectionClosed",
     "ConnectionFailed",
     "Error",
+    "Gimbal",
+    "GimbalAttitude",
+    "GimbalControl",
+    "GimbalInfo",
     "Home",
     "InvalidValueError",
     "ManualControl",
@@ -73,8 +84,11 @@ __all__ = [
     "Offboard",
     "ParamError",
     "Params",
+    "Photo",
     "Position",
+    "SIMULATED_CAMERA_DEFINITION",
     "Server",
+    "Storage",
     "SystemInfo",
     "Telemetry",
     "TimeoutError",
@@ -82,6 +96,7 @@ __all__ = [
     "Vehicle",
     "connect",
     "serve",
+    "serve_camera",
 ]
 
 log = logging.getLogger("mavstack.aio")
@@ -126,6 +141,11 @@ class InvalidValueError(Error, ValueError):
     """A value that cannot be sent (NaN, beyond its type's range): nothing was sent."""
 
 
+class CameraError(Error):
+    """A camera failed what it was asked (a photo it could not take, settings or a
+    definition it could not give)."""
+
+
 _KINDS: Dict[str, type[Error]] = {
     "timeout": TimeoutError,
     "closed": ConnectionClosed,
@@ -135,6 +155,7 @@ _KINDS: Dict[str, type[Error]] = {
     "command": CommandError,
     "mode": UnknownModeError,
     "value": InvalidValueError,
+    "camera": CameraError,
 }
 
 Settle = Callable[[bool, Any], None]
@@ -642,6 +663,16 @@ class Vehicle:
         ``timeout`` seconds; :class:`InvalidValueError` for a line with a line break."""
         return await _call(lambda lp, s: self._native.shell(command, float(timeout), lp, s))  # type: ignore[no-any-return]
 
+    async def gimbals(self) -> List[Gimbal]:
+        """Its gimbals (the gimbal protocol v2: each gimbal manager's
+        GIMBAL_MANAGER_INFORMATION), in the order found; empty when it has none."""
+        return await _payload.gimbals_of(self._native)
+
+    async def cameras(self) -> List[Camera]:
+        """Its cameras (the camera protocol v2: CAMERA_INFORMATION from its components),
+        in the order found; empty when it has none."""
+        return await _payload.cameras_of(self._native)
+
     def offboard(self, rate_hz: float = 20.0) -> _OffboardBlock:
         """``async with vehicle.offboard(rate_hz=20) as ob``: a setpoint stream (zero
         velocity at first), PX4 OFFBOARD or ArduPilot GUIDED once setpoints flow; leaving
@@ -908,3 +939,23 @@ def serve(device: str, *, system: int = 1, component: int = 191,
     args = (device, system, component, mav_type, autopilot, table, encoding, dialect, key,
             link_id)
     return Server(args, on_command)
+
+
+# The payload half (gimbals, cameras, a served camera): its own file, this module's names.
+from mavstack import _payload  # noqa: E402
+from mavstack._payload import (  # noqa: E402
+    Camera,
+    CameraInfo,
+    CameraRequest,
+    CameraServer,
+    CameraSetting,
+    CaptureStatus,
+    Gimbal,
+    GimbalAttitude,
+    GimbalControl,
+    GimbalInfo,
+    Photo,
+    SIMULATED_CAMERA_DEFINITION,
+    Storage,
+    serve_camera,
+)

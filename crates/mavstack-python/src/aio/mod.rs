@@ -110,6 +110,10 @@ fn system_error(e: SystemError) -> AioError {
         SystemError::Command { .. } => "command",
         SystemError::UnknownMode { .. } => "mode",
         SystemError::Rtcm(_) | SystemError::Shell(ShellError::LineBreak) => "value",
+        SystemError::Gimbal(_) | SystemError::CameraSetting(_) => "value",
+        SystemError::Photo(_)
+        | SystemError::CameraSettings(_)
+        | SystemError::CameraDefinition { .. } => "camera",
         SystemError::Shell(ShellError::NoAnswer { .. }) => "timeout",
         SystemError::Stopped => "closed",
         _ => "error",
@@ -420,17 +424,28 @@ pub(super) fn param_name(name: &str) -> PyResult<Name> {
 
 mod flying;
 mod link;
+mod payload;
 mod serve;
+mod serve_camera;
 mod vehicle;
 
 use link::{AioLink, aio_connect};
 use serve::{AioServer, aio_serve};
+use serve_camera::{AioCameraServer, aio_serve_camera};
 use vehicle::{AioStream, AioVehicle};
 
 /// Registers the module's classes and functions.
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(aio_connect, m)?)?;
     m.add_function(wrap_pyfunction!(aio_serve, m)?)?;
+    m.add_function(wrap_pyfunction!(aio_serve_camera, m)?)?;
+    m.add(
+        "SIMULATED_CAMERA_DEFINITION",
+        pyo3::types::PyBytes::new(
+            m.py(),
+            mavstack::services::camera::SIMULATED_DEFINITION.as_bytes(),
+        ),
+    )?;
     m.add_class::<Op>()?;
     m.add_class::<AioWaker>()?;
     m.add_class::<AioLink>()?;
@@ -439,5 +454,8 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<flying::AioOffboard>()?;
     m.add_class::<flying::AioManual>()?;
     m.add_class::<AioServer>()?;
+    m.add_class::<AioCameraServer>()?;
+    m.add_class::<payload::AioGimbal>()?;
+    m.add_class::<payload::AioCamera>()?;
     Ok(())
 }

@@ -577,6 +577,22 @@ impl AioVehicle {
         })
     }
 
+    /// Its gimbals (the gimbal protocol v2): settles with a list of `AioGimbal`.
+    fn gimbals(&self, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
+        let shared = Arc::clone(&self.shared);
+        self.run(waker, settle, move |system| {
+            payload::gimbals(shared, system)
+        })
+    }
+
+    /// Its cameras (the camera protocol v2): settles with a list of `AioCamera`.
+    fn cameras(&self, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
+        let shared = Arc::clone(&self.shared);
+        self.run(waker, settle, move |system| {
+            payload::cameras(shared, system)
+        })
+    }
+
     /// Where it is: `(lat, lon, height above home, altitude)`, or `None`.
     fn position(&self, waker: PyRef<'_, AioWaker>, settle: Py<PyAny>) -> PyResult<Op> {
         self.run(waker, settle, move |system| async move {

@@ -22,6 +22,8 @@ from mavstack.messages.common import MAVLink_attitude_quaternion_message as MAVL
 from mavstack.messages.common import MAVLink_attitude_target_message as MAVLink_attitude_target_message
 from mavstack.messages.common import MAVLink_auth_key_message as MAVLink_auth_key_message
 from mavstack.messages.common import MAVLink_autopilot_state_for_gimbal_device_message as MAVLink_autopilot_state_for_gimbal_device_message
+from mavstack.messages.common import MAVLink_available_modes_message as MAVLink_available_modes_message
+from mavstack.messages.common import MAVLink_available_modes_monitor_message as MAVLink_available_modes_monitor_message
 from mavstack.messages.common import MAVLink_battery_status_message as MAVLink_battery_status_message
 from mavstack.messages.common import MAVLink_button_change_message as MAVLink_button_change_message
 from mavstack.messages.common import MAVLink_camera_capture_status_message as MAVLink_camera_capture_status_message
@@ -45,6 +47,7 @@ from mavstack.messages.common import MAVLink_command_long_message as MAVLink_com
 from mavstack.messages.common import MAVLink_component_metadata_message as MAVLink_component_metadata_message
 from mavstack.messages.common import MAVLink_control_system_state_message as MAVLink_control_system_state_message
 from mavstack.messages.common import MAVLink_current_event_sequence_message as MAVLink_current_event_sequence_message
+from mavstack.messages.common import MAVLink_current_mode_message as MAVLink_current_mode_message
 from mavstack.messages.common import MAVLink_data_stream_message as MAVLink_data_stream_message
 from mavstack.messages.common import MAVLink_data_transmission_handshake_message as MAVLink_data_transmission_handshake_message
 from mavstack.messages.common import MAVLink_debug_float_array_message as MAVLink_debug_float_array_message
@@ -253,41 +256,6 @@ class MAVLink_radio_rc_channels_message(MAVLinkMessage):
     """RC channels. Channel values are in centered 13 bit format. Range is -4096 to 4096, center is 0. Conversion to PWM is x * 5/32 + 1500. Channels with indexes equal or above count should be set to 0, to benefit from MAVLink's trailing-zero trimming. (extension)"""
 
 
-class MAVLink_available_modes_message(MAVLinkMessage):
-    """Get information about a particular flight modes. The message can be enumerated or requested for a particular mode using MAV_CMD_REQUEST_MESSAGE. Specify 0 in param2 to request that the message is emitted for all available modes or the specific index for just one mode. The modes must be available/settable for the current vehicle/frame type. Each modes should only be emitted once (even if it is both standard and custom). (id 435)"""
-
-    number_modes: int
-    """The total number of available modes for the current vehicle type."""
-    mode_index: int
-    """The current mode index within number_modes, indexed from 1."""
-    standard_mode: int
-    """Standard mode. (enum MAV_STANDARD_MODE)"""
-    custom_mode: int
-    """A bitfield for use for autopilot-specific flags"""
-    properties: int
-    """Mode properties. (enum MAV_MODE_PROPERTY)"""
-    mode_name: str
-    """Name of custom mode, with null termination character. Should be omitted for standard modes."""
-
-
-class MAVLink_current_mode_message(MAVLinkMessage):
-    """Get the current mode. This should be emitted on any mode change, and broadcast at low rate (nominally 0.5 Hz). It may be requested using MAV_CMD_REQUEST_MESSAGE. (id 436)"""
-
-    standard_mode: int
-    """Standard mode. (enum MAV_STANDARD_MODE)"""
-    custom_mode: int
-    """A bitfield for use for autopilot-specific flags"""
-    intended_custom_mode: int
-    """The custom_mode of the mode that was last commanded by the user (for example, with MAV_CMD_DO_SET_STANDARD_MODE, MAV_CMD_DO_SET_MODE or via RC). This should usually be the same as custom_mode. It will be different if the vehicle is unable to enter the intended mode, or has left that mode due to a failsafe condition. 0 indicates the intended custom mode is unknown/not supplied"""
-
-
-class MAVLink_available_modes_monitor_message(MAVLinkMessage):
-    """A change to the sequence number indicates that the set of AVAILABLE_MODES has changed. A receiver must re-request all available modes whenever the sequence number changes. This is only emitted after the first change and should then be broadcast at low rate (nominally 0.3 Hz) and on change. (id 437)"""
-
-    seq: int
-    """Sequence number. The value iterates sequentially whenever AVAILABLE_MODES changes (e.g. support for a new mode is added/removed dynamically)."""
-
-
 class MAVLink_gnss_integrity_message(MAVLinkMessage):
     """Information about key components of GNSS receivers, like signal authentication, interference and system errors. (id 441)"""
 
@@ -394,55 +362,6 @@ class MAVLink(_common.MAVLink):
         force_mavlink1: bool = ...,
     ) -> None:
         """RADIO_RC_CHANNELS (id 420), fields in XML order."""
-        ...
-
-    def available_modes_encode(
-        self,
-        number_modes: int,
-        mode_index: int,
-        standard_mode: int,
-        custom_mode: int,
-        properties: int,
-        mode_name: Union[str, bytes],
-    ) -> MAVLink_available_modes_message:
-        """AVAILABLE_MODES (id 435), fields in XML order."""
-        ...
-    def available_modes_send(
-        self,
-        number_modes: int,
-        mode_index: int,
-        standard_mode: int,
-        custom_mode: int,
-        properties: int,
-        mode_name: Union[str, bytes],
-        force_mavlink1: bool = ...,
-    ) -> None:
-        """AVAILABLE_MODES (id 435), fields in XML order."""
-        ...
-
-    def current_mode_encode(
-        self,
-        standard_mode: int,
-        custom_mode: int,
-        intended_custom_mode: int,
-    ) -> MAVLink_current_mode_message:
-        """CURRENT_MODE (id 436), fields in XML order."""
-        ...
-    def current_mode_send(
-        self,
-        standard_mode: int,
-        custom_mode: int,
-        intended_custom_mode: int,
-        force_mavlink1: bool = ...,
-    ) -> None:
-        """CURRENT_MODE (id 436), fields in XML order."""
-        ...
-
-    def available_modes_monitor_encode(self, seq: int) -> MAVLink_available_modes_monitor_message:
-        """AVAILABLE_MODES_MONITOR (id 437), fields in XML order."""
-        ...
-    def available_modes_monitor_send(self, seq: int, force_mavlink1: bool = ...) -> None:
-        """AVAILABLE_MODES_MONITOR (id 437), fields in XML order."""
         ...
 
     def gnss_integrity_encode(
