@@ -36,6 +36,7 @@ mod interop_links;
 mod interop_log;
 mod interop_logs;
 mod interop_param_pck;
+mod interop_payload;
 mod interop_router;
 mod interop_router_peers;
 mod interop_rtk;
