@@ -7,8 +7,11 @@ as it can to the receiver's udpin port; the receiver loops over recv_match(block
 `mavstack router`'s `pack=true` and some radios do): the kernel's cost per datagram, which both
 receivers pay once per datagram, is then shared by N messages. Sending: `mav.attitude_send(...)` 50,000 times
 to a UDP port read by a thread of the same process (how many arrive is printed); the rate and
-the CPU seconds of the process. Usage:
-    bench_live.py [--seconds 5] [--pack 1]
+the CPU seconds of the process. `--latency`: instead, a sender writes one SYSTEM_TIME every
+5 ms stamped with its time.monotonic_ns() (in time_unix_usec) just before sendto; the receiver
+subtracts the stamp from time.monotonic_ns() as soon as recv_match returns: p50 and p99 from the
+frame given to the socket to Python holding the message, one at a time, for each receiver. Usage:
+    bench_live.py [--seconds 5] [--pack 1] [--latency]
 """
 
 import argparse
@@ -37,6 +40,35 @@ def sender(port, pack):
                 s.sendto(f, ("127.0.0.1", port))
             except OSError:
                 pass
+
+
+def latency_sender(port, period=0.005):
+    from pymavlink.dialects.v20 import ardupilotmega as apm
+    mav = apm.MAVLink(None, srcSystem=1, srcComponent=1)
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    while True:
+        frame = bytes(mav.system_time_encode(time.monotonic_ns(), 0).pack(mav))
+        s.sendto(frame, ("127.0.0.1", port))
+        time.sleep(period)
+
+
+def latency_receive(which, port, seconds):
+    if which == "mavstack":
+        from mavstack import mavutil
+    else:
+        from pymavlink import mavutil
+    conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % port)
+    conn.recv_match(type="SYSTEM_TIME", blocking=True, timeout=10)
+    lat = []
+    t0 = time.time()
+    while time.time() - t0 < seconds:
+        m = conn.recv_match(type="SYSTEM_TIME", blocking=True, timeout=1)
+        now = time.monotonic_ns()
+        if m is not None:
+            lat.append(now - m.time_unix_usec)
+    conn.close()
+    lat.sort()
+    print("%s %d %.1f %.1f" % (which, len(lat), lat[len(lat) // 2] / 1000, lat[int(len(lat) * 0.99)] / 1000))
 
 
 def receive(which, port, seconds):
@@ -96,15 +128,39 @@ def send_rate(which, count=50000):
     print("%s %d %.3f %.3f %d" % (which, count, cpu, wall, got[0]))
 
 
+def latency(seconds):
+    for which in ("pymavlink", "mavstack"):
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+        s.close()
+        recv = subprocess.Popen([sys.executable, __file__, "--role", "latency-" + which, "--port", str(port),
+                                 "--seconds", str(seconds)], stdout=subprocess.PIPE, text=True)
+        time.sleep(1.0)
+        send = subprocess.Popen([sys.executable, __file__, "--role", "latency-send", "--port", str(port)])
+        out = recv.communicate()[0].split()
+        send.kill()
+        send.wait()
+        _, n, p50, p99 = out
+        print("latency %-9s %6d messages one at a time: p50 %7.1f us, p99 %7.1f us" % (which, int(n), float(p50), float(p99)))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--role", default=None)
     ap.add_argument("--port", type=int, default=0)
     ap.add_argument("--pack", type=int, default=1)
+    ap.add_argument("--latency", action="store_true")
     a = ap.parse_args()
     if a.role == "send":
         return sender(a.port, max(1, a.pack))
+    if a.role == "latency-send":
+        return latency_sender(a.port)
+    if a.role and a.role.startswith("latency-"):
+        return latency_receive(a.role[8:], a.port, a.seconds)
+    if a.latency:
+        return latency(a.seconds)
     if a.role and a.role.startswith("send-"):
         return send_rate(a.role[5:])
     if a.role:

@@ -7,17 +7,17 @@
 //! string by the stack's own parser ([`LinkSpec`]): the link's version handling and signing
 //! come with it. The nodes run on one tokio runtime shared by every connection of the
 //! process (one worker thread; a UDP link's node on a thread of its own, with its own
-//! `epoll`); frames reach the connection through the node's subscription, and a blocking
-//! `recv_match` waits on it with the GIL released, waking every 100 ms to let Python see a
-//! Ctrl-C. Sends are queued to the node without waiting for it. One thread may receive while
+//! `epoll`); frames reach the connection in batches through the node's batch subscription
+//! (`live/receive.rs`), and a blocking `recv_match` waits on it with the GIL released, waking
+//! every 100 ms to let Python see a Ctrl-C. Sends are queued to the node without waiting for it. One thread may receive while
 //! others send and read the connection's state (see [`LiveLink`]).
 //!
 //! What pymavlink keeps per system (the latest message of each type, the flight mode, the
 //! armed flag) is kept the same way here, and `target_system` locks onto the first vehicle
 //! HEARTBEAT as pymavlink's does (`target_component` stays 0 until set, as in pymavlink).
 //!
-//! This file has the connection's state and how frames reach it; `live/methods.rs` its
-//! Python methods, `live/heartbeat.rs` what pymavlink reads of a HEARTBEAT (vehicle or not,
+//! This file has the connection's state; `live/receive.rs` how frames reach it and are
+//! recorded; `live/methods.rs` its Python methods, `live/heartbeat.rs` what pymavlink reads of a HEARTBEAT (vehicle or not,
 //! the flight mode's name), `live/fields.rs` Python values into payload bytes.
 
 use core::sync::atomic::{AtomicBool, AtomicU8, Ordering};
@@ -26,28 +26,27 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
-use mavstack::channel::{Authentication, SigningConfig};
+use mavstack::channel::SigningConfig;
 use mavstack::modes::Flavour;
 use mavstack::router::{LinkId, LocalDelivery, RouterConfig};
-use mavstack::{Incoming, LinkSpec, Node, NodeHandle, Subscription};
+use mavstack::{LinkSpec, Node, NodeHandle};
 use mavstack_core::signing::SecretKey;
 use pyo3::exceptions::{PyConnectionError, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::sync::MutexExt as _;
 use pyo3::types::{PyDict, PyString};
 use tokio::runtime::Runtime;
-use tokio::sync::mpsc::error::TryRecvError;
 
 use crate::connection::{Conditions, wanted_mask};
 use crate::dialect::{Dialect, MessageType};
-use crate::message::Message;
 
 mod fields;
 mod heartbeat;
 mod methods;
+mod receive;
 
 pub(crate) use fields::put_field;
-use heartbeat::{heartbeat_fields, mode_string, probably_vehicle};
+use receive::{RawFrame, Receiver};
 
 /// How long a blocking receive waits between two looks at Python's signals.
 const SIGNAL_CHECK: Duration = Duration::from_millis(100);
@@ -95,6 +94,11 @@ struct SystemState {
     mav_type: Option<u8>,
     autopilot: Option<u8>,
     base_mode: u8,
+    /// The latest frame of each type (by message index) that no message object was made
+    /// for yet (see `live/receive.rs`).
+    latest: Vec<Option<Box<RawFrame>>>,
+    /// The message indexes of `latest` marked newer than `messages`.
+    marked: Vec<usize>,
 }
 
 impl SystemState {
@@ -106,6 +110,8 @@ impl SystemState {
             mav_type: None,
             autopilot: None,
             base_mode: 0,
+            latest: Vec::new(),
+            marked: Vec::new(),
         }
     }
 }
@@ -127,7 +133,7 @@ pub(crate) struct LiveLink {
     closed: AtomicBool,
     handle: NodeHandle,
     /// The node's frames: held by the thread that receives.
-    frames: Mutex<Subscription>,
+    frames: Mutex<Receiver>,
     /// What the received frames built up.
     state: Mutex<State>,
     /// The router links (peers) heard from or reported, for `write`, and when the node was
@@ -152,6 +158,8 @@ struct State {
     unknown_id: u64,
     /// Messages received.
     received: u64,
+    /// Some system has frames recorded without a message object (`SystemState::marked`).
+    marked: bool,
 }
 
 impl State {
@@ -228,7 +236,7 @@ impl LiveLink {
                     .link(spec)
                     .start()
                     .await?;
-                let frames = node.subscribe().await;
+                let frames = node.subscribe_batched().await;
                 Ok::<_, mavstack::NodeError>((node, frames))
             })
         });
@@ -242,7 +250,7 @@ impl LiveLink {
             node: Mutex::new(Some(node)),
             closed: AtomicBool::new(false),
             dialect,
-            frames: Mutex::new(frames),
+            frames: Mutex::new(Receiver::new(frames)),
             state: Mutex::new(State {
                 sysid: 0,
                 target_component: 0,
@@ -251,114 +259,12 @@ impl LiveLink {
                 last_type: None,
                 unknown_id: 0,
                 received: 0,
+                marked: false,
             }),
             peers: Mutex::new((Vec::new(), None)),
             encode_seq: AtomicU8::new(0),
             names,
         })
-    }
-
-    /// The next frame from the node: at once, or (when `blocking`) waiting until `deadline`
-    /// with the GIL released. `None` when nothing came in time or the node has stopped.
-    fn next_frame(
-        py: Python<'_>,
-        frames: &mut Subscription,
-        blocking: bool,
-        deadline: Option<Instant>,
-    ) -> PyResult<Option<Incoming>> {
-        loop {
-            match frames.try_recv() {
-                Ok(i) => return Ok(Some(i)),
-                Err(TryRecvError::Disconnected) => return Ok(None),
-                Err(TryRecvError::Empty) => {}
-            }
-            if !blocking {
-                return Ok(None);
-            }
-            let wait = match deadline {
-                Some(d) => {
-                    let now = Instant::now();
-                    if d <= now {
-                        return Ok(None);
-                    }
-                    (d - now).min(SIGNAL_CHECK)
-                }
-                None => SIGNAL_CHECK,
-            };
-            let rt = runtime()?;
-            let frames = &mut *frames;
-            let got = py
-                .detach(|| rt.block_on(async { tokio::time::timeout(wait, frames.recv()).await }));
-            match got {
-                Ok(Some(i)) => return Ok(Some(i)),
-                Ok(None) => return Ok(None),
-                Err(_) => py.check_signals()?,
-            }
-        }
-    }
-
-    /// Records a received frame as pymavlink's `post_message` does and returns it as a
-    /// message with its sender's system id and its type's index; `None` for a message id
-    /// the dialect does not define.
-    fn post(
-        &self,
-        py: Python<'_>,
-        incoming: &Incoming,
-    ) -> PyResult<Option<(Py<Message>, u8, usize)>> {
-        let frame = incoming.frame.frame.view();
-        let Some(index) = self.dialect.index_of_id(frame.msg_id()) else {
-            lock(py, &self.state).unknown_id += 1;
-            return Ok(None);
-        };
-        {
-            let mut peers = lock(py, &self.peers);
-            if !peers.0.contains(&incoming.link_id) {
-                peers.0.push(incoming.link_id);
-            }
-        }
-        let ty = Arc::clone(&self.dialect.messages[index]);
-        let verified = matches!(incoming.frame.auth, Authentication::Verified { .. });
-        let sysid = frame.sysid();
-        let compid = frame.compid();
-        let heartbeat = (ty.name == "HEARTBEAT").then(|| heartbeat_fields(&ty, frame.payload()));
-        let message = Py::new(
-            py,
-            Message::live(
-                Arc::clone(&ty),
-                frame.as_bytes().to_vec(),
-                unix_now(),
-                verified,
-            ),
-        )?;
-        let messages = {
-            let mut st = lock(py, &self.state);
-            st.received += 1;
-            let target_unset = st.sysid == 0;
-            let system = st
-                .systems
-                .entry(sysid)
-                .or_insert_with(|| SystemState::new(py));
-            if let Some(hb) = heartbeat
-                && probably_vehicle(compid, &hb)
-            {
-                system.flightmode = mode_string(&hb);
-                system.armed = hb.base_mode & SAFETY_ARMED != 0;
-                system.mav_type = Some(hb.mav_type);
-                system.autopilot = Some(hb.autopilot);
-                system.base_mode = hb.base_mode;
-                if target_unset {
-                    st.sysid = sysid;
-                }
-            }
-            st.systems
-                .get(&sysid)
-                .map(|s| s.messages.clone_ref(py))
-                .ok_or_else(|| PyRuntimeError::new_err("no state for the sender"))?
-        };
-        messages
-            .bind(py)
-            .set_item(self.names[index].bind(py), &message)?;
-        Ok(Some((message, sysid, index)))
     }
 
     /// The type mask of a `type` argument, remembered for the same argument as last time.

@@ -336,3 +336,56 @@ def test_signing_set_up_before_any_peer():
     finally:
         peer.close()
         conn.close()
+
+
+def test_messages_hold_what_recv_match_filtered_out_as_pymavlinks_do():
+    """Frames `recv_match` does not return still become the latest of their type, as in
+    pymavlink (its `post_message` runs for every frame): the same datagrams to a pymavlink
+    and a mavstack connection, the same calls, the same `messages` after each, and a
+    condition over a type that was filtered out."""
+    from pymavlink import mavutil as pymavutil
+    ports = free_port(), free_port()
+    conns = [pymavutil.mavlink_connection("udpin:127.0.0.1:%d" % ports[0]),
+             mavutil.mavlink_connection("udpin:127.0.0.1:%d" % ports[1])]
+    enc = apm.MAVLink(None, srcSystem=1, srcComponent=1)
+    out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+
+    def send(*frames):
+        for f in frames:
+            for p in ports:
+                out.sendto(f.pack(enc), ("127.0.0.1", p))
+
+    def att(t):
+        return enc.attitude_encode(t, 0.1 * t, 0.2, 0.3, 0.01, 0.02, 0.03)
+
+    def gpi(t):
+        return enc.global_position_int_encode(t, -353632610 + t, 1491652300, 584000, 10000, 1, 2, 3, 9000)
+
+    def latest(c):
+        # pymavlink's dict starts with two entries of its own.
+        return {k: v.to_dict() for k, v in c.messages.items() if k not in ("MAV", "HOME")}
+
+    try:
+        send(enc.heartbeat_encode(2, 3, 81, 4, 4), att(1), gpi(2),
+             enc.vfr_hud_encode(1.5, 2.5, 90, 50, 10.0, 0.5), att(3), gpi(4),
+             enc.sys_status_encode(1, 1, 1, 500, 12000, -1, 80, 0, 0, 0, 0, 0, 0), gpi(5))
+        steps = []
+        for c in conns:
+            seen = []
+            for _ in range(2):
+                m = c.recv_match(type="ATTITUDE", blocking=True, timeout=5)
+                seen.append((m.time_boot_ms, m is c.messages["ATTITUDE"], latest(c)))
+            seen.append((c.recv_match(type="ATTITUDE", blocking=True, timeout=0.5), latest(c)))
+            steps.append(seen)
+        assert steps[0] == steps[1]
+        assert steps[1][2][1]["GLOBAL_POSITION_INT"]["time_boot_ms"] == 5
+        assert set(steps[1][2][1]) == {"HEARTBEAT", "ATTITUDE", "GLOBAL_POSITION_INT", "VFR_HUD", "SYS_STATUS"}
+
+        send(att(6), gpi(7), att(8))
+        got = [c.recv_match(type="ATTITUDE", condition="GLOBAL_POSITION_INT.time_boot_ms == 7",
+                            blocking=True, timeout=5) for c in conns]
+        assert [m.time_boot_ms for m in got] == [8, 8]
+        assert latest(conns[0]) == latest(conns[1])
+    finally:
+        for c in conns:
+            c.close()

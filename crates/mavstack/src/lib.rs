@@ -147,9 +147,9 @@ pub mod web;
 
 pub use link_spec::{LinkSpec, LinkSpecError, redacted};
 pub use node::{
-    EventSubscription, Incoming, InputModeration, LinkEvent, LinkReport, Node, NodeBuilder,
-    NodeError, NodeEvent, NodeHandle, NodeReport, RequestError, Subscription, SystemReport,
-    TapSubscription, Tapped,
+    BATCH_DEPTH, BatchFrame, BatchSubscription, BatchWait, EventSubscription, FrameBatch, Incoming,
+    InputModeration, LinkEvent, LinkReport, Node, NodeBuilder, NodeError, NodeEvent, NodeHandle,
+    NodeReport, RequestError, Subscription, SystemReport, TapSubscription, Tapped,
 };
 
 /// A message's name in the common dialect (`"HEARTBEAT"`), or `"message N"` for an id it

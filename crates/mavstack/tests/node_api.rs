@@ -220,3 +220,75 @@ async fn a_node_on_its_own_thread_forwards_between_tcp_and_udp() {
     assert_eq!(buf, want);
     node.shutdown().await.expect("clean shutdown");
 }
+
+/// A batch subscription on a node on its own thread: every frame reaches the reader thread
+/// in order, byte for byte, with the router link it came from and several frames of one
+/// datagram in one batch; after shutdown the reader is told the node has stopped.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_batch_subscription_gets_every_frame_in_order_then_the_end() {
+    use mavstack::{BatchWait, FrameBatch};
+
+    let none = |_: &str| None;
+    let node = Node::builder()
+        .own_thread(true)
+        .identity(1, 191)
+        .link(LinkSpec::parse("udpin:127.0.0.1:0", &none).expect("spec"))
+        .start()
+        .await
+        .expect("starts");
+    let port = node.local_addrs()[0].expect("bound").port();
+    let mut frames = node.subscribe_batched().await;
+    let sender = peer(port);
+    let mut sent = Vec::new();
+    // 50 datagrams of 4 frames each, sequence numbers 0..200.
+    for d in 0..50u8 {
+        let mut datagram = Vec::new();
+        for k in 0..4u8 {
+            let header = FrameHeader {
+                version: Version::V2,
+                seq: d * 4 + k,
+                sysid: 2,
+                compid: 1,
+                signed: false,
+            };
+            let mut buf = [0u8; MAX_FRAME_LEN];
+            let len = wire::emit_message(&header, &Heartbeat::default(), &mut buf).expect("fits");
+            let f = buf[..len].to_vec();
+            datagram.extend_from_slice(&f);
+            sent.push(f);
+        }
+        sender.send(&datagram).expect("send");
+    }
+    let reader = tokio::task::spawn_blocking(move || {
+        let mut batch = FrameBatch::new();
+        let mut got: Vec<Vec<u8>> = Vec::new();
+        let mut links = Vec::new();
+        let mut largest = 0;
+        while got.len() < 200 {
+            match frames.wait(&mut batch, Duration::from_secs(10)) {
+                BatchWait::Frames => {}
+                other => panic!("{other:?} after {} frames", got.len()),
+            }
+            largest = largest.max(batch.len());
+            for f in batch.iter() {
+                got.push(f.bytes.to_vec());
+                links.push(f.link_id);
+            }
+        }
+        (got, links, largest, frames)
+    });
+    let (got, links, largest, mut frames) = reader.await.expect("the reader ends");
+    assert_eq!(got, sent);
+    assert!(
+        links.iter().all(|l| *l == links[0]),
+        "one peer, one router link"
+    );
+    assert!(largest >= 4, "the frames of one datagram come in one batch");
+    let report = node.shutdown().await.expect("clean shutdown");
+    assert_eq!(report.subscriber_drops, 0);
+    let mut batch = FrameBatch::new();
+    let end = tokio::task::spawn_blocking(move || frames.wait(&mut batch, Duration::from_secs(10)))
+        .await
+        .expect("waits");
+    assert_eq!(end, BatchWait::Closed);
+}

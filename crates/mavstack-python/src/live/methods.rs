@@ -13,14 +13,14 @@ use mavstack::core::wire::{self, FrameHeader, Version};
 use mavstack::modes;
 use mavstack::router::LinkId;
 use mavstack_core::signing::SecretKey;
-use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 
 use super::fields::encode_payload;
 use super::heartbeat::ardupilot_modes;
+use super::receive::Posted;
 use super::{CUSTOM_MODE_ENABLED, LiveLink, lock, runtime, unix_now};
-use crate::connection::eval_condition;
 use crate::message::Message;
 
 #[pymethods]
@@ -28,13 +28,17 @@ impl LiveLink {
     /// The next message, or `None` when none has arrived (pymavlink's `recv_msg`: it does
     /// not wait).
     fn recv_msg(&self, py: Python<'_>) -> PyResult<Option<Py<Message>>> {
-        let mut frames = lock(py, &self.frames);
-        while let Some(i) = Self::next_frame(py, &mut frames, false, None)? {
-            if let Some((m, _, _)) = self.post(py, &i)? {
-                return Ok(Some(m));
+        let mut rx = lock(py, &self.frames);
+        let mut found = None;
+        while let Some(i) = self.next_frame(py, &mut rx, false, None)? {
+            if let Posted::Message(m, _) = self.post(py, &mut rx, i, |_| true)? {
+                found = Some(m);
+                break;
             }
         }
-        Ok(None)
+        drop(rx);
+        self.materialize(py)?;
+        Ok(found)
     }
 
     /// The next message of the given type(s) for which `condition` holds (a Python
@@ -60,48 +64,31 @@ impl LiveLink {
             }
             _ => None,
         };
-        let mut frames = lock(py, &self.frames);
-        loop {
-            if deadline.is_some_and(|d| Instant::now() >= d) {
-                return Ok(None);
-            }
-            let Some(incoming) = Self::next_frame(py, &mut frames, blocking, deadline)? else {
-                return Ok(None);
-            };
-            let Some((message, sysid, index)) = self.post(py, &incoming)? else {
-                continue;
-            };
-            if wanted.as_ref().is_some_and(|w| !w[index]) {
-                continue;
-            }
-            if let Some(c) = condition {
-                let (globals, code, locals) = {
-                    let mut st = lock(py, &self.state);
-                    let (globals, code) = st.conditions.prepare(py, c)?;
-                    let locals = st
-                        .systems
-                        .get(&sysid)
-                        .map(|s| s.messages.clone_ref(py))
-                        .ok_or_else(|| PyRuntimeError::new_err("no state for the sender"))?;
-                    (globals, code, locals)
-                };
-                if !eval_condition(py, &globals, &code, locals.bind(py).as_any())? {
-                    continue;
-                }
-            }
-            return Ok(Some(message));
-        }
+        let mut rx = lock(py, &self.frames);
+        let found = self.match_next(
+            py,
+            &mut rx,
+            condition,
+            wanted.as_ref().map(|w| w.as_slice()),
+            blocking,
+            deadline,
+        );
+        drop(rx);
+        self.materialize(py)?;
+        found
     }
 
     /// The latest message of each type from the target system (pymavlink's `messages`, a
     /// dict by name).
     #[getter]
-    fn messages(&self, py: Python<'_>) -> Py<PyDict> {
-        lock(py, &self.state).target(py).messages.clone_ref(py)
+    fn messages(&self, py: Python<'_>) -> PyResult<Py<PyDict>> {
+        self.materialize(py)?;
+        Ok(lock(py, &self.state).target(py).messages.clone_ref(py))
     }
 
     /// The latest messages of each system heard: `{sysid: {name: message}}`.
     fn messages_by_system<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.materialize(py)?;
         let all: Vec<(u8, Py<PyDict>)> = lock(py, &self.state)
             .systems
             .iter()

@@ -320,6 +320,7 @@ impl NodeBuilder {
             started: clock::now(),
             buf: [0; MAX_FRAME_LEN],
             subscribers: Vec::new(),
+            batches: Vec::new(),
             subscriber_drops: 0,
             watchers: self.watchers,
             pending: Vec::new(),

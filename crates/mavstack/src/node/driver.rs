@@ -11,6 +11,7 @@ use mavstack_transport::protocol::Framing;
 use mavstack_transport::{Dest, Input, Link, PeerId, PeerInfo, clock};
 use tokio::sync::mpsc;
 
+use super::batch::BatchSink;
 pub(super) use super::heartbeat::Heartbeat;
 use super::log::TrafficLog;
 use super::moderation::Moderation;
@@ -41,6 +42,8 @@ pub(super) struct Driver {
     pub(super) started: Instant,
     pub(super) buf: [u8; MAX_FRAME_LEN],
     pub(super) subscribers: Vec<mpsc::Sender<Incoming>>,
+    /// Batch subscribers ([`super::NodeHandle::subscribe_batched`]).
+    pub(super) batches: Vec<BatchSink>,
     pub(super) subscriber_drops: u64,
     pub(super) watchers: Vec<mpsc::Sender<NodeEvent>>,
     /// Peer events of the last dispatch, for the watchers.
@@ -267,6 +270,10 @@ impl Driver {
                 self.subscribers.push(tx);
                 let _ = done.send(());
             }
+            Some(Some(Command::SubscribeBatched(sink, done))) => {
+                self.batches.push(sink);
+                let _ = done.send(());
+            }
             Some(Some(Command::Events(tx, done))) => {
                 self.watchers.push(tx);
                 let _ = done.send(());
@@ -392,7 +399,13 @@ impl Driver {
                             frame.frame.as_bytes(),
                         );
                     }
-                    if self.log_local_only || self.subscribers.is_empty() {
+                    if self.log_local_only {
+                        continue;
+                    }
+                    for b in &mut self.batches {
+                        b.push(link, &frame);
+                    }
+                    if self.subscribers.is_empty() {
                         continue;
                     }
                     let name = self.link_label(link);
@@ -438,6 +451,12 @@ impl Driver {
                     self.tell(link, LinkEvent::SigningSetup { from, setup });
                 }
                 _ => {}
+            }
+        }
+        if !self.batches.is_empty() {
+            self.batches.retain(BatchSink::is_open);
+            for b in &mut self.batches {
+                self.subscriber_drops += b.publish();
             }
         }
         let pending = core::mem::take(&mut self.pending);

@@ -10,6 +10,7 @@ use mavstack_transport::Options;
 use tokio::sync::{mpsc, oneshot};
 use tokio::task::JoinHandle;
 
+use super::batch::{BatchSink, BatchSubscription};
 use super::builder::NodeBuilder;
 use super::moderation::InputModeration;
 use super::{
@@ -107,6 +108,11 @@ impl Node {
     /// See [`NodeHandle::subscribe`].
     pub async fn subscribe(&self) -> Subscription {
         self.handle().subscribe().await
+    }
+
+    /// See [`NodeHandle::subscribe_batched`].
+    pub async fn subscribe_batched(&self) -> BatchSubscription {
+        self.handle().subscribe_batched().await
     }
 
     /// Whether the node's task has ended (a link failed).
@@ -248,6 +254,26 @@ impl NodeHandle {
             let _ = registered.await;
         }
         rx
+    }
+
+    /// Every frame [`subscribe`](Self::subscribe) would give, in batches, for a reader on a
+    /// thread of its own (see [`BatchSubscription`]): the frames of a driver turn are handed
+    /// over together, their bytes copied once, with one wake-up when the reader waits.
+    /// Dropping the subscription unsubscribes; once the node stops, the reader is told
+    /// ([`BatchWait::Closed`](super::BatchWait::Closed)) after the last frame.
+    pub async fn subscribe_batched(&self) -> BatchSubscription {
+        let (sink, subscription) = BatchSink::new();
+        let (done, registered) = oneshot::channel();
+        if self
+            .commands
+            .send(Command::SubscribeBatched(sink, done))
+            .await
+            .is_ok()
+        {
+            // Registered before this returns: nothing that arrives later is missed.
+            let _ = registered.await;
+        }
+        subscription
     }
 
     /// A copy of every input from now on, as it arrived on its link, before any parsing:

@@ -14,13 +14,15 @@
 //!                                       Link::send (batched, never waits) ─► sockets
 //! ```
 //!
-//! One file per part: `builder` (what a node is made of, and opening it), `handle` (the
+//! One file per part: `builder` (what a node is made of, and opening it), `batch` (frames
+//! handed to a reader thread in batches), `handle` (the
 //! running [`Node`] and its [`NodeHandle`]s), `driver` (the driver's state and one turn of
 //! it: reading, routing, forwarding, commands), `run_task` (the driver as a task of the
 //! runtime), `run_thread` (the driver on a thread of its own, over an `epoll`),
 //! `moderation` (reading in bursts under a steady stream), `heartbeat` (the node's own
 //! HEARTBEAT timer), `log` (the traffic log) and `report` (the counters a node reports).
 
+mod batch;
 mod builder;
 mod driver;
 mod handle;
@@ -32,6 +34,7 @@ mod run_task;
 #[cfg(target_os = "linux")]
 mod run_thread;
 
+pub use batch::{BATCH_DEPTH, BatchFrame, BatchSubscription, BatchWait, FrameBatch};
 pub use builder::NodeBuilder;
 pub use handle::{Node, NodeHandle};
 pub use moderation::InputModeration;
@@ -287,6 +290,7 @@ enum Command {
         done: oneshot::Sender<usize>,
     },
     Subscribe(mpsc::Sender<Incoming>, oneshot::Sender<()>),
+    SubscribeBatched(batch::BatchSink, oneshot::Sender<()>),
     Events(mpsc::Sender<NodeEvent>, oneshot::Sender<()>),
     Tap(mpsc::Sender<Tapped>, oneshot::Sender<()>),
     SendBytes {
