@@ -40,10 +40,11 @@ fi
 # Each target runs from DIR/start.sh (made by make_starter): it ends the instance before (the
 # session whose leader's pid is in DIR/pid) and starts the target in a session of its own, under
 # a shell that waits for it (ArduPilot SITL exits when its parent does). The restart scenario
-# runs it again while a ground station is connected.
+# runs it again while a ground station is connected. STARTER=NAME writes DIR/NAME instead
+# (the simulator's start-camera.sh: the same vehicle with its camera, for the camera scenario).
 starters=()
 make_starter() {
-    local dir="$1"
+    local dir="$1" file="$1/${STARTER:-start.sh}"
     shift
     {
         echo '#!/usr/bin/env bash'
@@ -54,8 +55,8 @@ make_starter() {
         printf ' %q' "$@"
         echo ' </dev/null >>"$dir/run.log" 2>&1 &'
         echo 'echo $! >"$dir/pid"'
-    } >"$dir/start.sh"
-    chmod +x "$dir/start.sh"
+    } >"$file"
+    chmod +x "$file"
     starters+=("$dir")
 }
 stop_all() {
@@ -143,11 +144,17 @@ for flavour in ${SIMS-ardupilot px4}; do
         second=(--signed-link udpin:127.0.0.1:14562)
     fi
     dir="$out/sim-$flavour-run"
-    mkdir -p "$dir"
+    mkdir -p "$dir/camera"
     make_starter "$dir" "$bin" vehicle udpout:127.0.0.1:14550 --autopilot "$flavour" \
         --estimator-settle 5 --secure "${extra[@]}"
+    # The same with the simulated camera (component 100), for the camera scenario only: the
+    # other scenarios' peers take the first HEARTBEAT heard (pymavlink's wait_heartbeat), which
+    # could be the camera's.
+    STARTER=start-camera.sh make_starter "$dir" "$bin" vehicle udpout:127.0.0.1:14550 \
+        --autopilot "$flavour" --estimator-settle 5 --secure --camera "$dir/camera" "${extra[@]}"
     "$dir/start.sh"
-    scenarios "sim-$flavour" udpin:127.0.0.1:14550 "$dir" "${second[@]}"
+    scenarios "sim-$flavour" udpin:127.0.0.1:14550 "$dir" "${second[@]}" \
+        --camera-restart "$dir/start-camera.sh"
     bench "sim-$flavour" 14550
     stop_all
 done

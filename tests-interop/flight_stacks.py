@@ -62,6 +62,14 @@ Scenarios (in this order, each independent of the ones before but the flight, la
                fragment); on PX4, `listener gps_inject_data` through the shell then shows the
                last one as sent (length, flags and bytes); elsewhere the vehicle gives no
                readout (ArduPilot counts the fragments it used in its log, GPA.RTCMFU)
+  gimbal, camera
+               `mavstack gimbal` and `mavstack camera` (tests-interop/flight_payload.py, whose
+               docstring says what each checks and what each stack is told first): a manager
+               found, angles set and read back, a location pointed at and cleared; a camera
+               found, a photo announced by CAMERA_IMAGE_CAPTURED, its settings where it has a
+               definition; n/a with what the stack was asked and answered where it lacks them
+               (with --camera-restart CMD, a command that starts the vehicle again with its
+               camera, for the simulator)
   restart      (with --restart CMD, a command that kills the vehicle and starts it again; last)
                `mavstack listen CONN --rate ATTITUDE:4` running while the vehicle is restarted:
                it keeps running (a TCP link reconnects), hears the new instance's HEARTBEAT
@@ -84,6 +92,7 @@ from pymavlink import mavutil
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
+import flight_payload  # noqa: E402
 KEY = "a1" * 32
 PERIPHERAL_COMPID = 158  # MAV_COMP_ID_PERIPHERAL
 
@@ -98,9 +107,10 @@ def run(argv, timeout=120, env=None):
 
 
 class Runner:
-    def __init__(self, bin_, name, conn, flight=None, restart=None, signed_link=None):
+    def __init__(self, bin_, name, conn, flight=None, restart=None, signed_link=None, camera_restart=None):
         self.bin, self.name, self.conn, self.flight_bin = bin_, name, conn, flight
         self.restart_cmd = restart
+        self.camera_restart = camera_restart
         self.signed_link = signed_link
         self.results = []
 
@@ -915,7 +925,7 @@ def compare_plans(sent, got):
 
 SCENARIOS = ["probe", "conform", "params", "param_set", "mission", "arm_refused", "signing", "router", "record",
              "aio", "pymavlink_scripts", "signed_router", "modes", "takeoff_goto", "offboard", "manual",
-             "shell", "rtk", "flight", "restart"]
+             "shell", "rtk", "gimbal", "camera", "flight", "restart"]
 
 
 def main():
@@ -928,14 +938,18 @@ def main():
     ap.add_argument("--flight", help="the flight example's binary")
     ap.add_argument("--restart", help="a shell command that kills the vehicle and starts it again")
     ap.add_argument("--signed-link", help="a second link of the vehicle's (ArduPilot's SERIAL1), for signed_router")
+    ap.add_argument("--camera-restart", help="a shell command that starts the vehicle again with a camera (the "
+                    "simulator's --camera), for the camera scenario; --restart undoes it")
     a = ap.parse_args()
-    r = Runner(a.mavstack, a.name, a.conn, a.flight, a.restart, a.signed_link)
+    r = Runner(a.mavstack, a.name, a.conn, a.flight, a.restart, a.signed_link, a.camera_restart)
     chosen = a.only.split(",") if a.only else SCENARIOS
     # arm_refused needs the vehicle fresh: it goes first when asked for.
     order = (["arm_refused"] if "arm_refused" in chosen else []) + [s for s in chosen if s != "arm_refused"]
     for s in order:
         if s == "flight":
             flight_steps(r)
+        elif s in ("gimbal", "camera"):
+            getattr(flight_payload, s)(r)
         else:
             getattr(r, s)()
     if a.out:
