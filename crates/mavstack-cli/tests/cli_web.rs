@@ -508,12 +508,19 @@ fn websocket_clients_that_never_read_do_not_hold_the_router_back() {
     std::thread::sleep(Duration::from_millis(300));
     let sender = UdpSocket::bind("127.0.0.1:0").expect("sender");
     sender.connect(("127.0.0.1", in_port)).expect("connect");
+    // What the receiver has got so far: the sender keeps at most WINDOW frames in flight,
+    // so that no socket buffer on the way can overflow however the machine schedules the
+    // three processes (a loss is then the router's).
+    const WINDOW: u32 = 128;
+    let got = std::sync::Arc::new(core::sync::atomic::AtomicU32::new(0));
+    let counted = std::sync::Arc::clone(&got);
     let receiving = std::thread::spawn(move || {
         let mut buf = [0u8; 2048];
         let mut n = 0u32;
         while let Ok(len) = receiver.recv(&mut buf) {
             if len > 0 {
                 n += 1;
+                counted.store(n, core::sync::atomic::Ordering::Release);
             }
             if n == FRAMES {
                 break;
@@ -540,11 +547,15 @@ fn websocket_clients_that_never_read_do_not_hold_the_router_back() {
             &mut frame,
         )
         .expect("fits");
-        sender.send(&frame[..len]).expect("sent");
-        if i % 200 == 199 {
-            // Paced, so that loopback's socket buffers are not what is measured.
-            std::thread::sleep(Duration::from_millis(10));
+        // At most WINDOW frames ahead of the receiver; a frame lost for good stalls the
+        // window for 5 s at most, and the count below fails.
+        let stall = Instant::now() + Duration::from_secs(5);
+        while i.saturating_sub(got.load(core::sync::atomic::Ordering::Acquire)) >= WINDOW
+            && Instant::now() < stall
+        {
+            std::thread::sleep(Duration::from_micros(200));
         }
+        sender.send(&frame[..len]).expect("sent");
     }
     let received = receiving.join().expect("receiver");
     let status = json_of(&get(http, "/api/status").1);
