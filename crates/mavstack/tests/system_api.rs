@@ -521,3 +521,58 @@ async fn a_vehicle_streaming_on_request_sends_only_what_is_asked() {
     gcs.shutdown().await.expect("stops");
     vehicle.shutdown().await.expect("stops");
 }
+
+/// A vehicle that restarts behind the ground station's `udpin` link comes back from another
+/// source port, i.e. as another peer link of the node: the handle's requests follow its
+/// HEARTBEAT there, so the rate it had asked for is asked for again where the vehicle now
+/// is (before, they went on to the dead peer and the restarted vehicle, streaming nothing
+/// unasked, stayed silent).
+#[tokio::test]
+async fn a_vehicle_restarted_from_another_port_is_asked_again_where_it_is() {
+    use mavstack::dialects::common::Attitude;
+    let gcs = ground_station()
+        .link(LinkSpec::parse("udpin:127.0.0.1:0", &none).expect("spec"))
+        .start()
+        .await
+        .expect("ground station starts");
+    let port = gcs.local_addrs()[0].expect("bound").port();
+    let start = || async {
+        let mut config =
+            SimVehicle::config(Autopilot::Ardupilot, params::defaults(Autopilot::Ardupilot));
+        config.streams_on_request = true;
+        SimVehicle::start(
+            Node::builder()
+                .link(LinkSpec::parse(&format!("udpout:127.0.0.1:{port}"), &none).expect("spec"))
+                .role(LinkRole::Vehicle {
+                    protocol_version: ProtocolVersionSupport::Answer,
+                }),
+            config,
+        )
+        .await
+        .expect("vehicle starts")
+    };
+    let first = start().await;
+    let v = System::wait(&gcs.handle(), Wanted::AnyAutopilot, Duration::from_secs(10))
+        .await
+        .expect("the vehicle is found");
+    let mut attitude = v.telemetry().subscribe::<Attitude>().await;
+    let rate = v
+        .telemetry()
+        .request_rate(Attitude::ID, 10.0)
+        .await
+        .expect("asked");
+    assert!(rate.arrived, "{rate:?}");
+    first.shutdown().await.expect("stops");
+    // The same vehicle again, from a new socket: a new source port.
+    let second = start().await;
+    while tokio::time::timeout(Duration::from_millis(50), attitude.recv())
+        .await
+        .is_ok()
+    {}
+    // Its first ATTITUDE: it streams nothing unasked, so the handle asked it again (the
+    // keeper, once ATTITUDE had stayed away for 3 s with HEARTBEAT coming).
+    let again = tokio::time::timeout(Duration::from_secs(30), attitude.recv()).await;
+    assert!(matches!(again, Ok(Some(_))), "{again:?}");
+    gcs.shutdown().await.expect("stops");
+    second.shutdown().await.expect("stops");
+}

@@ -277,7 +277,7 @@ impl System {
                 node: inner.node.clone(),
                 own: inner.own,
                 target,
-                link: inner.link,
+                link: inner.link(),
                 link_name: inner.link_name.clone(),
                 autopilot,
                 mav_type,

@@ -131,6 +131,7 @@ struct Inner {
     node: NodeHandle,
     own: Address,
     target: Address,
+    /// The router link it was found on.
     link: LinkId,
     link_name: String,
     autopilot: MavAutopilot,
@@ -152,6 +153,13 @@ struct Inner {
     logs: Mutex<Option<Vec<mavstack_services::log_transfer::LogInfo>>>,
     /// The telemetry rates asked for, asked for again after a restart.
     rates: Mutex<rates::Kept>,
+}
+
+impl Inner {
+    /// Where the system is reached now: see [`System::link`].
+    fn link(&self) -> LinkId {
+        self.state.borrow().link.unwrap_or(self.link)
+    }
 }
 
 #[derive(Debug, Default)]
@@ -219,10 +227,12 @@ impl System {
         Encoding::for_autopilot(self.inner.autopilot)
     }
 
-    /// The router link it was found on.
+    /// The router link it is reached through: the one its latest HEARTBEAT came in on
+    /// (a vehicle that restarted behind a `udpin` link is a new peer there), at first the
+    /// one it was found on.
     #[must_use]
     pub fn link(&self) -> LinkId {
-        self.inner.link
+        self.inner.link()
     }
 
     /// The name of that link (its key never appears in it).
@@ -267,7 +277,7 @@ impl System {
         report
             .links
             .iter()
-            .find(|l| l.link_id == Some(self.inner.link))
+            .find(|l| l.link_id == Some(self.inner.link()))
             .map(|l| l.version)
     }
 
@@ -390,12 +400,12 @@ impl System {
             param1: id as f32,
             ..CommandLong::default()
         });
-        self.inner.node.send_on(self.inner.link, &request).await;
+        self.inner.node.send_on(self.inner.link(), &request).await;
     }
 
     /// Sends `message` on the system's link; [`SystemError::Stopped`] once the node is gone.
     async fn send(&self, message: &MavMessage) -> Result<(), SystemError> {
-        if self.inner.node.send_on(self.inner.link, message).await == 0 {
+        if self.inner.node.send_on(self.inner.link(), message).await == 0 {
             return Err(SystemError::Stopped);
         }
         Ok(())

@@ -55,7 +55,7 @@ pub(super) async fn drive<S: Service, R>(
 /// Sends what `service` has to send.
 pub(super) async fn flush<S: Service>(inner: &Inner, service: &mut S) -> Result<(), SystemError> {
     while let Some(out) = service.poll_transmit() {
-        if inner.node.send_on(inner.link, &out.message).await == 0
+        if inner.node.send_on(inner.link(), &out.message).await == 0
             && inner.node.report().await.is_none()
         {
             return Err(SystemError::Stopped);

@@ -22,6 +22,7 @@ use tokio::sync::watch;
 use tokio::time::Instant;
 
 use crate::node::Subscription;
+use crate::router::LinkId;
 
 /// Lines kept of what the system said (STATUSTEXT and EVENT).
 const SAID_KEPT: usize = 64;
@@ -96,6 +97,10 @@ pub(crate) struct State {
     pub(crate) ack_count: u64,
     /// The node stopped: nothing more will come.
     pub(crate) stopped: bool,
+    /// The router link its latest HEARTBEAT (of the target component) came in on: where
+    /// it is reached now. A vehicle that restarts behind a `udpin` link comes back from
+    /// another source port, i.e. as another peer link; requests follow it there.
+    pub(crate) link: Option<LinkId>,
     lines: Lines,
     events_seen: VecDeque<(u8, u16)>,
 }
@@ -273,8 +278,12 @@ pub(crate) async fn track(
             continue;
         };
         let from = Address::new(f.sysid(), f.compid());
+        let link = incoming.link_id;
         state.send_modify(|s| {
             s.last_seen.insert(id, Instant::now());
+            if matches!(msg, MavMessage::Heartbeat(_)) && from == target {
+                s.link = Some(link);
+            }
             s.note(from, own, target, &msg);
         });
     }
