@@ -67,9 +67,21 @@ pub struct Range {
 impl Range {
     /// The range `min..=max` in radians, in degrees; `None` when it says nothing (a NaN,
     /// an infinite bound or `min >= max`, which some managers send for "unknown").
+    ///
+    /// A bound beyond a full turn (2π) cannot be radians: PX4 1.16 sends its `MNT_RANGE_*`
+    /// parameters, degrees, in these fields (pitch ±90 and yaw ±360 as "radians", i.e.
+    /// ±5157° and ±20626°, which would let every angle through). Such a range is taken as
+    /// degrees.
     #[must_use]
     pub fn from_radians(min: f32, max: f32) -> Option<Self> {
-        let (min, max) = (min * DEG_PER_RAD, max * DEG_PER_RAD);
+        /// A full turn and a little: beyond it a bound is in degrees.
+        const TURN: f32 = core::f32::consts::TAU * 1.001;
+        let scale = if min.abs() > TURN || max.abs() > TURN {
+            1.0
+        } else {
+            DEG_PER_RAD
+        };
+        let (min, max) = (min * scale, max * scale);
         (min.is_finite() && max.is_finite() && min < max).then_some(Self { min, max })
     }
 
@@ -372,6 +384,40 @@ fn finite(what: &'static str, v: f32) -> Result<(), GimbalError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn limits_beyond_a_turn_are_read_as_degrees_as_px4_sends_them() {
+        // Radians: -π/2..π/6 is -90..30 degrees.
+        let r = Range::from_radians(-core::f32::consts::FRAC_PI_2, core::f32::consts::FRAC_PI_6)
+            .expect("a range");
+        assert!(
+            (r.min + 90.0).abs() < 1e-3 && (r.max - 30.0).abs() < 1e-3,
+            "{r:?}"
+        );
+        // PX4 1.16: MNT_RANGE_PITCH 180 and MNT_RANGE_YAW 720 as -90..90 and -360..360.
+        assert_eq!(
+            Range::from_radians(-90.0, 90.0),
+            Some(Range {
+                min: -90.0,
+                max: 90.0
+            })
+        );
+        assert_eq!(
+            Range::from_radians(-360.0, 360.0),
+            Some(Range {
+                min: -360.0,
+                max: 360.0
+            })
+        );
+        // A full turn each way in radians is still radians.
+        let turn = Range::from_radians(-core::f32::consts::TAU, core::f32::consts::TAU);
+        assert!(
+            turn.is_some_and(|r| (r.max - 360.0).abs() < 1e-2),
+            "{turn:?}"
+        );
+        assert_eq!(Range::from_radians(f32::NAN, 1.0), None);
+        assert_eq!(Range::from_radians(1.0, 1.0), None);
+    }
 
     fn info(pitch: (f32, f32), yaw: (f32, f32)) -> GimbalInfo {
         let rad = |d: f32| d / DEG_PER_RAD;
