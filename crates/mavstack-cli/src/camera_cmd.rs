@@ -17,7 +17,7 @@ pub(crate) struct CameraArgs {
     #[command(flatten)]
     remote: RemoteArgs,
     /// Which camera, as `list` numbers them (from 1).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, global = true, default_value_t = 1)]
     camera: usize,
     #[command(subcommand)]
     what: What,

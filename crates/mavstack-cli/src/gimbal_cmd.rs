@@ -21,16 +21,16 @@ pub(crate) struct GimbalArgs {
     #[command(flatten)]
     remote: RemoteArgs,
     /// Which gimbal, as `list` numbers them (from 1).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, global = true, default_value_t = 1)]
     gimbal: usize,
     /// Do not take primary control before moving it.
-    #[arg(long)]
+    #[arg(long, global = true)]
     no_control: bool,
     /// Yaw from north rather than from the vehicle's nose.
-    #[arg(long)]
+    #[arg(long, global = true)]
     earth: bool,
     /// Seconds `set` waits for the gimbal to get there (and `attitude` for a report).
-    #[arg(long, default_value_t = 10.0, value_parser = timeout_arg)]
+    #[arg(long, global = true, default_value_t = 10.0, value_parser = timeout_arg)]
     wait: f64,
     #[command(subcommand)]
     what: What,

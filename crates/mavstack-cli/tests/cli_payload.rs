@@ -40,7 +40,9 @@ fn gimbal_list_set_and_limits() {
     assert_eq!(j["manager"]["component"], 1);
     assert_eq!(j["pitch"], serde_json::json!([-90.0, 30.0]));
 
-    let out = mavstack(&["gimbal", &conn, "set", "-30", "45", "--json"]);
+    let out = mavstack(&[
+        "gimbal", &conn, "set", "-30", "45", "--json", "--wait", "20",
+    ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
     assert!((j["pitch"].as_f64().unwrap() + 30.0).abs() <= 2.0, "{j}");
