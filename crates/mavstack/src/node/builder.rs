@@ -238,6 +238,7 @@ impl NodeBuilder {
     ///
     /// # Panics
     /// Outside a tokio runtime.
+    #[cfg_attr(not(feature = "http"), allow(unused_mut))]
     pub async fn start(mut self) -> Result<Node, NodeError> {
         // The web API is a monitor link of the node, fed and read by the web service.
         #[cfg(feature = "http")]
