@@ -147,6 +147,7 @@ pub mod plan;
 mod ranges;
 pub mod rtcm;
 mod rtt;
+mod search;
 pub mod shell;
 pub mod statustext;
 pub mod stream;

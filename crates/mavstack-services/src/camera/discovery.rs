@@ -9,15 +9,15 @@ use mavstack_core::Message as _;
 use mavstack_core::MessageSet as _;
 use mavstack_core::time::Instant;
 use mavstack_dialects::common::{
-    CameraCaptureStatus, CameraInformation, CameraSettings, CommandLong, MavCmd, MavMessage,
-    StorageInformation, VideoStreamInformation,
+    CameraCaptureStatus, CameraInformation, CameraSettings, MavCmd, MavMessage, StorageInformation,
+    VideoStreamInformation,
 };
 
 use super::messages::CameraInfo;
 use crate::command::{
     Command, CommandClient, CommandConfig, CommandError, CommandEvent, CommandHandle,
 };
-use crate::gimbal::DiscoveryConfig;
+use crate::search::{DiscoveryConfig, Search};
 use crate::{Address, Outgoing, Service};
 
 /// A search for the cameras of one system: MAV_CMD_REQUEST_MESSAGE(CAMERA_INFORMATION) to
@@ -28,36 +28,17 @@ use crate::{Address, Outgoing, Service};
 /// [`poll_result`](Self::poll_result).
 #[derive(Clone, Debug)]
 pub struct CameraDiscovery {
-    system: u8,
-    components: Vec<u8>,
-    config: DiscoveryConfig,
-    started: Instant,
-    next_ask: Option<Instant>,
-    last_found: Option<Instant>,
+    search: Search,
     found: Vec<CameraInfo>,
-    out: Vec<Outgoing>,
-    done: bool,
-    taken: bool,
 }
 
 impl CameraDiscovery {
     /// Starts looking among `components` of `system`.
     #[must_use]
     pub fn new(now: Instant, system: u8, components: &[u8], config: DiscoveryConfig) -> Self {
-        let mut components: Vec<u8> = components.iter().copied().filter(|&c| c != 0).collect();
-        components.sort_unstable();
-        components.dedup();
         let mut d = Self {
-            system,
-            components,
-            config,
-            started: now,
-            next_ask: Some(now),
-            last_found: None,
+            search: Search::new(now, system, components, config),
             found: Vec::new(),
-            out: Vec::new(),
-            done: false,
-            taken: false,
         };
         d.handle_timeout(now);
         d
@@ -65,20 +46,12 @@ impl CameraDiscovery {
 
     /// The cameras found (by component), once the search has ended; given once.
     pub fn poll_result(&mut self) -> Option<Vec<CameraInfo>> {
-        if !self.done || self.taken {
+        if !self.search.take() {
             return None;
         }
-        self.taken = true;
         let mut found = core::mem::take(&mut self.found);
         found.sort_by_key(|c| c.component.component);
         Some(found)
-    }
-
-    fn deadline(&self) -> Instant {
-        match self.last_found {
-            Some(t) => t + self.config.settle,
-            None => self.started + self.config.limit,
-        }
     }
 }
 
@@ -87,58 +60,35 @@ impl Service for CameraDiscovery {
         let MavMessage::CameraInformation(info) = message else {
             return false;
         };
-        if self.done || from.system != self.system {
+        if self.search.done() || from.system != self.search.system {
             return false;
         }
         if !self.found.iter().any(|c| c.component == from) {
             self.found.push(CameraInfo::from_information(from, info));
-            self.last_found = Some(now);
+            self.search.found(now);
         }
         true
     }
 
     fn handle_timeout(&mut self, now: Instant) {
-        if self.done {
+        if !self.search.tick(now) {
             return;
         }
-        if now >= self.deadline() {
-            self.done = true;
-            self.next_ask = None;
-            return;
-        }
-        if let Some(due) = self.next_ask
-            && now >= due
-        {
-            // The whole system (component 0) too: a camera not heard yet answers that.
-            for c in core::iter::once(0).chain(self.components.iter().copied()) {
-                if c != 0 && self.found.iter().any(|f| f.component.component == c) {
-                    continue;
-                }
-                self.out.push(Outgoing {
-                    target: Address::new(self.system, c),
-                    message: MavMessage::CommandLong(CommandLong {
-                        target_system: self.system,
-                        target_component: c,
-                        command: MavCmd::REQUEST_MESSAGE,
-                        param1: CameraInformation::ID as f32,
-                        ..CommandLong::default()
-                    }),
-                });
+        // The whole system (component 0) too: a camera not heard yet answers that.
+        for c in core::iter::once(0).chain(self.search.components.clone()) {
+            if c != 0 && self.found.iter().any(|f| f.component.component == c) {
+                continue;
             }
-            self.next_ask = Some(now + self.config.ask_every);
+            self.search.request(c, CameraInformation::ID);
         }
     }
 
     fn poll_transmit(&mut self) -> Option<Outgoing> {
-        (!self.out.is_empty()).then(|| self.out.remove(0))
+        self.search.poll_transmit()
     }
 
     fn poll_timeout(&self) -> Option<Instant> {
-        if self.done {
-            return None;
-        }
-        let end = self.deadline();
-        Some(self.next_ask.map_or(end, |a| a.min(end)))
+        self.search.poll_timeout()
     }
 }
 

@@ -3,38 +3,15 @@
 
 use alloc::string::String;
 use alloc::vec::Vec;
-use core::time::Duration;
 
 use mavstack_core::Message as _;
 use mavstack_core::time::Instant;
-use mavstack_dialects::common::{
-    CommandLong, GimbalDeviceInformation, GimbalManagerInformation, MavCmd, MavMessage,
-};
+use mavstack_dialects::common::{GimbalDeviceInformation, GimbalManagerInformation, MavMessage};
 
 use super::{GimbalInfo, MAX_NON_MAVLINK_DEVICE};
+pub use crate::search::DiscoveryConfig;
+use crate::search::Search;
 use crate::{Address, Outgoing, Service};
-
-/// Timings of a [`GimbalDiscovery`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct DiscoveryConfig {
-    /// How often the requests go out again while nothing has answered (default 500 ms).
-    pub ask_every: Duration,
-    /// How long after the last new manager the search ends (default 700 ms: a system's
-    /// managers answer one request within a round trip of each other).
-    pub settle: Duration,
-    /// How long the search lasts at most, when nothing answers (default 3 s).
-    pub limit: Duration,
-}
-
-impl Default for DiscoveryConfig {
-    fn default() -> Self {
-        Self {
-            ask_every: Duration::from_millis(500),
-            settle: Duration::from_millis(700),
-            limit: Duration::from_secs(3),
-        }
-    }
-}
 
 /// A search for the gimbal managers of one system: MAV_CMD_REQUEST_MESSAGE(GIMBAL_MANAGER_INFORMATION)
 /// to the whole system (component 0) and to each component known to be there, again every
@@ -48,16 +25,8 @@ impl Default for DiscoveryConfig {
 /// that has something to say (and refused by the others), which is the point.
 #[derive(Clone, Debug)]
 pub struct GimbalDiscovery {
-    system: u8,
-    components: Vec<u8>,
-    config: DiscoveryConfig,
-    started: Instant,
-    next_ask: Option<Instant>,
-    last_found: Option<Instant>,
+    search: Search,
     found: Vec<GimbalInfo>,
-    out: Vec<Outgoing>,
-    done: bool,
-    taken: bool,
 }
 
 impl GimbalDiscovery {
@@ -65,20 +34,9 @@ impl GimbalDiscovery {
     /// the autopilot at least) besides the whole system.
     #[must_use]
     pub fn new(now: Instant, system: u8, components: &[u8], config: DiscoveryConfig) -> Self {
-        let mut components: Vec<u8> = components.iter().copied().filter(|&c| c != 0).collect();
-        components.sort_unstable();
-        components.dedup();
         let mut d = Self {
-            system,
-            components,
-            config,
-            started: now,
-            next_ask: Some(now),
-            last_found: None,
+            search: Search::new(now, system, components, config),
             found: Vec::new(),
-            out: Vec::new(),
-            done: false,
-            taken: false,
         };
         d.handle_timeout(now);
         d
@@ -87,31 +45,7 @@ impl GimbalDiscovery {
     /// The managers found, in the order they answered, once the search has ended; given
     /// once.
     pub fn poll_result(&mut self) -> Option<Vec<GimbalInfo>> {
-        if !self.done || self.taken {
-            return None;
-        }
-        self.taken = true;
-        Some(core::mem::take(&mut self.found))
-    }
-
-    fn request(&mut self, component: u8, msg_id: u32) {
-        self.out.push(Outgoing {
-            target: Address::new(self.system, component),
-            message: MavMessage::CommandLong(CommandLong {
-                target_system: self.system,
-                target_component: component,
-                command: MavCmd::REQUEST_MESSAGE,
-                param1: msg_id as f32,
-                ..CommandLong::default()
-            }),
-        });
-    }
-
-    fn deadline(&self) -> Instant {
-        match self.last_found {
-            Some(t) => t + self.config.settle,
-            None => self.started + self.config.limit,
-        }
+        self.search.take().then(|| core::mem::take(&mut self.found))
     }
 }
 
@@ -123,7 +57,7 @@ pub(crate) fn text(bytes: &[u8]) -> String {
 
 impl Service for GimbalDiscovery {
     fn handle_message(&mut self, now: Instant, from: Address, message: &MavMessage) -> bool {
-        if self.done || from.system != self.system {
+        if self.search.done() || from.system != self.search.system {
             return false;
         }
         match message {
@@ -134,15 +68,15 @@ impl Service for GimbalDiscovery {
                     .any(|g| g.manager == from && g.device_id == info.gimbal_device_id);
                 if !known {
                     self.found.push(GimbalInfo::from_information(from, info));
-                    self.last_found = Some(now);
-                    self.next_ask = None;
+                    self.search.found(now);
+                    self.search.next_ask = None;
                     // The device's own component, or the manager on its behalf.
                     let asked = if info.gimbal_device_id > MAX_NON_MAVLINK_DEVICE {
                         info.gimbal_device_id
                     } else {
                         from.component
                     };
-                    self.request(asked, GimbalDeviceInformation::ID);
+                    self.search.request(asked, GimbalDeviceInformation::ID);
                 }
                 true
             }
@@ -169,35 +103,20 @@ impl Service for GimbalDiscovery {
     }
 
     fn handle_timeout(&mut self, now: Instant) {
-        if self.done {
-            return;
-        }
-        if now >= self.deadline() {
-            self.done = true;
-            self.next_ask = None;
-            return;
-        }
-        if let Some(due) = self.next_ask
-            && now >= due
-        {
-            self.request(0, GimbalManagerInformation::ID);
-            for c in self.components.clone() {
-                self.request(c, GimbalManagerInformation::ID);
+        if self.search.tick(now) {
+            self.search.request(0, GimbalManagerInformation::ID);
+            for c in self.search.components.clone() {
+                self.search.request(c, GimbalManagerInformation::ID);
             }
-            self.next_ask = Some(now + self.config.ask_every);
         }
     }
 
     fn poll_transmit(&mut self) -> Option<Outgoing> {
-        (!self.out.is_empty()).then(|| self.out.remove(0))
+        self.search.poll_transmit()
     }
 
     fn poll_timeout(&self) -> Option<Instant> {
-        if self.done {
-            return None;
-        }
-        let end = self.deadline();
-        Some(self.next_ask.map_or(end, |a| a.min(end)))
+        self.search.poll_timeout()
     }
 }
 

@@ -46,8 +46,7 @@ impl Cameras {
     /// [`SystemError::Stopped`].
     pub async fn list(&self) -> Result<Vec<Camera>, SystemError> {
         let inner = &self.system.inner;
-        let mut components: Vec<u8> = self.system.components().iter().map(|c| c.0).collect();
-        components.push(inner.target.component);
+        let components = self.system.component_ids();
         let mut frames = self.system.frames().await;
         let mut discovery = CameraDiscovery::new(
             clock::now(),
@@ -65,11 +64,7 @@ impl Cameras {
         .await?;
         let mut cameras = Vec::with_capacity(found.len());
         for info in found {
-            let system = if info.component == inner.target {
-                self.system.clone()
-            } else {
-                self.system.component(info.component.component).await
-            };
+            let system = self.system.at(info.component).await;
             cameras.push(Camera::new(system, info));
         }
         Ok(cameras)

@@ -259,6 +259,23 @@ impl System {
         };
         Ok(system)
     }
+    /// The ids of the components heard from the system, the target's among them: where a
+    /// discovery (cameras, gimbal managers) asks.
+    pub(super) fn component_ids(&self) -> Vec<u8> {
+        let mut ids: Vec<u8> = self.state().components.keys().copied().collect();
+        ids.push(self.inner.target.component);
+        ids
+    }
+
+    /// A handle on the component at `address` of this system: this handle for the target,
+    /// else [`System::component`].
+    pub(super) async fn at(&self, address: Address) -> Self {
+        if address == self.inner.target {
+            self.clone()
+        } else {
+            self.component(address.component).await
+        }
+    }
 
     /// Another component of the same system (a camera, a gimbal manager), reached over the
     /// same link: a handle of its own, with its own state and one operation of each service

@@ -55,8 +55,7 @@ impl Gimbals {
     /// [`SystemError::Stopped`].
     pub async fn list(&self) -> Result<Vec<Gimbal>, SystemError> {
         let inner = &self.system.inner;
-        let mut components: Vec<u8> = self.system.components().iter().map(|c| c.0).collect();
-        components.push(inner.target.component);
+        let components = self.system.component_ids();
         let mut frames = self.system.frames().await;
         let mut discovery = GimbalDiscovery::new(
             clock::now(),
@@ -74,11 +73,7 @@ impl Gimbals {
         .await?;
         let mut gimbals = Vec::with_capacity(found.len());
         for info in found {
-            let manager = if info.manager == inner.target {
-                self.system.clone()
-            } else {
-                self.system.component(info.manager.component).await
-            };
+            let manager = self.system.at(info.manager).await;
             gimbals.push(Gimbal {
                 root: self.system.clone(),
                 manager,
