@@ -27,6 +27,7 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -68,10 +69,12 @@ def timed(argv, want, timeout=30):
     return took
 
 
-def until_line(argv, want, timeout=60):
-    """Seconds from starting `argv` to a line of its output holding `want`; then stops it."""
+def until_line(argv, want, cwd, timeout=60):
+    """Seconds from starting `argv` (in `cwd`) to a line of its output holding `want`; then
+    stops it."""
     t = time.monotonic()
-    p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                         cwd=cwd)
     try:
         for line in p.stdout:
             if want in line:
@@ -84,10 +87,12 @@ def until_line(argv, want, timeout=60):
         p.wait()
 
 
-def until_line(argv, want, timeout=60):
-    """Seconds from starting `argv` to a line of its output holding `want`; then stops it."""
+def until_line(argv, want, cwd, timeout=60):
+    """Seconds from starting `argv` (in `cwd`) to a line of its output holding `want`; then
+    stops it."""
     t = time.monotonic()
-    p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                         cwd=cwd)
     try:
         for line in p.stdout:
             if want in line:
@@ -112,6 +117,8 @@ def main():
                                 "--autopilot", "ardupilot"],
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     bindir = os.path.dirname(PY)
+    # MAVProxy writes its tlog and state where it runs.
+    work = tempfile.mkdtemp(prefix="first-contact-")
     runs = {}
     try:
         time.sleep(1.0)
@@ -127,7 +134,7 @@ def main():
                 elif tool == "mavproxy":
                     t = until_line([os.path.join(bindir, "mavproxy.py"),
                                     "--master=udpout:127.0.0.1:%d" % port, "--non-interactive"],
-                                   "Detected vehicle")
+                                   "Detected vehicle", work)
                 else:
                     raise SystemExit("first_contact: unknown tool %s" % tool)
                 runs.setdefault(tool, []).append(t)
