@@ -312,7 +312,8 @@ def camera_steps(runner, rc, out, err):
     rc, out, err, _ = runner.mavstack("camera", conn, "photo", "--json", timeout=60)
     p = first_json(out) if rc == 0 else None
     if p is not None and p.get("success"):
-        parts.append("photo %d: CAMERA_IMAGE_CAPTURED, %s" % (
+        # Announced by CAMERA_IMAGE_CAPTURED, or by ArduPilot's CAMERA_FEEDBACK (no file URL).
+        parts.append("photo %d announced, %s" % (
             p["index"], (p.get("file_url") or "no file URL").rsplit("/", 1)[-1]))
     else:
         # What the stack sends for a photo, seen by pymavlink.

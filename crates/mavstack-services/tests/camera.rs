@@ -668,3 +668,27 @@ fn cameras_of_a_system_found() {
     assert_eq!(found[0].component, CAMERA);
     assert_eq!(found[0].model, "Simulated camera");
 }
+
+/// An announcement in another form (ArduPilot's CAMERA_FEEDBACK, converted by the caller):
+/// taken from the camera with an index not below the one expected, once.
+#[test]
+fn an_announcement_in_another_form_is_taken_by_the_same_rule() {
+    let mut capture = PhotoCapture::start(T0, GCS, CAMERA, Some(3), 1, CaptureConfig::default());
+    let image = |index| mavstack_services::camera::ImageCaptured {
+        index,
+        time_utc_us: 0,
+        lat: -35.36,
+        lon: 149.16,
+        alt_m: 584.0,
+        relative_alt_m: 0.0,
+        q: [1.0, 0.0, 0.0, 0.0],
+        file_url: String::new(),
+        success: true,
+    };
+    assert!(!capture.handle_announcement(Address::new(1, 1), image(3)));
+    assert!(!capture.handle_announcement(CAMERA, image(2)));
+    assert!(capture.poll_result().is_none());
+    assert!(capture.handle_announcement(CAMERA, image(3)));
+    assert_eq!(capture.poll_result(), Some(Ok(image(3))));
+    assert!(!capture.handle_announcement(CAMERA, image(4)));
+}

@@ -203,6 +203,21 @@ impl PhotoCapture {
         self.resend_command = self.commands.send(now, self.camera, command).ok();
     }
 
+    /// The photo announced in another form than CAMERA_IMAGE_CAPTURED, converted by the
+    /// caller: ArduPilot announces a photo only with CAMERA_FEEDBACK (its own dialect's
+    /// message, which this crate's messages lack). Taken as the announcement under the
+    /// same rule (from the camera, an index not below the one expected). Whether it was.
+    pub fn handle_announcement(&mut self, from: Address, image: ImageCaptured) -> bool {
+        if from != self.camera
+            || self.result.is_some()
+            || self.expected.is_some_and(|e| image.index < e)
+        {
+            return false;
+        }
+        self.finish(Ok(image));
+        true
+    }
+
     fn command_events(&mut self, now: Instant) {
         while let Some(e) = self.commands.poll_event() {
             let CommandEvent::Finished { handle, result } = e else {

@@ -236,12 +236,17 @@ impl Camera {
             sequence,
             CaptureConfig::default(),
         );
-        let image = run::drive(
+        let image = run::drive_with(
             inner,
             &mut frames,
             &mut capture,
             LIMIT,
             PhotoCapture::poll_result,
+            |capture, from, id, payload| {
+                if let Some(image) = feedback_image(id, payload) {
+                    capture.handle_announcement(from, image);
+                }
+            },
         )
         .await??;
         Ok(image)
@@ -476,5 +481,82 @@ impl Camera {
             ParamExtEvent::Set(r) => Ok(r?.1),
             _ => Err(SystemError::Stopped),
         }
+    }
+}
+
+/// ArduPilot's announcement of a photo, CAMERA_FEEDBACK (its own dialect's), as the
+/// camera protocol's CAMERA_IMAGE_CAPTURED would say it: ArduPilot sends no
+/// CAMERA_IMAGE_CAPTURED. `None` for another message, or a video frame's feedback.
+fn feedback_image(id: u32, payload: &[u8]) -> Option<ImageCaptured> {
+    use mavstack_dialects::ardupilotmega::{CameraFeedback, CameraFeedbackFlags};
+    if id != CameraFeedback::ID {
+        return None;
+    }
+    let f = CameraFeedback::decode(payload);
+    if f.flags == CameraFeedbackFlags::CAMERA_FEEDBACK_VIDEO {
+        return None;
+    }
+    Some(ImageCaptured {
+        index: i32::from(f.img_idx),
+        time_utc_us: f.time_usec,
+        lat: f64::from(f.lat) / 1e7,
+        lon: f64::from(f.lng) / 1e7,
+        alt_m: f.alt_msl,
+        relative_alt_m: f.alt_rel,
+        q: mavstack_services::gimbal::quaternion_from_euler(f.roll, f.pitch, f.yaw),
+        file_url: String::new(),
+        success: f.flags != CameraFeedbackFlags::CAMERA_FEEDBACK_BADEXPOSURE,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mavstack_dialects::ardupilotmega::{CameraFeedback, CameraFeedbackFlags};
+
+    fn payload(flags: CameraFeedbackFlags) -> Vec<u8> {
+        let f = CameraFeedback {
+            time_usec: 1_765_000_000_000_000,
+            img_idx: 2,
+            lat: -353_632_610,
+            lng: 1_491_652_300,
+            alt_msl: 584.5,
+            alt_rel: 0.5,
+            yaw: 90.0,
+            flags,
+            ..CameraFeedback::default()
+        };
+        let mut buf = [0u8; 255];
+        let n = f.encode(&mut buf);
+        buf[..n].to_vec()
+    }
+
+    #[test]
+    fn ardupilots_camera_feedback_reads_as_the_photos_announcement() {
+        let image = feedback_image(
+            CameraFeedback::ID,
+            &payload(CameraFeedbackFlags::CAMERA_FEEDBACK_PHOTO),
+        )
+        .expect("a photo");
+        assert_eq!(image.index, 2);
+        assert_eq!(image.time_utc_us, 1_765_000_000_000_000);
+        assert!((image.lat + 35.363_261).abs() < 1e-9 && (image.lon - 149.165_23).abs() < 1e-9);
+        assert_eq!((image.alt_m, image.relative_alt_m), (584.5, 0.5));
+        assert!(image.success && image.file_url.is_empty());
+        // Yaw 90 degrees: a quarter turn about z.
+        let h = core::f32::consts::FRAC_1_SQRT_2;
+        assert!(
+            (image.q[0] - h).abs() < 1e-5 && (image.q[3] - h).abs() < 1e-5,
+            "{:?}",
+            image.q
+        );
+        let bad = feedback_image(
+            CameraFeedback::ID,
+            &payload(CameraFeedbackFlags::CAMERA_FEEDBACK_BADEXPOSURE),
+        );
+        assert!(bad.is_some_and(|i| !i.success));
+        let video = payload(CameraFeedbackFlags::CAMERA_FEEDBACK_VIDEO);
+        assert_eq!(feedback_image(CameraFeedback::ID, &video), None);
+        assert_eq!(feedback_image(0, &video), None);
     }
 }

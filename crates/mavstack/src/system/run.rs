@@ -19,7 +19,21 @@ pub(super) async fn drive<S: Service, R>(
     frames: &mut Subscription,
     service: &mut S,
     limit: Duration,
+    done: impl FnMut(&mut S) -> Option<R>,
+) -> Result<R, SystemError> {
+    drive_with(inner, frames, service, limit, done, |_, _, _, _| {}).await
+}
+
+/// [`drive`], with `other` given the frames of the target system that the common dialect
+/// cannot decode (an autopilot's own messages): the service, the sender, the message id and
+/// the payload.
+pub(super) async fn drive_with<S: Service, R>(
+    inner: &Inner,
+    frames: &mut Subscription,
+    service: &mut S,
+    limit: Duration,
     mut done: impl FnMut(&mut S) -> Option<R>,
+    mut other: impl FnMut(&mut S, Address, u32, &[u8]),
 ) -> Result<R, SystemError> {
     let deadline = tokio::time::Instant::now() + limit;
     loop {
@@ -44,8 +58,12 @@ pub(super) async fn drive<S: Service, R>(
                 if f.sysid() != inner.target.system {
                     continue;
                 }
-                if let Ok(msg) = MavMessage::decode(f.msg_id(), f.payload()) {
-                    service.handle_message(clock::now(), Address::new(f.sysid(), f.compid()), &msg);
+                let from = Address::new(f.sysid(), f.compid());
+                match MavMessage::decode(f.msg_id(), f.payload()) {
+                    Ok(msg) => {
+                        service.handle_message(clock::now(), from, &msg);
+                    }
+                    Err(_) => other(service, from, f.msg_id(), f.payload()),
                 }
             }
         }
