@@ -17,6 +17,17 @@ struct Deferred {
     /// Commands just handed over, whose first IN_PROGRESS ACK is not sent: the final ACK
     /// follows as soon as the handler answers.
     fresh: Vec<(Address, MavCmd)>,
+    /// Who asked for the component's HEARTBEAT (REQUEST_MESSAGE(HEARTBEAT), which a ground
+    /// station sends to find a system in one round trip): answered by the stack, not Python.
+    heartbeat_asked: Vec<Address>,
+}
+
+/// Whether `command` is MAV_CMD_REQUEST_MESSAGE for HEARTBEAT.
+fn asks_heartbeat(command: &Command) -> bool {
+    match command {
+        Command::Long(c) => c.command == MavCmd::REQUEST_MESSAGE && c.param1 == 0.0,
+        Command::Int(c) => c.command == MavCmd::REQUEST_MESSAGE && c.param1 == 0.0,
+    }
 }
 
 impl CommandHandler for Deferred {
@@ -25,6 +36,12 @@ impl CommandHandler for Deferred {
         _now: mavstack_core::time::Instant,
         request: &Request,
     ) -> Response {
+        if asks_heartbeat(&request.command) {
+            if !self.heartbeat_asked.contains(&request.from) {
+                self.heartbeat_asked.push(request.from);
+            }
+            return Response::done(MavResult::ACCEPTED);
+        }
         self.next += 1;
         self.fresh.push((request.from, request.command.id()));
         push(
@@ -39,6 +56,8 @@ impl CommandHandler for Deferred {
 struct Component {
     params: ParamServer,
     commands: CommandServer<Deferred>,
+    /// Its HEARTBEAT, sent at once to who asks for it.
+    heartbeat: Heartbeat,
     /// Parameters a peer set, for Python: (name, value).
     changed: Arc<Mutex<Queue<(Name, Value)>>>,
 }
@@ -69,6 +88,12 @@ impl Service for Component {
     fn poll_transmit(&mut self) -> Option<Outgoing> {
         if let Some(out) = self.params.poll_transmit() {
             return Some(out);
+        }
+        if let Some(to) = self.commands.handler_mut().heartbeat_asked.pop() {
+            return Some(Outgoing {
+                target: to,
+                message: mavstack::dialects::common::MavMessage::Heartbeat(self.heartbeat),
+            });
         }
         loop {
             let out = self.commands.poll_transmit()?;
@@ -191,8 +216,10 @@ pub(crate) fn aio_serve(
                     requests: Arc::clone(&requests),
                     next: 0,
                     fresh: Vec::new(),
+                    heartbeat_asked: Vec::new(),
                 },
             ),
+            heartbeat,
             changed: Arc::clone(&changed),
         };
         let served = Served::start(&node.handle(), component).await;
