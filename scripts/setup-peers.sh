@@ -8,7 +8,8 @@
 #     mavsdk-grpc 4.0.5  MAVSDK's gRPC wrapper (import mavsdk_grpc) with its bundled
 #                        mavsdk_server binary (mavsdk_grpc/bin/mavsdk_server);
 #     for the Python package (crates/mavstack-python): maturin 1.16.0 (builds the wheel),
-#     pytest 9.2.0, and the readers of its Arrow tables: pyarrow 26.0.1, polars 2.1.0,
+#     pytest 9.2.0 (with pytest-xdist 3.8.0: the tests in two processes), and the readers of
+#     its Arrow tables: pyarrow 26.0.1, polars 2.1.0,
 #     pandas 3.1.1, matplotlib 3.11.2 (its README's example); its type checks: mypy 2.4.1
 #     (with stubtest) and pyright 1.1.414 (the PyPI wheel carries pyright itself and runs it
 #     with the system's node, which scripts/setup-system.sh installs: nothing is fetched when
@@ -26,6 +27,7 @@ pins=(
     "mavsdk==4.1.0"
     "mavsdk-grpc==4.0.5" "grpcio==1.85.1" "protobuf==6.33.6" "typing_extensions==4.16.0"
     "maturin==1.16.0" "pytest==9.2.0" "iniconfig==2.3.1" "pluggy==1.7.0" "packaging==26.4"
+    "pytest-xdist==3.8.0" "execnet==2.1.2"
     "Pygments==2.21.0" "pyarrow==26.0.1" "polars==2.1.0" "polars-runtime-32==2.1.0"
     "pandas==3.1.1" "numpy==2.4.6" "python-dateutil==4.0.0" "tzdata==2026.6"
     "matplotlib==3.11.2" "contourpy==1.3.3" "cycler==0.12.1" "fonttools==4.68.0"

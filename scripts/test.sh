@@ -30,7 +30,10 @@ step "cargo clippy (all targets, all features, -D warnings)"
 cargo clippy --workspace --all-targets --all-features --locked -- -D warnings
 
 step "cargo test (workspace, all features)"
-cargo test --workspace --all-features --locked --no-fail-fast
+# Three test threads on two cores: most tests wait on processes and sockets (simulated vehicles
+# flying in real time, the peers), so a third keeps the cores busy; counts, never timings, are
+# what the tests check, so a busier machine only makes them slower.
+cargo test --workspace --all-features --locked --no-fail-fast -- --test-threads=3
 
 step "Python package: maturin builds the wheel, installed in .venv, pytest"
 # The same build as `pip install crates/mavstack-python` (release, abi3), then the package's
@@ -40,7 +43,9 @@ rm -f target/wheels/mavstack-*.whl
     -m crates/mavstack-python/Cargo.toml -o target/wheels
 "$MAVSTACK_PYTHON" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps \
     target/wheels/mavstack-*-abi3-*.whl
-(cd crates/mavstack-python && "$MAVSTACK_PYTHON" -m pytest -q -p no:cacheprovider tests)
+# Four pytest workers (pytest-xdist): the tests wait on simulated vehicles and sockets far more
+# than they compute (about 6 minutes one at a time, 2 with four workers).
+(cd crates/mavstack-python && "$MAVSTACK_PYTHON" -m pytest -q -p no:cacheprovider -n 4 tests)
 # Types: the stubs against the installed extension (stubtest: every module of the package,
 # mavstack.aio and the generated mavstack.messages included; stubtest-allowlist.txt says why
 # each entry is there), then the typed examples under mypy --strict and pyright in strict mode
