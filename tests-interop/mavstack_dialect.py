@@ -1,5 +1,6 @@
 """A pymavlink dialect generated from mavstack's own definitions, so pymavlink speaks
-PROTOCOL_VERSION (id 300) and the events protocol (EVENT 410-413, COMPONENT_METADATA 397) too.
+PROTOCOL_VERSION (id 300), the events protocol (EVENT 410-413, COMPONENT_METADATA 397) and the
+standard modes (AVAILABLE_MODES, CURRENT_MODE, AVAILABLE_MODES_MONITOR: 435-437) too.
 
 pymavlink's stock XML (the official files mavstack vendors) no longer defines
 PROTOCOL_VERSION, the reply of the MAVLink 2 handshake, nor the events protocol. mavstack's
@@ -28,7 +29,8 @@ DEFINITIONS = os.path.join(HERE, "..", "definitions")
 NAME = "mavstack_ardupilotmega"
 
 
-EXTRAS = [os.path.join(DEFINITIONS, "extras", name) for name in ("protocol_version.xml", "events.xml")]
+EXTRAS = [os.path.join(DEFINITIONS, "extras", name)
+          for name in ("protocol_version.xml", "events.xml", "standard_modes.xml")]
 
 
 def _extra(tag):
@@ -39,7 +41,16 @@ def _extra(tag):
             text = f.read()
         m = re.search(r"<%s>(.*)</%s>" % (tag, tag), text, re.S)
         if m:
-            parts.append(m.group(1))
+            part = m.group(1)
+            if tag == "enums":
+                # An enum common.xml has already (MAV_STANDARD_MODE) is left out: mavgen
+                # would see it twice.
+                with open(os.path.join(DEFINITIONS, "common.xml"), encoding="utf-8") as f:
+                    common = f.read()
+                part = "".join(e for e in re.findall(r"<enum .*?</enum>", part, re.S)
+                               if '<enum name="%s"' % re.search(r'name="([^"]+)"', e).group(1)
+                               not in common)
+            parts.append(part)
         elif tag == "messages":
             raise RuntimeError("%s has no <messages>" % path)
     return "".join(parts)
