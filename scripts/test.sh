@@ -29,6 +29,15 @@ cargo fmt --all -- --check
 step "cargo clippy (all targets, all features, -D warnings)"
 cargo clippy --workspace --all-targets --all-features --locked -- -D warnings
 
+# The Python package's wheel (a release build) is built meanwhile, in a target directory of its
+# own (no lock shared with the tests' build): the tests mostly wait on simulated vehicles and
+# peers, and the compiler takes the idle cores. Its result is awaited before the Python tests.
+rm -f target/wheels/mavstack-*.whl
+CARGO_TARGET_DIR="$root/target/wheel-build" "$(dirname "$MAVSTACK_PYTHON")/maturin" build \
+    --release --locked -q -m crates/mavstack-python/Cargo.toml -o target/wheels \
+    >target/wheel-build.log 2>&1 &
+wheel_build=$!
+
 step "cargo test (workspace, all features)"
 # Three test threads on two cores: most tests wait on processes and sockets (simulated vehicles
 # flying in real time, the peers), so a third keeps the cores busy; counts, never timings, are
@@ -38,9 +47,11 @@ cargo test --workspace --all-features --locked --no-fail-fast -- --test-threads=
 step "Python package: maturin builds the wheel, installed in .venv, pytest"
 # The same build as `pip install crates/mavstack-python` (release, abi3), then the package's
 # tests against pymavlink, pyarrow, polars and pandas in the test venv.
-rm -f target/wheels/mavstack-*.whl
-"$(dirname "$MAVSTACK_PYTHON")/maturin" build --release --locked -q \
-    -m crates/mavstack-python/Cargo.toml -o target/wheels
+if ! wait "$wheel_build"; then
+    cat target/wheel-build.log >&2
+    echo "the Python wheel did not build (target/wheel-build.log above)" >&2
+    exit 1
+fi
 "$MAVSTACK_PYTHON" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps \
     target/wheels/mavstack-*-abi3-*.whl
 # Four pytest workers (pytest-xdist): the tests wait on simulated vehicles and sockets far more
@@ -57,7 +68,7 @@ rm -f target/wheels/mavstack-*.whl
 # Damaged logs: `mavstack decode` and the package return exactly the frames pymavlink's reader
 # returns (order, timestamps), once with bit flips of every header field and unknown ids, once
 # with inserted garbage and flipped timestamps as well; raw streams lose none pymavlink finds.
-"$MAVSTACK_PYTHON" tests-interop/tlog_damage.py --mavstack target/debug/mavstack --python \
+"$MAVSTACK_PYTHON" tests-interop/tlog_damage.py --mavstack target/debug/mavstack --python --records 50000 \
     --damage payload,checksum,length_down,length_up,incompat,msgid0,msgid1,msgid2,magic,header,unknown_id
 "$MAVSTACK_PYTHON" tests-interop/tlog_damage.py --mavstack target/debug/mavstack --python --records 50000
 
@@ -91,14 +102,15 @@ step "fleet test: 1,000 vehicles through their bridges and mosquitto (about 60 s
 # tests-interop/fleet_test.py --check: every command answered (with telemetry and without),
 # nothing lost on the control lane and under 1 % of telemetry while the broker is up, traffic
 # again after the broker is killed and restarted. Counts are checked, never timings.
-cargo build --release --locked -q -p mavstack-bridge --example fleet
-"$MAVSTACK_PYTHON" tests-interop/fleet_test.py --fleet target/release/examples/fleet --count 1000 \
+# In the wheel's target directory: the release builds of the dependencies they share are reused.
+CARGO_TARGET_DIR="$root/target/wheel-build" cargo build --release --locked -q -p mavstack-bridge --example fleet
+"$MAVSTACK_PYTHON" tests-interop/fleet_test.py --fleet target/wheel-build/release/examples/fleet --count 1000 \
     --out target/fleet-results.json --check | tail -12
 
-step "fuzz: every target for ${FUZZ_SECONDS:-6} s on nightly (a crash fails, kept as a regression seed)"
+step "fuzz: every target for ${FUZZ_SECONDS:-3} s on nightly (a crash fails, kept as a regression seed)"
 # Without the address sanitizer: quicker to build and to run, and the code under test is safe
 # Rust (long campaigns by hand use it: scripts/fuzz.sh 480).
-FUZZ_SANITIZER=none FUZZ_JOBS=2 bash scripts/fuzz.sh "${FUZZ_SECONDS:-6}"
+FUZZ_SANITIZER=none FUZZ_JOBS=2 bash scripts/fuzz.sh "${FUZZ_SECONDS:-3}"
 
 step "feature matrix"
 # Type-checked without codegen (what a feature combination can break is whether it compiles).
