@@ -530,7 +530,7 @@ impl Channel {
 
     /// Refuses SETUP_SIGNING for now (`true`) or takes it again (`false`): a vehicle that
     /// will not change its key at the moment (ArduPilot ignores SETUP_SIGNING while armed)
-    /// holds it; a held SETUP_SIGNING is a rejection ([`RejectReason::SetupSigningHeld`]),
+    /// holds it; a held SETUP_SIGNING is a rejection ([`RejectReason::SetupSigningHeld`](crate::RejectReason::SetupSigningHeld)),
     /// for the vehicle to say why. Off by default.
     pub const fn hold_setup_signing(&mut self, held: bool) {
         self.setup_signing_held = held;

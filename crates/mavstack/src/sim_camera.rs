@@ -1,5 +1,5 @@
 //! [`SimCamera`]: a camera component beside a simulated vehicle (feature `sim`): the
-//! camera protocol served as a component of its own ([`serve::Camera`](crate::serve::Camera),
+//! camera protocol served as a component of its own ([`serve::Camera`],
 //! with the simulated camera's definition file), each photo written as an image file into a
 //! directory (`mavstack vehicle --camera DIR`).
 
