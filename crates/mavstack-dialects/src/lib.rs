@@ -32,7 +32,8 @@
 //!         MessageTable::of::<M>()
 //!     }
 //! }
-//! let table = with_dialect("ArduPilotMega", Table).expect("the default feature");
+//! // Names are matched without regard to case; `minimal` comes with every dialect feature.
+//! let table = with_dialect("Minimal", Table).expect("compiled in");
 //! assert!(table.info(0).is_some());
 //! assert!(with_dialect("no_such_dialect", Table).is_none());
 //! ```
