@@ -34,7 +34,8 @@ const BATCHED: bool = cfg!(target_os = "linux");
 #[derive(Debug)]
 pub(crate) struct RecvBatch {
     buf: Vec<u8>,
-    got: Vec<(usize, SocketAddr)>,
+    /// Per datagram taken: its slot, length and sender.
+    got: Vec<(usize, usize, SocketAddr)>,
     /// Datagrams cut because they were longer than a slot.
     pub(crate) truncated: u64,
     /// Batch mode (see above).
@@ -106,8 +107,8 @@ impl RecvBatch {
 
     /// Datagram `i` of the last receive: its bytes and sender.
     pub(crate) fn get(&self, i: usize) -> Option<(&[u8], SocketAddr)> {
-        let &(len, from) = self.got.get(i)?;
-        let start = i * RECV_SLOT;
+        let &(slot, len, from) = self.got.get(i)?;
+        let start = slot * RECV_SLOT;
         Some((&self.buf[start..start + len], from))
     }
 
@@ -151,14 +152,15 @@ impl RecvBatch {
                 None,
             )
             .map_err(io::Error::from)?;
-            for r in results {
+            for (slot, r) in results.enumerate() {
                 if r.flags.contains(MsgFlags::MSG_TRUNC) {
                     *truncated += 1;
                 }
                 let from = r.address.and_then(|a| to_std(&a));
-                // A datagram without a usable sender (not IP) cannot be answered: skipped.
+                // A datagram without a usable sender (not IP) cannot be answered: skipped
+                // (the next ones keep their own slots).
                 if let Some(from) = from {
-                    got.push((r.bytes.min(RECV_SLOT), from));
+                    got.push((slot, r.bytes.min(RECV_SLOT), from));
                 }
             }
             Ok(got.len())
@@ -178,7 +180,7 @@ impl RecvBatch {
             // Cut (or exactly a slot long, which no MAVLink datagram is).
             self.truncated += 1;
         }
-        self.got.push((len.min(RECV_SLOT), from));
+        self.got.push((0, len.min(RECV_SLOT), from));
         Ok(1)
     }
 }
