@@ -11,7 +11,7 @@ use mavstack_dialects::common::{
 
 use crate::command::{Command, CommandClient, CommandHandler, CommandServer, Request, Response};
 use crate::heartbeat::{HeartbeatConfig, Heartbeats};
-use crate::mission::{MissionClient, MissionServer};
+use crate::mission::{MissionClient, MissionConfig, MissionServer};
 use crate::param::{Encoding, Name, ParamClient, ParamServer, Value};
 use crate::stream::{Due, StreamServer, Subscriptions};
 use crate::timesync::Timesync;
@@ -66,7 +66,12 @@ pub fn fuzz_services(data: &[u8], heap: &dyn Fn() -> Option<usize>) {
     let mut heartbeats = Heartbeats::new(HeartbeatConfig::ground_station());
     let mut timesync = Timesync::new(Default::default());
     let mut param_client = ParamClient::new(Default::default(), Encoding::CCast);
-    let mut mission_client = MissionClient::new(gcs, Default::default());
+    // A windowed download (as from ArduPilot): the items kept ahead are bounded too.
+    let mission_config = MissionConfig {
+        download_window: 8,
+        ..MissionConfig::default()
+    };
+    let mut mission_client = MissionClient::new(gcs, mission_config);
     let mut command_client = CommandClient::new(gcs, Default::default());
     let mut subscriptions = Subscriptions::new();
     subscriptions.subscribe(30, None);

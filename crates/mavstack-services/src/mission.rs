@@ -5,7 +5,8 @@
 //!   MISSION_ITEM_INT with MISSION_REQUEST_INT (MISSION_REQUEST is answered too), and ends
 //!   with MISSION_ACK.
 //! - [`MissionClient::download`]: MISSION_REQUEST_LIST → MISSION_COUNT, then the client
-//!   pulls item after item and ends with MISSION_ACK(ACCEPTED).
+//!   pulls item after item (a few at a time from a vehicle that answers any request,
+//!   [`MissionConfig::download_window`]) and ends with MISSION_ACK(ACCEPTED).
 //! - [`MissionClient::clear`]: MISSION_CLEAR_ALL → MISSION_ACK.
 //! - [`MissionClient::set_current`]: MISSION_SET_CURRENT → MISSION_CURRENT with that seq.
 //! - [`MissionClient::cancel`] sends MISSION_ACK(OPERATION_CANCELLED) and goes idle.
@@ -28,8 +29,8 @@ use alloc::vec::Vec;
 use core::time::Duration;
 
 use mavstack_dialects::common::{
-    MavFrame, MavMessage, MavMissionResult, MavMissionType, MissionAck, MissionItemInt,
-    MissionRequestInt,
+    MavAutopilot, MavFrame, MavMessage, MavMissionResult, MavMissionType, MissionAck,
+    MissionItemInt, MissionRequestInt,
 };
 
 use crate::Address;
@@ -54,6 +55,31 @@ pub struct MissionConfig {
     /// When the server asks again for an item that did not come, and when it gives an
     /// upload up.
     pub pacing: UploadPacing,
+    /// How many items a download asks for ahead of the first one missing (default 1: one
+    /// request at a time, as the protocol describes and PX4 requires: it aborts a download
+    /// on a request out of turn). A vehicle answering any request as it comes (ArduPilot,
+    /// see [`MissionConfig::download_window_for`]) takes a window: a slow link's round trip
+    /// is then paid once per window rather than once per item. At least 1, at most
+    /// [`MAX_DOWNLOAD_WINDOW`].
+    pub download_window: u16,
+}
+
+/// The largest [`MissionConfig::download_window`] (more is clamped to it).
+pub const MAX_DOWNLOAD_WINDOW: u16 = 32;
+
+impl MissionConfig {
+    /// The download window for a vehicle of `autopilot`: 8 for ArduPilot, whose every
+    /// MISSION_REQUEST_INT is answered on its own (no transfer state; its telemetry queue
+    /// takes a few answers at once), 1 for every other (PX4 answers only the request after
+    /// the last).
+    #[must_use]
+    pub fn download_window_for(autopilot: MavAutopilot) -> u16 {
+        if autopilot == MavAutopilot::ARDUPILOTMEGA {
+            8
+        } else {
+            1
+        }
+    }
 }
 
 /// When a [`MissionServer`] asks again for an item that did not come, and when it gives an
@@ -118,6 +144,7 @@ impl Default for MissionConfig {
             retries: 5,
             stray_items: StrayItems::Reask,
             pacing: UploadPacing::Adaptive,
+            download_window: 1,
         }
     }
 }

@@ -584,3 +584,133 @@ fn server_takes_float_mission_items_and_moves_current() {
         Some(MavMessage::MissionCurrent(c)) if c.seq == 1 && c.total == 2
     ));
 }
+
+/// The requests a client sent: their item numbers, in order.
+fn requested(c: &mut MissionClient) -> Vec<u16> {
+    core::iter::from_fn(|| c.poll_transmit())
+        .filter_map(|o| match o.message {
+            MavMessage::MissionRequestInt(r) => Some(r.seq),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Item `seq` of `plan`, as the vehicle sends it to us.
+fn item_to_gcs(plan: &[MissionItemInt], seq: u16) -> MavMessage {
+    MavMessage::MissionItemInt(MissionItemInt {
+        seq,
+        target_system: GCS.system,
+        target_component: GCS.component,
+        mission_type: MavMissionType::MISSION,
+        ..plan[usize::from(seq)]
+    })
+}
+
+/// With a window of 4 the client keeps the four items after the last it holds asked for:
+/// an item that comes early is kept and asks for nothing, the awaited one slides the window,
+/// and a timeout asks again for exactly the items of the window still missing.
+#[test]
+fn a_windowed_download_asks_ahead_and_again_only_for_what_is_missing() {
+    let plan = items(10);
+    let config = MissionConfig {
+        download_window: 4,
+        ..MissionConfig::default()
+    };
+    let mut c = MissionClient::new(GCS, config);
+    c.download(T0, VEHICLE, MavMissionType::MISSION).unwrap();
+    let _ = c.poll_transmit();
+    let count = MavMessage::MissionCount(MissionCount {
+        target_system: GCS.system,
+        target_component: GCS.component,
+        count: 10,
+        mission_type: MavMissionType::MISSION,
+    });
+    assert!(c.handle(T0, VEHICLE, &count));
+    assert_eq!(requested(&mut c), [0, 1, 2, 3]);
+    // Item 2 before 0: kept, the window stays.
+    assert!(c.handle(T0, VEHICLE, &item_to_gcs(&plan, 2)));
+    assert_eq!(requested(&mut c), [] as [u16; 0]);
+    // A copy of it is not used again.
+    assert!(!c.handle(T0, VEHICLE, &item_to_gcs(&plan, 2)));
+    // Item 0: the window starts at 1, so 4 is asked for.
+    assert!(c.handle(T0, VEHICLE, &item_to_gcs(&plan, 0)));
+    assert_eq!(requested(&mut c), [4]);
+    // Item 1: 0, 1 and 2 are in; the window is 3..7.
+    assert!(c.handle(T0, VEHICLE, &item_to_gcs(&plan, 1)));
+    assert_eq!(requested(&mut c), [5, 6]);
+    // Item 8 is outside the window: not used.
+    assert!(!c.handle(T0, VEHICLE, &item_to_gcs(&plan, 8)));
+    assert!(c.handle(T0, VEHICLE, &item_to_gcs(&plan, 5)));
+    // Nothing more comes: the missing 3, 4 and 6 are asked for again, not 5.
+    let deadline = c.poll_timeout().unwrap();
+    c.handle_timeout(deadline);
+    let mut again = requested(&mut c);
+    again.sort_unstable();
+    assert_eq!(again, [3, 4, 6]);
+    for seq in [3, 4, 6, 7, 8, 9] {
+        assert!(c.handle(deadline, VEHICLE, &item_to_gcs(&plan, seq)));
+    }
+    let MissionEvent::Downloaded {
+        result: Ok(got), ..
+    } = c.poll_event().unwrap()
+    else {
+        panic!("not downloaded")
+    };
+    same_items(&got, &plan);
+}
+
+/// Windowed downloads through loss, duplication and reordering return the plan in order,
+/// and on a clean slow link (100 ms each way) a window of 8 takes about an eighth of the
+/// round trips one item at a time takes (virtual time, counted in round trips).
+#[test]
+fn sim_windowed_downloads_are_whole_and_take_fewer_round_trips() {
+    let plan = items(200);
+    let download = |knobs: Knobs, seed: u64, window: u16| {
+        let config = MissionConfig {
+            download_window: window,
+            ..config(knobs)
+        };
+        let mut p = Pair::new(
+            MissionClient::new(GCS, config),
+            GCS,
+            MissionServer::new(VEHICLE, config),
+            VEHICLE,
+            knobs,
+            seed,
+        );
+        p.a.upload(p.now, VEHICLE, MavMissionType::MISSION, plan.clone())
+            .unwrap();
+        assert!(matches!(
+            wait(&mut p).0,
+            MissionEvent::Uploaded { result: Ok(()), .. }
+        ));
+        p.a.download(p.now, VEHICLE, MavMissionType::MISSION)
+            .unwrap();
+        let (e, took, _) = wait(&mut p);
+        let MissionEvent::Downloaded {
+            result: Ok(got), ..
+        } = e
+        else {
+            panic!("window {window}, seed {seed}: {e:?}")
+        };
+        same_items(&got, &plan);
+        took
+    };
+    for seed in 1..=6 {
+        for window in [2, 8, 32] {
+            download(Knobs::hostile(), seed, window);
+        }
+    }
+    let slow = Knobs {
+        latency: Duration::from_millis(100),
+        ..Knobs::clean()
+    };
+    let round_trips = |t: Duration| t.as_millis() / 200;
+    let one = round_trips(download(slow, 1, 1));
+    let eight = round_trips(download(slow, 1, 8));
+    eprintln!(
+        "200 items over 100 ms each way: {one} round trips one at a time, {eight} with a window of 8"
+    );
+    assert!(one >= 200, "one at a time: {one} round trips");
+    assert!(eight <= 200 / 8 + 3, "a window of 8: {eight} round trips");
+}

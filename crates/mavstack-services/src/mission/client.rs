@@ -15,8 +15,8 @@ use super::transfer::{
     AwaitingAck, AwaitingCount, AwaitingItem, AwaitingRequest, Download, Upload,
 };
 use super::{
-    MissionBusy, MissionConfig, MissionError, MissionEvent, PREALLOCATED_ITEMS, ack, as_request,
-    for_me, request_int,
+    MAX_DOWNLOAD_WINDOW, MissionBusy, MissionConfig, MissionError, MissionEvent,
+    PREALLOCATED_ITEMS, ack, as_request, for_me, request_int,
 };
 use crate::rtt::Rtt;
 use crate::{Address, Outgoing, Service};
@@ -427,9 +427,12 @@ impl MissionClient {
                 (Some(r), true)
             }
             Op::Download(state) => {
+                let counted = matches!(state, Download::AwaitingCount(_));
                 let (next, used) = self.download_step(now, target, ty, state, message);
-                if used {
-                    // A count or the awaited item: the answer to what we sent last.
+                if used && (counted || self.window() == 1) {
+                    // A count or the awaited item: the answer to what we sent last (with a
+                    // window, an item answers a request sent some items ago: only the
+                    // count times a round trip).
                     if !r.resent {
                         self.rtt.sample(r.sent, now);
                     }
@@ -484,38 +487,64 @@ impl MissionClient {
                     );
                     return (Err(Vec::new()), true);
                 }
-                self.send(target, request_int(target, ty, 0));
-                let next = AwaitingItem {
+                let mut next = AwaitingItem {
                     seq: 0,
                     count: c.count,
                     // Room for the first items only: a count is a claim (any peer may announce
                     // 65,535 items), and the list grows as items really arrive.
                     items: Vec::with_capacity(usize::from(c.count).min(PREALLOCATED_ITEMS)),
+                    ahead: Vec::new(),
+                    next: 0,
                     attempts: 1,
                     deadline: now + self.item_wait(),
                 };
+                self.request_window(target, ty, &mut next);
                 (Ok(Download::AwaitingItem(next)), true)
             }
             (Download::AwaitingItem(mut s), MavMessage::MissionItemInt(item))
                 if for_me(self.own, item.target_system, item.target_component)
                     && item.mission_type == ty
-                    && item.seq == s.seq =>
+                    && (s.seq..s.next).contains(&item.seq)
+                    && !s.ahead.iter().any(|a| a.seq == item.seq) =>
             {
-                s.items.push(*item);
-                if s.seq + 1 >= s.count {
+                if item.seq == s.seq {
+                    s.items.push(*item);
+                    s.seq += 1;
+                    // The items that came ahead of it and follow on now.
+                    while let Some(i) = s.ahead.iter().position(|a| a.seq == s.seq) {
+                        s.items.push(s.ahead.swap_remove(i));
+                        s.seq += 1;
+                    }
+                } else {
+                    s.ahead.push(*item);
+                }
+                if s.seq >= s.count {
                     self.send(
                         target,
                         ack(target, ty, MavMissionResult::MAV_MISSION_ACCEPTED),
                     );
                     return (Err(s.items), true);
                 }
-                s.seq += 1;
                 s.attempts = 1;
                 s.deadline = now + self.item_wait();
-                self.send(target, request_int(target, ty, s.seq));
+                self.request_window(target, ty, &mut s);
                 (Ok(Download::AwaitingItem(s)), true)
             }
             (state, _) => (Ok(state), false),
+        }
+    }
+
+    /// The download window: how many items are asked for ahead of the first missing one.
+    fn window(&self) -> u16 {
+        self.config.download_window.clamp(1, MAX_DOWNLOAD_WINDOW)
+    }
+
+    /// Requests the items not asked for yet up to the window's end.
+    fn request_window(&mut self, target: Address, ty: MavMissionType, s: &mut AwaitingItem) {
+        let end = s.seq.saturating_add(self.window()).min(s.count);
+        while s.next < end {
+            self.send(target, request_int(target, ty, s.next));
+            s.next += 1;
         }
     }
 
@@ -625,11 +654,22 @@ impl Service for MissionClient {
                 self.request_list(target, ty),
                 (&mut s.deadline, wait),
             ),
-            Op::Download(Download::AwaitingItem(s)) => (
-                &mut s.attempts,
-                request_int(target, ty, s.seq),
-                (&mut s.deadline, item_wait),
-            ),
+            Op::Download(Download::AwaitingItem(s)) => {
+                // Every item of the window still missing is asked for again.
+                for seq in s.seq + 1..s.next {
+                    if !s.ahead.iter().any(|a| a.seq == seq) {
+                        self.out.push_back(Outgoing {
+                            target,
+                            message: request_int(target, ty, seq),
+                        });
+                    }
+                }
+                (
+                    &mut s.attempts,
+                    request_int(target, ty, s.seq),
+                    (&mut s.deadline, item_wait),
+                )
+            }
             Op::Clear { attempts, deadline } => (attempts, clear_all(target, ty), (deadline, wait)),
             Op::SetCurrent {
                 seq,

@@ -40,7 +40,7 @@ pub struct AwaitingAck {
 pub enum Download {
     /// MISSION_REQUEST_LIST sent.
     AwaitingCount(AwaitingCount),
-    /// Items `0..seq` received; item `seq` requested.
+    /// Items `0..seq` received; item `seq` (and, with a window, the next few) requested.
     AwaitingItem(AwaitingItem),
 }
 
@@ -51,13 +51,17 @@ pub struct AwaitingCount {
     pub(super) deadline: Instant,
 }
 
-/// Waiting for item `seq`.
+/// Waiting for item `seq`, the first not received yet.
 #[derive(Debug)]
 pub struct AwaitingItem {
-    /// The item requested.
+    /// The first item not received (items `0..seq` are in).
     pub seq: u16,
     pub(super) count: u16,
     pub(super) items: Vec<MissionItemInt>,
+    /// Items after `seq` that came before it (a windowed download; fewer than the window).
+    pub(super) ahead: Vec<MissionItemInt>,
+    /// The first item not requested yet (`seq + 1` without a window).
+    pub(super) next: u16,
     pub(super) attempts: u8,
     pub(super) deadline: Instant,
 }

@@ -35,6 +35,7 @@ impl Mission {
     fn client(&self) -> MissionClient {
         let config = MissionConfig {
             retries: self.system.retries(),
+            download_window: MissionConfig::download_window_for(self.system.autopilot()),
             ..MissionConfig::default()
         };
         MissionClient::new(self.system.own(), config)
