@@ -17,10 +17,10 @@ use core::time::Duration;
 use mavstack::core::Message as _;
 use mavstack::dialects::common::{
     Attitude, GlobalPositionInt, Heartbeat, MavCmd, MavFrame, MavMissionType, MavModeFlag,
-    MissionItemInt, MissionItemReached,
+    MavResult, MissionItemInt, MissionItemReached,
 };
 use mavstack::modes::Flavour;
-use mavstack::services::command::Command;
+use mavstack::services::command::{Command, CommandError};
 use mavstack::services::plan::{self, Convention};
 use mavstack::system::{System, SystemError, Wanted};
 use mavstack::{LinkSpec, Node};
@@ -52,6 +52,29 @@ async fn command(v: &mut System, command: MavCmd, p: [f32; 7]) -> Result<(), Sys
 
 /// The plan: home, a take-off to 10 m, three waypoints about 40 m apart (item 0 home, as QGC
 /// writes plans).
+/// Switches to `mode`, asking again every half second for up to ten seconds while the
+/// vehicle answers TEMPORARILY_REJECTED (PX4 does right after arming, until its checks have
+/// seen the new state: "try again later" is what that result means).
+async fn set_mode_when_ready(v: &System, mode: &str) -> Result<(), SystemError> {
+    let until = Instant::now() + Duration::from_secs(10);
+    loop {
+        match v.modes().set(mode).await {
+            Ok(_) => return Ok(()),
+            Err(SystemError::Command {
+                reason:
+                    CommandError::Rejected {
+                        result: MavResult::TEMPORARILY_REJECTED,
+                        ..
+                    },
+                ..
+            }) if Instant::now() < until => {
+                tokio::time::sleep(Duration::from_millis(500)).await;
+            }
+            Err(e) => return Err(e),
+        }
+    }
+}
+
 fn plan(home: &MissionItemInt) -> Vec<MissionItemInt> {
     let item = |seq: u16, command, frame, dlat: i32, dlon: i32, z| MissionItemInt {
         seq,
@@ -197,7 +220,7 @@ async fn main() -> Result<(), Error> {
         }
     });
     match flavour {
-        Flavour::Px4 => v.modes().set("AUTO.MISSION").await.map(drop)?,
+        Flavour::Px4 => set_mode_when_ready(&v, "AUTO.MISSION").await?,
         _ => {
             command(
                 &mut v,
