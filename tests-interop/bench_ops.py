@@ -9,7 +9,7 @@ usage: bench_ops.py --port P --name NAME [--rust BIN] [--tools rust,aio,mavsdk,p
 
 The vehicle sends UDP to 127.0.0.1:P (PX4 SITL: 14550; `mavstack vehicle udpout:127.0.0.1:P`;
 ArduPilot SITL with `--serial1 udpclient:127.0.0.1:P`). Each tool connects first (untimed),
-then, each timed alone:
+then, each timed alone (with SETTLE seconds after the parameter table):
   params    the whole parameter table (aio: `params.get_all(via="list")`, PARAM_REQUEST_LIST
             as the others do; the Rust API `params().get_all()`; MAVSDK get_all_params;
             pymavlink: PARAM_REQUEST_LIST, then PARAM_REQUEST_READ for the gaps until complete)
@@ -34,6 +34,11 @@ sys.path.insert(0, HERE)
 from lossy_relay import LossyRelay  # noqa: E402
 
 STEPS = ["params", "upload", "download", "command"]
+
+# Seconds every tool waits after the parameter table before the next step: PX4 goes on
+# sending its whole list (about a second) after a client that re-requests gaps has it all, and
+# an upload timed meanwhile would measure that stream, not the tool.
+SETTLE = 2.0
 
 
 def free_udp():
@@ -73,6 +78,7 @@ async def bench_aio(url, n, timeout):
     async with aio.connect(url) as gcs:
         v = await gcs.vehicle(timeout=60)
         out["params"] = await timed(v.params.get_all(via="list"), timeout)
+        await asyncio.sleep(SETTLE)
         home = await v.home()
         h = (home.lat_deg, home.lon_deg, home.alt_m) if home else (-35.363261, 149.16523, 584.0)
         items = [aio.MissionItem(16, frame=0 if i == 0 else 3, x=int(lat * 1e7), y=int(lon * 1e7), z=alt)
@@ -106,6 +112,7 @@ async def bench_mavsdk(url, n, timeout):
     try:
         param, mission, action = ParamAsync(system), MissionRawAsync(system), ActionAsync(system)
         out["params"] = await timed(param.get_all_params(), timeout)
+        await asyncio.sleep(SETTLE)
         telemetry = TelemetryAsync(system)
         home = None
         try:
@@ -161,6 +168,9 @@ def bench_pymavlink(url, n, timeout):
                     c.mav.param_request_read_send(ts, tc, b"", i)
             last = time.monotonic()
     out["params"] = time.monotonic() - t if count and len(got) >= count else "timed out"
+    settle = time.monotonic() + SETTLE
+    while time.monotonic() < settle:
+        c.recv_match(blocking=True, timeout=0.1)
 
     home = (-35.363261, 149.16523, 584.0)
     pts = plan(home, n)

@@ -66,9 +66,10 @@ pub fn fuzz_services(data: &[u8], heap: &dyn Fn() -> Option<usize>) {
     let mut heartbeats = Heartbeats::new(HeartbeatConfig::ground_station());
     let mut timesync = Timesync::new(Default::default());
     let mut param_client = ParamClient::new(Default::default(), Encoding::CCast);
-    // A windowed download (as from ArduPilot): the items kept ahead are bounded too.
+    // Windowed transfers (as with ArduPilot): the items kept ahead are bounded too.
     let mission_config = MissionConfig {
         download_window: 8,
+        upload_window: 8,
         ..MissionConfig::default()
     };
     let mut mission_client = MissionClient::new(gcs, mission_config);

@@ -3,7 +3,8 @@
 //! **Client** ([`MissionClient`]), one transfer at a time:
 //! - [`MissionClient::upload`]: MISSION_COUNT, then the vehicle pulls every
 //!   MISSION_ITEM_INT with MISSION_REQUEST_INT (MISSION_REQUEST is answered too), and ends
-//!   with MISSION_ACK.
+//!   with MISSION_ACK; to a vehicle that takes the next item unasked, a few items go out
+//!   ahead of its requests ([`MissionConfig::upload_window`]).
 //! - [`MissionClient::download`]: MISSION_REQUEST_LIST → MISSION_COUNT, then the client
 //!   pulls item after item (a few at a time from a vehicle that answers any request,
 //!   [`MissionConfig::download_window`]) and ends with MISSION_ACK(ACCEPTED).
@@ -58,26 +59,42 @@ pub struct MissionConfig {
     /// How many items a download asks for ahead of the first one missing (default 1: one
     /// request at a time, as the protocol describes and PX4 requires: it aborts a download
     /// on a request out of turn). A vehicle answering any request as it comes (ArduPilot,
-    /// see [`MissionConfig::download_window_for`]) takes a window: a slow link's round trip
-    /// is then paid once per window rather than once per item. At least 1, at most
-    /// [`MAX_DOWNLOAD_WINDOW`].
+    /// see [`MissionConfig::for_autopilot`]) takes a window: a slow link's round trip is
+    /// then paid once per window rather than once per item. At least 1, at most
+    /// [`MAX_WINDOW`].
     pub download_window: u16,
+    /// How many items an upload sends ahead of the one the vehicle asked for (default 1:
+    /// only what it asks for). A vehicle that takes the next item in sequence whether it
+    /// asked for it yet or not (ArduPilot and PX4) takes a window: items go out `n` at a
+    /// time and the vehicle's requests slide it (go-back-n: on a sign of loss, a request
+    /// repeated, ArduPilot's INVALID_SEQUENCE or a timeout, the window is sent again from
+    /// the item asked for). At least 1, at most [`MAX_WINDOW`].
+    pub upload_window: u16,
 }
 
-/// The largest [`MissionConfig::download_window`] (more is clamped to it).
-pub const MAX_DOWNLOAD_WINDOW: u16 = 32;
+/// The largest [`MissionConfig::download_window`] and [`MissionConfig::upload_window`]
+/// (more is clamped to it).
+pub const MAX_WINDOW: u16 = 32;
 
 impl MissionConfig {
-    /// The download window for a vehicle of `autopilot`: 8 for ArduPilot, whose every
-    /// MISSION_REQUEST_INT is answered on its own (no transfer state; its telemetry queue
-    /// takes a few answers at once), 1 for every other (PX4 answers only the request after
-    /// the last).
+    /// This configuration with the windows a vehicle of `autopilot` takes. ArduPilot: 8 for
+    /// downloads (every MISSION_REQUEST_INT is answered on its own, no transfer state:
+    /// `MissionItemProtocol.cpp`) and 8 for uploads (it takes the item it expects whether it
+    /// asked yet or not, and answers another with INVALID_SEQUENCE, the upload left open).
+    /// PX4: 1 for downloads (it aborts one on a request out of turn) and 8 for uploads (it
+    /// takes the item it expects and ignores others: `mavlink_mission.cpp`). Every other
+    /// autopilot: 1 and 1, the protocol as written.
     #[must_use]
-    pub fn download_window_for(autopilot: MavAutopilot) -> u16 {
-        if autopilot == MavAutopilot::ARDUPILOTMEGA {
-            8
-        } else {
-            1
+    pub fn for_autopilot(self, autopilot: MavAutopilot) -> Self {
+        let (download_window, upload_window) = match autopilot {
+            MavAutopilot::ARDUPILOTMEGA => (8, 8),
+            MavAutopilot::PX4 => (1, 8),
+            _ => (1, 1),
+        };
+        Self {
+            download_window,
+            upload_window,
+            ..self
         }
     }
 }
@@ -145,6 +162,7 @@ impl Default for MissionConfig {
             stray_items: StrayItems::Reask,
             pacing: UploadPacing::Adaptive,
             download_window: 1,
+            upload_window: 1,
         }
     }
 }

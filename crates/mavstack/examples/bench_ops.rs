@@ -79,6 +79,9 @@ async fn main() -> Result<(), Error> {
         },
     );
     let items = plan(home, n);
+    // As every tool of tests-interop/bench_ops.py: PX4 goes on sending its parameter list
+    // for about a second after a client that re-requests gaps has it all.
+    tokio::time::sleep(Duration::from_secs(2)).await;
     let t = Instant::now();
     let up = v
         .mission()

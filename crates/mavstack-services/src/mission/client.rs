@@ -15,8 +15,8 @@ use super::transfer::{
     AwaitingAck, AwaitingCount, AwaitingItem, AwaitingRequest, Download, Upload,
 };
 use super::{
-    MAX_DOWNLOAD_WINDOW, MissionBusy, MissionConfig, MissionError, MissionEvent,
-    PREALLOCATED_ITEMS, ack, as_request, for_me, request_int,
+    MAX_WINDOW, MissionBusy, MissionConfig, MissionError, MissionEvent, PREALLOCATED_ITEMS, ack,
+    as_request, for_me, request_int,
 };
 use crate::rtt::Rtt;
 use crate::{Address, Outgoing, Service};
@@ -149,12 +149,7 @@ impl MissionClient {
             count: u16::try_from(items.len()).unwrap_or(u16::MAX),
             mission_type,
         });
-        let state = AwaitingRequest {
-            items,
-            last: None,
-            attempts: 1,
-            deadline: now + self.config.timeout,
-        };
+        let state = AwaitingRequest::new(items, None, 1, now + self.config.timeout);
         self.start(
             now,
             target,
@@ -311,6 +306,22 @@ impl MissionClient {
         {
             if matches!(r.op, Op::Upload(_))
                 && a.r#type == MavMissionResult::MAV_MISSION_INVALID_SEQUENCE
+                && self.upload_window() > 1
+            {
+                // ArduPilot refused an item of the window: one before it was lost. The
+                // window again from the item it asked for, once for that item.
+                if let Op::Upload(Upload::AwaitingRequest(s)) = &mut r.op
+                    && let Some(h) = s.last
+                    && s.went_back != Some(h)
+                {
+                    s.went_back = Some(h);
+                    s.send_next = h;
+                    self.send_window(target, s);
+                }
+                return (Some(r), true);
+            }
+            if matches!(r.op, Op::Upload(_))
+                && a.r#type == MavMissionResult::MAV_MISSION_INVALID_SEQUENCE
             {
                 // ArduPilot's answer to an item it did not ask for (our resend after its
                 // request was lost); the upload goes on. Retries and the timeout still bound
@@ -329,7 +340,14 @@ impl MissionClient {
             }
             let done_upload = matches!(r.op, Op::Upload(Upload::AwaitingAck(_)))
                 || matches!(&r.op, Op::Upload(Upload::AwaitingRequest(s)) if s.items.is_empty());
-            let resent_last = matches!(&r.op, Op::Upload(Upload::AwaitingAck(s)) if s.attempts > 1);
+            // A refusal after the last item went out again may be the answer of a vehicle
+            // that had the whole plan and whose ACK was lost. With a window, once every item
+            // has gone out, so may be a refusal of any: a copy of an item (resent, or doubled
+            // by the link) that came after the vehicle had the plan.
+            let windowed = self.upload_window() > 1;
+            let resent_last = matches!(&r.op, Op::Upload(Upload::AwaitingAck(s)) if s.attempts > 1 || windowed)
+                || matches!(&r.op, Op::Upload(Upload::AwaitingRequest(s))
+                    if windowed && usize::from(s.sent_ever) >= s.items.len());
             let result = if a.r#type != MavMissionResult::MAV_MISSION_ACCEPTED && resent_last {
                 Err(MissionError::Unconfirmed { result: a.r#type })
             } else if a.r#type != MavMissionResult::MAV_MISSION_ACCEPTED {
@@ -352,6 +370,24 @@ impl MissionClient {
                     r.op = Op::Upload(state);
                     return (Some(r), false);
                 };
+                let state = match state {
+                    Upload::AwaitingRequest(s)
+                        if self.upload_window() > 1
+                            && rty == ty
+                            && usize::from(seq) < s.items.len() =>
+                    {
+                        if s.last.is_none() {
+                            // The first request answers the count: a round trip.
+                            if !r.resent {
+                                self.rtt.sample(r.sent, now);
+                            }
+                            (r.sent, r.resent) = (now, false);
+                        }
+                        r.op = Op::Upload(self.windowed_request(now, target, s, seq));
+                        return (Some(r), true);
+                    }
+                    other => other,
+                };
                 let (items, attempts, deadline, last) = match state {
                     Upload::AwaitingRequest(s) => (s.items, s.attempts, s.deadline, s.last),
                     Upload::AwaitingAck(s) => (s.items, s.attempts, s.deadline, s.last),
@@ -362,12 +398,7 @@ impl MissionClient {
                         target,
                         ack(target, ty, MavMissionResult::MAV_MISSION_INVALID_SEQUENCE),
                     );
-                    let state = AwaitingRequest {
-                        items,
-                        last,
-                        attempts,
-                        deadline,
-                    };
+                    let state = AwaitingRequest::new(items, last, attempts, deadline);
                     r.op = Op::Upload(Upload::AwaitingRequest(state));
                     self.finish(
                         r,
@@ -383,12 +414,7 @@ impl MissionClient {
                     // delayed it), or the vehicle going back: answer it, but it neither
                     // moves the transfer back nor says anything of the round trip.
                     self.send(target, MavMessage::MissionItemInt(item));
-                    let state = AwaitingRequest {
-                        items,
-                        last,
-                        attempts,
-                        deadline,
-                    };
+                    let state = AwaitingRequest::new(items, last, attempts, deadline);
                     r.op = Op::Upload(if usize::from(next) >= state.items.len() {
                         Upload::AwaitingAck(AwaitingAck {
                             items: state.items,
@@ -417,12 +443,7 @@ impl MissionClient {
                         deadline: now + self.config.timeout,
                     })
                 } else {
-                    Upload::AwaitingRequest(AwaitingRequest {
-                        items,
-                        last,
-                        attempts,
-                        deadline,
-                    })
+                    Upload::AwaitingRequest(AwaitingRequest::new(items, last, attempts, deadline))
                 });
                 (Some(r), true)
             }
@@ -536,7 +557,69 @@ impl MissionClient {
 
     /// The download window: how many items are asked for ahead of the first missing one.
     fn window(&self) -> u16 {
-        self.config.download_window.clamp(1, MAX_DOWNLOAD_WINDOW)
+        self.config.download_window.clamp(1, MAX_WINDOW)
+    }
+
+    /// The upload window: how many items go out from the one the vehicle asked for.
+    fn upload_window(&self) -> u16 {
+        self.config.upload_window.clamp(1, MAX_WINDOW)
+    }
+
+    /// A windowed upload's answer to a request for item `seq` (of the plan).
+    fn windowed_request(
+        &mut self,
+        now: Instant,
+        target: Address,
+        mut s: AwaitingRequest,
+        seq: u16,
+    ) -> Upload {
+        match s.last {
+            // A late copy of an older request: the vehicle has moved on.
+            Some(h) if seq < h => return Upload::AwaitingRequest(s),
+            // Asked again: what went out from `h` on did not arrive (once for `h`: the
+            // copies of one loss make one resend; a timeout goes back again).
+            Some(h) if seq == h => {
+                if s.went_back != Some(h) {
+                    s.went_back = Some(h);
+                    s.send_next = h;
+                }
+            }
+            // Progress: the vehicle holds every item before `seq`.
+            _ => {
+                s.last = Some(seq);
+                s.attempts = 1;
+                s.deadline = now + self.item_wait();
+                s.send_next = s.send_next.max(seq);
+            }
+        }
+        self.send_window(target, &mut s);
+        if s.last.is_some_and(|h| usize::from(h) + 1 >= s.items.len()) {
+            // The last item asked for (and sent): the ACK is next.
+            return Upload::AwaitingAck(AwaitingAck {
+                items: s.items,
+                last: s.last,
+                attempts: 1,
+                deadline: now + self.config.timeout,
+            });
+        }
+        Upload::AwaitingRequest(s)
+    }
+
+    /// Sends the items of the window not sent since it last went back, in order.
+    fn send_window(&mut self, target: Address, s: &mut AwaitingRequest) {
+        let len = u16::try_from(s.items.len()).unwrap_or(u16::MAX);
+        let end = s
+            .last
+            .unwrap_or(0)
+            .saturating_add(self.upload_window())
+            .min(len);
+        while s.send_next < end {
+            if let Some(item) = s.items.get(usize::from(s.send_next)) {
+                self.send(target, MavMessage::MissionItemInt(*item));
+            }
+            s.send_next += 1;
+        }
+        s.sent_ever = s.sent_ever.max(s.send_next);
     }
 
     /// Requests the items not asked for yet up to the window's end.
@@ -638,11 +721,30 @@ impl Service for MissionClient {
         // `None`: an item's wait, the round trip's timeout backing off with each resend.
         let item_wait = None;
         (r.sent, r.resent) = (now, true);
+        // What goes out after the resend (the rest of a window), in order.
+        let mut then = Vec::new();
+        let window = self.upload_window();
         // (attempts so far, message to resend, wait)
         let (attempts, resend, wait) = match &mut r.op {
             Op::Upload(Upload::AwaitingRequest(s)) => {
                 let w = if s.last.is_none() { wait } else { item_wait };
                 let m = upload_message(target, ty, &s.items, s.last);
+                if window > 1
+                    && let Some(h) = s.last
+                {
+                    // Go back: the window again from the item asked for (`m`).
+                    let len = u16::try_from(s.items.len()).unwrap_or(u16::MAX);
+                    let end = h.saturating_add(window).min(len);
+                    then.extend(
+                        s.items
+                            .get(usize::from(h) + 1..usize::from(end))
+                            .unwrap_or_default()
+                            .iter()
+                            .map(|i| MavMessage::MissionItemInt(*i)),
+                    );
+                    s.went_back = Some(h);
+                    s.send_next = end.max(h + 1);
+                }
                 (&mut s.attempts, m, (&mut s.deadline, w))
             }
             Op::Upload(Upload::AwaitingAck(s)) => {
@@ -656,14 +758,11 @@ impl Service for MissionClient {
             ),
             Op::Download(Download::AwaitingItem(s)) => {
                 // Every item of the window still missing is asked for again.
-                for seq in s.seq + 1..s.next {
-                    if !s.ahead.iter().any(|a| a.seq == seq) {
-                        self.out.push_back(Outgoing {
-                            target,
-                            message: request_int(target, ty, seq),
-                        });
-                    }
-                }
+                then.extend(
+                    (s.seq + 1..s.next)
+                        .filter(|seq| !s.ahead.iter().any(|a| a.seq == *seq))
+                        .map(|seq| request_int(target, ty, seq)),
+                );
                 (
                     &mut s.attempts,
                     request_int(target, ty, s.seq),
@@ -690,6 +789,8 @@ impl Service for MissionClient {
             target,
             message: resend,
         });
+        self.out
+            .extend(then.into_iter().map(|message| Outgoing { target, message }));
         self.running = Some(r);
     }
 

@@ -19,10 +19,18 @@ pub enum Upload {
 #[derive(Debug)]
 pub struct AwaitingRequest {
     pub(super) items: Vec<MissionItemInt>,
-    /// The last item sent (`None`: only MISSION_COUNT so far).
+    /// The last item sent (`None`: only MISSION_COUNT so far); with a window, the last item
+    /// the vehicle asked for (it holds every item before it).
     pub(super) last: Option<u16>,
     pub(super) attempts: u8,
     pub(super) deadline: Instant,
+    /// With a window: the next item to send (those from `last` up to it are on their way).
+    pub(super) send_next: u16,
+    /// With a window: how many items have gone out at least once.
+    pub(super) sent_ever: u16,
+    /// With a window: the item the window last went back to on a sign of loss (a repeated
+    /// request or an INVALID_SEQUENCE), so that one loss makes one resend.
+    pub(super) went_back: Option<u16>,
 }
 
 /// Waiting for the final MISSION_ACK.
@@ -67,6 +75,25 @@ pub struct AwaitingItem {
 }
 
 impl AwaitingRequest {
+    /// `last` sent (or only the count, `None`): the window starts after it.
+    pub(super) fn new(
+        items: Vec<MissionItemInt>,
+        last: Option<u16>,
+        attempts: u8,
+        deadline: Instant,
+    ) -> Self {
+        let next = last.map_or(0, |l| l.saturating_add(1));
+        Self {
+            items,
+            last,
+            attempts,
+            deadline,
+            send_next: next,
+            sent_ever: next,
+            went_back: None,
+        }
+    }
+
     /// How many items the upload has.
     #[must_use]
     pub fn count(&self) -> usize {

@@ -35,9 +35,9 @@ impl Mission {
     fn client(&self) -> MissionClient {
         let config = MissionConfig {
             retries: self.system.retries(),
-            download_window: MissionConfig::download_window_for(self.system.autopilot()),
             ..MissionConfig::default()
-        };
+        }
+        .for_autopilot(self.system.autopilot());
         MissionClient::new(self.system.own(), config)
     }
 
