@@ -5,7 +5,7 @@ API (`examples/bench_ops.rs`), `mavstack.aio`, MAVSDK 4.1.0 (native binding) and
 (20 % of the datagrams dropped each way, 100 ms each way).
 
 usage: bench_ops.py --port P --name NAME [--rust BIN] [--tools rust,aio,mavsdk,pymavlink]
-                    [--links clean,lossy] [--items 100] [--out FILE.json] [--md FILE.md]
+                    [--links clean,lossy] [--items 100] [--seed 7] [--out FILE.json] [--md FILE.md]
 
 The vehicle sends UDP to 127.0.0.1:P (PX4 SITL: 14550; `mavstack vehicle udpout:127.0.0.1:P`;
 ArduPilot SITL with `--serial1 udpclient:127.0.0.1:P`). Each tool connects first (untimed),
@@ -236,7 +236,7 @@ def run_tool(tool, link, a):
     port = a.port
     if link == "lossy":
         tool_port = free_udp()
-        relay = LossyRelay(("127.0.0.1", a.port), ("127.0.0.1", tool_port), loss=0.2, seed=7,
+        relay = LossyRelay(("127.0.0.1", a.port), ("127.0.0.1", tool_port), loss=0.2, seed=a.seed,
                            delay=0.1)
         relay.start()
         port = tool_port
@@ -266,6 +266,9 @@ def main():
     ap.add_argument("--links", default="clean,lossy")
     ap.add_argument("--items", type=int, default=100)
     ap.add_argument("--timeout", type=float, default=120.0)
+    ap.add_argument("--seed", type=int, default=7,
+                    help="the lossy relay's seed: which datagrams it drops is a function of it and of"
+                         " how many came before, so a tool's steps meet the same losses run after run")
     ap.add_argument("--out")
     ap.add_argument("--md")
     a = ap.parse_args()
