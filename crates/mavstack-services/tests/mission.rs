@@ -398,6 +398,17 @@ fn out_of_sequence_items_are_dropped_and_the_expected_one_requested() {
     );
 }
 
+/// The client's next event is the mission uploaded and confirmed.
+fn assert_uploaded(c: &mut MissionClient) {
+    assert_eq!(
+        c.poll_event(),
+        Some(MissionEvent::Uploaded {
+            mission_type: MavMissionType::MISSION,
+            result: Ok(())
+        })
+    );
+}
+
 /// MISSION_REQUEST_INT for item `seq` of the mission, from the vehicle to us.
 fn request_to_gcs(seq: u16) -> MavMessage {
     MavMessage::MissionRequestInt(MissionRequestInt {
@@ -456,13 +467,7 @@ fn an_invalid_sequence_ack_mid_upload_does_not_end_it() {
         MavMessage::MissionItemInt(MissionItemInt { seq: 1, .. })
     ));
     c.handle_message(t, VEHICLE, &ack(MavMissionResult::MAV_MISSION_ACCEPTED));
-    assert_eq!(
-        c.poll_event(),
-        Some(MissionEvent::Uploaded {
-            mission_type: MavMissionType::MISSION,
-            result: Ok(())
-        })
-    );
+    assert_uploaded(&mut c);
 }
 
 /// The final ACK lost: the last item goes again, and ArduPilot, no longer in an upload,
@@ -769,13 +774,7 @@ fn a_windowed_upload_sends_ahead_and_goes_back_once_per_loss() {
         VEHICLE,
         &ack_to_gcs(MavMissionResult::MAV_MISSION_ACCEPTED)
     ));
-    assert_eq!(
-        c.poll_event(),
-        Some(MissionEvent::Uploaded {
-            mission_type: MavMissionType::MISSION,
-            result: Ok(())
-        })
-    );
+    assert_uploaded(&mut c);
 }
 
 /// Windowed uploads through loss, duplication and reordering store the plan in place on a
