@@ -5,7 +5,8 @@ API (`examples/bench_ops.rs`), `mavstack.aio`, MAVSDK 4.1.0 (native binding) and
 (20 % of the datagrams dropped each way, 100 ms each way).
 
 usage: bench_ops.py --port P --name NAME [--rust BIN] [--tools rust,aio,mavsdk,pymavlink]
-                    [--links clean,lossy] [--items 100] [--seed 7] [--out FILE.json] [--md FILE.md]
+                    [--links clean,lossy] [--items 100] [--rounds 3] [--seed 7] [--out FILE.json]
+                    [--md FILE.md]
 
 The vehicle sends UDP to 127.0.0.1:P (PX4 SITL: 14550; `mavstack vehicle udpout:127.0.0.1:P`;
 ArduPilot SITL with `--serial1 udpclient:127.0.0.1:P`). Each tool connects first (untimed),
@@ -15,6 +16,8 @@ then, each timed alone (with SETTLE seconds after the parameter table):
             pymavlink: PARAM_REQUEST_LIST, then PARAM_REQUEST_READ for the gaps until complete)
   upload    home + N waypoints (MAVSDK's mission_raw; pymavlink: the MISSION_REQUEST_INT loop)
   download  the same plan read back
+            (upload and download: --rounds times on the clean link, once through loss, with
+            TRANSFER_SETTLE seconds before each; the median is reported)
   command   DO_SET_MODE to the vehicle's hold mode, the median of 10 round trips (MAVSDK:
             action.hold())
 A step not done in --timeout seconds (default 120) is 'timed out'. Prints a Markdown table.
@@ -39,6 +42,17 @@ STEPS = ["params", "upload", "download", "command"]
 # sending its whole list (about a second) after a client that re-requests gaps has it all, and
 # an upload timed meanwhile would measure that stream, not the tool.
 SETTLE = 2.0
+
+# Seconds every tool waits before each transfer: PX4 checks a plan it has just taken, reading
+# every item back from its storage, and a download started meanwhile waits on that storage
+# (items 2.5-3 ms apart instead of 0.1 ms: 15 ms for 100 items against 3.7 ms a second later).
+TRANSFER_SETTLE = 1.0
+
+
+def median_of(values):
+    """The median of a step's rounds, or the first round's failure."""
+    bad = [v for v in values if not isinstance(v, float)]
+    return bad[0] if bad else statistics.median(values)
 
 
 def free_udp():
@@ -72,7 +86,7 @@ async def timed(coro, timeout):
     return time.monotonic() - t
 
 
-async def bench_aio(url, n, timeout):
+async def bench_aio(url, n, rounds, timeout):
     import mavstack.aio as aio
     out = {}
     async with aio.connect(url) as gcs:
@@ -83,8 +97,13 @@ async def bench_aio(url, n, timeout):
         h = (home.lat_deg, home.lon_deg, home.alt_m) if home else (-35.363261, 149.16523, 584.0)
         items = [aio.MissionItem(16, frame=0 if i == 0 else 3, x=int(lat * 1e7), y=int(lon * 1e7), z=alt)
                  for i, (lat, lon, alt) in enumerate(plan(h, n))]
-        out["upload"] = await timed(v.mission.upload(items), timeout)
-        out["download"] = await timed(v.mission.download(), timeout)
+        ups, downs = [], []
+        for _ in range(rounds):
+            await asyncio.sleep(TRANSFER_SETTLE)
+            ups.append(await timed(v.mission.upload(items), timeout))
+            await asyncio.sleep(TRANSFER_SETTLE)
+            downs.append(await timed(v.mission.download(), timeout))
+        out["upload"], out["download"] = median_of(ups), median_of(downs)
         rtts = []
         for _ in range(10):
             t = time.monotonic()
@@ -96,7 +115,7 @@ async def bench_aio(url, n, timeout):
     return out
 
 
-async def bench_mavsdk(url, n, timeout):
+async def bench_mavsdk(url, n, rounds, timeout):
     from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
     from mavsdk.asyncio.plugins.action import ActionAsync
     from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
@@ -125,8 +144,13 @@ async def bench_mavsdk(url, n, timeout):
         items = [MissionItem(i, 0 if i == 0 else 3, 16, 1 if i == 0 else 0, 1, 0.0, 0.0, 0.0, float("nan"),
                              int(lat * 1e7), int(lon * 1e7), float(alt), 0)
                  for i, (lat, lon, alt) in enumerate(plan(h, n))]
-        out["upload"] = await timed(mission.upload_mission(items), timeout)
-        out["download"] = await timed(mission.download_mission(), timeout)
+        ups, downs = [], []
+        for _ in range(rounds):
+            await asyncio.sleep(TRANSFER_SETTLE)
+            ups.append(await timed(mission.upload_mission(items), timeout))
+            await asyncio.sleep(TRANSFER_SETTLE)
+            downs.append(await timed(mission.download_mission(), timeout))
+        out["upload"], out["download"] = median_of(ups), median_of(downs)
         rtts = []
         for _ in range(10):
             t = time.monotonic()
@@ -141,7 +165,7 @@ async def bench_mavsdk(url, n, timeout):
     return out
 
 
-def bench_pymavlink(url, n, timeout):
+def bench_pymavlink(url, n, rounds, timeout):
     from pymavlink import mavutil
     c = mavutil.mavlink_connection(url, source_system=255, source_component=190)
     hb = c.wait_heartbeat(timeout=60)
@@ -168,43 +192,57 @@ def bench_pymavlink(url, n, timeout):
                     c.mav.param_request_read_send(ts, tc, b"", i)
             last = time.monotonic()
     out["params"] = time.monotonic() - t if count and len(got) >= count else "timed out"
-    settle = time.monotonic() + SETTLE
-    while time.monotonic() < settle:
-        c.recv_match(blocking=True, timeout=0.1)
+    def drain(seconds):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            c.recv_match(blocking=True, timeout=0.1)
 
+    drain(SETTLE)
     home = (-35.363261, 149.16523, 584.0)
     pts = plan(home, n)
-    t = time.monotonic()
-    c.mav.mission_count_send(ts, tc, len(pts), 0)
-    end, done = deadline(), False
-    while time.monotonic() < end:
-        m = c.recv_match(type=["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], blocking=True, timeout=1)
-        if m is None:
-            continue
-        if m.get_type() == "MISSION_ACK":
-            done = m.type == 0
-            break
-        lat, lon, alt = pts[m.seq]
-        c.mav.mission_item_int_send(ts, tc, m.seq, 0 if m.seq == 0 else 3, 16, 0, 1, 0, 0, 0, 0,
-                                    int(lat * 1e7), int(lon * 1e7), alt, 0)
-    out["upload"] = time.monotonic() - t if done else "failed"
 
-    t = time.monotonic()
-    c.mav.mission_request_list_send(ts, tc, 0)
-    end, count, items = deadline(), None, {}
-    while time.monotonic() < end:
-        m = c.recv_match(type=["MISSION_COUNT", "MISSION_ITEM_INT"], blocking=True, timeout=0.5)
-        if m is not None and m.get_type() == "MISSION_COUNT":
-            count = m.count
-        elif m is not None:
-            items[m.seq] = m
-        if count is not None and len(items) >= count:
-            c.mav.mission_ack_send(ts, tc, 0, 0)
-            break
-        if count is not None:
-            nxt = next(i for i in range(count) if i not in items)
-            c.mav.mission_request_int_send(ts, tc, nxt, 0)
-    out["download"] = time.monotonic() - t if count is not None and len(items) >= count else "timed out"
+    def upload():
+        t = time.monotonic()
+        c.mav.mission_count_send(ts, tc, len(pts), 0)
+        end, done = deadline(), False
+        while time.monotonic() < end:
+            m = c.recv_match(type=["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], blocking=True,
+                             timeout=1)
+            if m is None:
+                continue
+            if m.get_type() == "MISSION_ACK":
+                done = m.type == 0
+                break
+            lat, lon, alt = pts[m.seq]
+            c.mav.mission_item_int_send(ts, tc, m.seq, 0 if m.seq == 0 else 3, 16, 0, 1, 0, 0, 0, 0,
+                                        int(lat * 1e7), int(lon * 1e7), alt, 0)
+        return time.monotonic() - t if done else "failed"
+
+    def download():
+        t = time.monotonic()
+        c.mav.mission_request_list_send(ts, tc, 0)
+        end, count, items = deadline(), None, {}
+        while time.monotonic() < end:
+            m = c.recv_match(type=["MISSION_COUNT", "MISSION_ITEM_INT"], blocking=True, timeout=0.5)
+            if m is not None and m.get_type() == "MISSION_COUNT":
+                count = m.count
+            elif m is not None:
+                items[m.seq] = m
+            if count is not None and len(items) >= count:
+                c.mav.mission_ack_send(ts, tc, 0, 0)
+                break
+            if count is not None:
+                nxt = next(i for i in range(count) if i not in items)
+                c.mav.mission_request_int_send(ts, tc, nxt, 0)
+        return time.monotonic() - t if count is not None and len(items) >= count else "timed out"
+
+    ups, downs = [], []
+    for _ in range(rounds):
+        drain(TRANSFER_SETTLE)
+        ups.append(upload())
+        drain(TRANSFER_SETTLE)
+        downs.append(download())
+    out["upload"], out["download"] = median_of(ups), median_of(downs)
 
     p = hold_params(hb.autopilot)
     rtts = []
@@ -220,20 +258,26 @@ def bench_pymavlink(url, n, timeout):
     return out
 
 
-def bench_rust(binary, url, n, timeout):
+def bench_rust(binary, url, n, rounds, timeout):
     try:
-        p = subprocess.run([binary, url, str(n)], capture_output=True, text=True, timeout=timeout * 4 + 60)
+        p = subprocess.run([binary, url, str(n), str(rounds)], capture_output=True, text=True,
+                           timeout=timeout * (2 * rounds + 2) + 60)
         r = json.loads(p.stdout.splitlines()[-1])
     except (subprocess.TimeoutExpired, ValueError, IndexError) as e:
         return {s: "failed: %s" % type(e).__name__ for s in STEPS}
-    return {"params": r["params_s"], "upload": r["upload_s"], "download": r["download_s"],
-            "command": r["command_s"]}
+
+    def step(v):
+        return v if v is not None else "failed: %s" % "; ".join(r["errors"])[:80]
+
+    return {"params": step(r["params_s"]), "upload": median_of([step(v) for v in r["upload_s"]]),
+            "download": median_of([step(v) for v in r["download_s"]]), "command": step(r["command_s"])}
 
 
 def run_tool(tool, link, a):
     """One tool's session on one link: the URL it listens on, through the relay when lossy."""
     relay = None
     port = a.port
+    rounds = a.rounds if link == "clean" else 1
     if link == "lossy":
         tool_port = free_udp()
         relay = LossyRelay(("127.0.0.1", a.port), ("127.0.0.1", tool_port), loss=0.2, seed=a.seed,
@@ -242,12 +286,12 @@ def run_tool(tool, link, a):
         port = tool_port
     try:
         if tool == "rust":
-            return bench_rust(a.rust, "udpin:127.0.0.1:%d" % port, a.items, a.timeout)
+            return bench_rust(a.rust, "udpin:127.0.0.1:%d" % port, a.items, rounds, a.timeout)
         if tool == "aio":
-            return asyncio.run(bench_aio("udpin:127.0.0.1:%d" % port, a.items, a.timeout))
+            return asyncio.run(bench_aio("udpin:127.0.0.1:%d" % port, a.items, rounds, a.timeout))
         if tool == "mavsdk":
-            return asyncio.run(bench_mavsdk("udpin://127.0.0.1:%d" % port, a.items, a.timeout))
-        return bench_pymavlink("udpin:127.0.0.1:%d" % port, a.items, a.timeout)
+            return asyncio.run(bench_mavsdk("udpin://127.0.0.1:%d" % port, a.items, rounds, a.timeout))
+        return bench_pymavlink("udpin:127.0.0.1:%d" % port, a.items, rounds, a.timeout)
     finally:
         if relay is not None:
             relay.stop()
@@ -265,6 +309,8 @@ def main():
     ap.add_argument("--tools", default="rust,aio,mavsdk,pymavlink")
     ap.add_argument("--links", default="clean,lossy")
     ap.add_argument("--items", type=int, default=100)
+    ap.add_argument("--rounds", type=int, default=3,
+                    help="transfers timed per tool on the clean link (the median is reported)")
     ap.add_argument("--timeout", type=float, default=120.0)
     ap.add_argument("--seed", type=int, default=7,
                     help="the lossy relay's seed: which datagrams it drops is a function of it and of"

@@ -70,6 +70,14 @@ pub struct MissionConfig {
     /// repeated, ArduPilot's INVALID_SEQUENCE or a timeout, the window is sent again from
     /// the item asked for). At least 1, at most [`MAX_WINDOW`].
     pub upload_window: u16,
+    /// Whether the vehicle writes each item of a MISSION upload into its plan as it takes it
+    /// (ArduPilot: `MissionItemProtocol_Waypoints.cpp` truncates the plan to the count, then
+    /// replaces or appends item by item), so that a vehicle that asked for item `k` holds
+    /// the new items before `k` whatever happens next. Default `false`: the vehicle keeps an
+    /// upload apart until its last item (PX4; ArduPilot's fences and rally points), and only
+    /// reading the whole plan back tells what it holds. See
+    /// [`MissionConfig::readback_from`].
+    pub stores_in_place: bool,
 }
 
 /// The largest [`MissionConfig::download_window`] and [`MissionConfig::upload_window`]
@@ -94,7 +102,22 @@ impl MissionConfig {
         Self {
             download_window,
             upload_window,
+            stores_in_place: autopilot == MavAutopilot::ARDUPILOTMEGA,
             ..self
+        }
+    }
+
+    /// The first item to read back to learn whether an upload of `count` items of
+    /// `mission_type`, whose final MISSION_ACK was lost, is what the vehicle holds
+    /// ([`MissionError::Unconfirmed`]): the last item where the vehicle stores items in
+    /// place (it asked for the last item, so it holds every one before it; the count and the
+    /// last item read back tell the rest), else 0, the whole plan.
+    #[must_use]
+    pub fn readback_from(&self, mission_type: MavMissionType, count: usize) -> u16 {
+        if self.stores_in_place && mission_type == MavMissionType::MISSION {
+            u16::try_from(count.saturating_sub(1)).unwrap_or(0)
+        } else {
+            0
         }
     }
 }
@@ -163,6 +186,7 @@ impl Default for MissionConfig {
             pacing: UploadPacing::Adaptive,
             download_window: 1,
             upload_window: 1,
+            stores_in_place: false,
         }
     }
 }

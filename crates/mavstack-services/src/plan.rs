@@ -144,12 +144,29 @@ pub fn from_vehicle(
 /// a command's unused position may come back as 0 or NaN.
 #[must_use]
 pub fn same(sent: &[MissionItemInt], back: &[MissionItemInt]) -> bool {
-    sent.len() == back.len()
-        && sent
+    sent.len() == back.len() && items_match(sent, back, 0)
+}
+
+/// Whether `back`, the items of a plan read back from item `first` on, are the items of
+/// `sent` from `first` on, as [`same`] compares them, each read back with its number: the
+/// plan then has as many items as `sent`, and ends as it does.
+#[must_use]
+pub fn same_from(sent: &[MissionItemInt], first: usize, back: &[MissionItemInt]) -> bool {
+    sent.len() == first + back.len()
+        && back
             .iter()
-            .zip(back)
-            .enumerate()
-            .all(|(i, (a, b))| i == 0 || same_item(a, b))
+            .zip(first..)
+            .all(|(b, i)| usize::from(b.seq) == i)
+        && items_match(sent.get(first..).unwrap_or_default(), back, first)
+}
+
+/// Whether `a` and `b`, both starting at item `first` of their plans, hold the same items
+/// (home, item 0, matches any).
+fn items_match(a: &[MissionItemInt], b: &[MissionItemInt], first: usize) -> bool {
+    a.iter()
+        .zip(b)
+        .zip(first..)
+        .all(|((a, b), i)| i == 0 || same_item(a, b))
 }
 
 fn same_f32(a: f32, b: f32) -> bool {
@@ -250,5 +267,33 @@ mod tests {
         let mut frame = plan();
         frame[2].frame = MavFrame::GLOBAL;
         assert!(!same(&plan(), &frame));
+    }
+
+    #[test]
+    fn a_plan_read_back_from_an_item_on_must_end_as_it_and_have_its_length() {
+        let sent = plan();
+        assert!(same_from(&sent, 4, &sent[4..]));
+        assert!(same_from(&sent, 2, &sent[2..]));
+        assert!(same_from(&sent, 0, &sent));
+        // The count read back said one more item: it came too.
+        assert!(!same_from(
+            &sent,
+            3,
+            &plan()[3..]
+                .iter()
+                .chain(&sent[4..])
+                .copied()
+                .collect::<Vec<_>>()
+        ));
+        // One fewer: nothing came from item 4.
+        assert!(!same_from(&sent, 4, &[]));
+        // The last item differs.
+        let mut other = sent[4];
+        other.command = MavCmd::NAV_LAND;
+        assert!(!same_from(&sent, 4, &[other]));
+        // The right item under another number.
+        let mut moved = sent[4];
+        moved.seq = 3;
+        assert!(!same_from(&sent, 4, &[moved]));
     }
 }

@@ -612,8 +612,9 @@ fn item_to_gcs(plan: &[MissionItemInt], seq: u16) -> MavMessage {
 }
 
 /// With a window of 4 the client keeps the four items after the last it holds asked for:
-/// an item that comes early is kept and asks for nothing, the awaited one slides the window,
-/// and a timeout asks again for exactly the items of the window still missing.
+/// an item that comes early is kept and asks again, once, for the items before it still
+/// missing (the vehicle answers in order, so they were lost), the awaited one slides the
+/// window, and a timeout asks again for exactly the items of the window still missing.
 #[test]
 fn a_windowed_download_asks_ahead_and_again_only_for_what_is_missing() {
     let plan = items(10);
@@ -632,11 +633,12 @@ fn a_windowed_download_asks_ahead_and_again_only_for_what_is_missing() {
     });
     assert!(c.handle(T0, VEHICLE, &count));
     assert_eq!(requested(&mut c), [0, 1, 2, 3]);
-    // Item 2 before 0: kept, the window stays.
+    // Item 2 before 0: kept, the window stays, and 0 and 1 are asked for again.
     assert!(c.handle(T0, VEHICLE, &item_to_gcs(&plan, 2)));
-    assert_eq!(requested(&mut c), [] as [u16; 0]);
-    // A copy of it is not used again.
+    assert_eq!(requested(&mut c), [0, 1]);
+    // A copy of it is not used again, and asks for nothing.
     assert!(!c.handle(T0, VEHICLE, &item_to_gcs(&plan, 2)));
+    assert_eq!(requested(&mut c), [] as [u16; 0]);
     // Item 0: the window starts at 1, so 4 is asked for.
     assert!(c.handle(T0, VEHICLE, &item_to_gcs(&plan, 0)));
     assert_eq!(requested(&mut c), [4]);
@@ -645,14 +647,19 @@ fn a_windowed_download_asks_ahead_and_again_only_for_what_is_missing() {
     assert_eq!(requested(&mut c), [5, 6]);
     // Item 8 is outside the window: not used.
     assert!(!c.handle(T0, VEHICLE, &item_to_gcs(&plan, 8)));
+    // Item 5 passes the missing 3 and 4: asked for again.
     assert!(c.handle(T0, VEHICLE, &item_to_gcs(&plan, 5)));
-    // Nothing more comes: the missing 3, 4 and 6 are asked for again, not 5.
+    assert_eq!(requested(&mut c), [3, 4]);
+    // Item 6 passes them too, but they were asked for again already.
+    assert!(c.handle(T0, VEHICLE, &item_to_gcs(&plan, 6)));
+    assert_eq!(requested(&mut c), [] as [u16; 0]);
+    // Nothing more comes: the missing 3 and 4 are asked for again, not 5 or 6.
     let deadline = c.poll_timeout().unwrap();
     c.handle_timeout(deadline);
     let mut again = requested(&mut c);
     again.sort_unstable();
-    assert_eq!(again, [3, 4, 6]);
-    for seq in [3, 4, 6, 7, 8, 9] {
+    assert_eq!(again, [3, 4]);
+    for seq in [3, 4, 7, 8, 9] {
         assert!(c.handle(deadline, VEHICLE, &item_to_gcs(&plan, seq)));
     }
     let MissionEvent::Downloaded {
@@ -835,4 +842,66 @@ fn sim_windowed_uploads_are_whole_and_take_fewer_round_trips() {
     );
     assert!(one >= 200, "one at a time: {one} round trips");
     assert!(eight <= 200 / 8 + 3, "a window of 8: {eight} round trips");
+}
+
+/// A download from item `first` on asks only for the items from it to the vehicle's count,
+/// returns them with their numbers, and returns none when the count does not reach it.
+#[test]
+fn a_download_from_an_item_on_asks_only_for_the_rest() {
+    let plan = items(10);
+    let count = |n| {
+        MavMessage::MissionCount(MissionCount {
+            target_system: GCS.system,
+            target_component: GCS.component,
+            count: n,
+            mission_type: MavMissionType::MISSION,
+        })
+    };
+    let mut c = MissionClient::new(GCS, MissionConfig::default());
+    c.download_from(T0, VEHICLE, MavMissionType::MISSION, 8)
+        .unwrap();
+    let _ = c.poll_transmit();
+    assert!(c.handle(T0, VEHICLE, &count(10)));
+    assert_eq!(requested(&mut c), [8]);
+    assert!(c.handle(T0, VEHICLE, &item_to_gcs(&plan, 8)));
+    assert_eq!(requested(&mut c), [9]);
+    assert!(c.handle(T0, VEHICLE, &item_to_gcs(&plan, 9)));
+    let Some(MissionEvent::Downloaded {
+        result: Ok(got), ..
+    }) = c.poll_event()
+    else {
+        panic!("not downloaded")
+    };
+    assert_eq!(got.iter().map(|i| i.seq).collect::<Vec<_>>(), [8, 9]);
+
+    c.download_from(T0, VEHICLE, MavMissionType::MISSION, 8)
+        .unwrap();
+    let _ = c.poll_transmit();
+    assert!(c.handle(T0, VEHICLE, &count(8)));
+    assert_eq!(requested(&mut c), [] as [u16; 0]);
+    assert_eq!(
+        c.poll_event(),
+        Some(MissionEvent::Downloaded {
+            mission_type: MavMissionType::MISSION,
+            result: Ok(Vec::new())
+        })
+    );
+}
+
+/// After an upload whose final ACK was lost, a vehicle that stores mission items in place
+/// (ArduPilot) is read back from the last item; fences, rally points and PX4 from item 0.
+#[test]
+fn the_read_back_of_an_unconfirmed_upload_starts_where_the_autopilot_allows() {
+    use mavstack_dialects::common::MavAutopilot;
+    let ardupilot = MissionConfig::default().for_autopilot(MavAutopilot::ARDUPILOTMEGA);
+    let px4 = MissionConfig::default().for_autopilot(MavAutopilot::PX4);
+    assert_eq!(ardupilot.readback_from(MavMissionType::MISSION, 30), 29);
+    assert_eq!(ardupilot.readback_from(MavMissionType::MISSION, 0), 0);
+    assert_eq!(ardupilot.readback_from(MavMissionType::FENCE, 30), 0);
+    assert_eq!(ardupilot.readback_from(MavMissionType::RALLY, 30), 0);
+    assert_eq!(px4.readback_from(MavMissionType::MISSION, 30), 0);
+    assert_eq!(
+        MissionConfig::default().readback_from(MavMissionType::MISSION, 30),
+        0
+    );
 }

@@ -1,12 +1,13 @@
 //! Microservice operations timed in a connected session of the Rust API, from the call to
 //! the result (what `tests-interop/bench_ops.py` sets beside MAVSDK, pymavlink and
 //! `mavstack.aio`): the whole parameter table, a plan of home + N waypoints uploaded and
-//! downloaded, and a command's round trip (DO_SET_MODE to the vehicle's hold mode, the
-//! median of 10).
+//! downloaded ROUNDS times (one second's pause before each), and a command's round trip
+//! (DO_SET_MODE to the vehicle's hold mode, the median of 10).
 //!
-//! `cargo run --release -p mavstack --features services --example bench_ops -- CONN [N]`
-//! prints one JSON object: `{"connect_s", "params_s", "params", "upload_s", "download_s",
-//! "command_s"}` (a step that failed is `null`, with its error in `errors`).
+//! `cargo run --release -p mavstack --features services --example bench_ops -- CONN [N [ROUNDS]]`
+//! prints one JSON object: `{"connect_s", "params_s", "params", "upload_s": [..],
+//! "download_s": [..], "command_s"}` (a step that failed is `null`, with its error in
+//! `errors`).
 
 use core::time::Duration;
 use std::time::Instant;
@@ -19,6 +20,9 @@ use mavstack::system::{System, Wanted};
 use serde_json::json;
 
 type Error = Box<dyn core::error::Error>;
+
+/// The pause before each timed transfer.
+const TRANSFER_SETTLE: Duration = Duration::from_secs(1);
 
 /// Home + `n` waypoints around the vehicle's home.
 fn plan(home: (f64, f64, f32), n: usize) -> Vec<MissionItemInt> {
@@ -45,8 +49,9 @@ fn plan(home: (f64, f64, f32), n: usize) -> Vec<MissionItemInt> {
 #[tokio::main]
 async fn main() -> Result<(), Error> {
     let mut args = std::env::args().skip(1);
-    let conn = args.next().ok_or("usage: bench_ops CONN [N]")?;
+    let conn = args.next().ok_or("usage: bench_ops CONN [N [ROUNDS]]")?;
     let n: usize = args.next().map_or(Ok(100), |a| a.parse())?;
+    let rounds: usize = args.next().map_or(Ok(1), |a| a.parse())?;
     let t = Instant::now();
     let session = System::connect(
         LinkSpec::parse(&conn, &|_| None)?,
@@ -82,15 +87,22 @@ async fn main() -> Result<(), Error> {
     // As every tool of tests-interop/bench_ops.py: PX4 goes on sending its parameter list
     // for about a second after a client that re-requests gaps has it all.
     tokio::time::sleep(Duration::from_secs(2)).await;
-    let t = Instant::now();
-    let up = v
-        .mission()
-        .upload_plan(MavMissionType::MISSION, &items, |_, _| {})
-        .await;
-    let upload_s = timed("upload", up.map(|_| t.elapsed().as_secs_f64()));
-    let t = Instant::now();
-    let down = v.mission().download(MavMissionType::MISSION).await;
-    let download_s = timed("download", down.map(|_| t.elapsed().as_secs_f64()));
+    let (mut upload_s, mut download_s) = (Vec::new(), Vec::new());
+    for _ in 0..rounds {
+        // As every tool: PX4 checks a plan it has just taken, reading every item back, and a
+        // transfer started meanwhile waits on its storage.
+        tokio::time::sleep(TRANSFER_SETTLE).await;
+        let t = Instant::now();
+        let up = v
+            .mission()
+            .upload_plan(MavMissionType::MISSION, &items, |_, _| {})
+            .await;
+        upload_s.push(timed("upload", up.map(|_| t.elapsed().as_secs_f64())));
+        tokio::time::sleep(TRANSFER_SETTLE).await;
+        let t = Instant::now();
+        let down = v.mission().download(MavMissionType::MISSION).await;
+        download_s.push(timed("download", down.map(|_| t.elapsed().as_secs_f64())));
+    }
     let hold = match v.flavour() {
         Some(Flavour::Px4) => "AUTO.LOITER",
         _ => "LOITER",

@@ -170,8 +170,26 @@ impl MissionClient {
         target: Address,
         mission_type: MavMissionType,
     ) -> Result<(), MissionBusy> {
+        self.download_from(now, target, mission_type, 0)
+    }
+
+    /// Downloads the items of the `mission_type` plan of `target` from `first` on (none when
+    /// the plan has `first` items or fewer: the vehicle's count decides). Ends with
+    /// [`MissionEvent::Downloaded`], whose items carry their numbers.
+    ///
+    /// # Errors
+    ///
+    /// [`MissionBusy::Busy`] while another transfer runs.
+    pub fn download_from(
+        &mut self,
+        now: Instant,
+        target: Address,
+        mission_type: MavMissionType,
+        first: u16,
+    ) -> Result<(), MissionBusy> {
         let message = self.request_list(target, mission_type);
         let state = AwaitingCount {
+            first,
             attempts: 1,
             deadline: now + self.config.timeout,
         };
@@ -436,11 +454,12 @@ impl MissionClient {
                 let is_last = usize::from(seq) + 1 == items.len();
                 let (attempts, deadline) = (1, now + self.item_wait());
                 r.op = Op::Upload(if is_last {
+                    // The vehicle answers the last item at once, as any other.
                     Upload::AwaitingAck(AwaitingAck {
                         items,
                         last,
                         attempts,
-                        deadline: now + self.config.timeout,
+                        deadline,
                     })
                 } else {
                     Upload::AwaitingRequest(AwaitingRequest::new(items, last, attempts, deadline))
@@ -466,6 +485,7 @@ impl MissionClient {
                     }
                     Err(items) => {
                         r.op = Op::Download(Download::AwaitingCount(AwaitingCount {
+                            first: 0,
                             attempts: 0,
                             deadline: now,
                         }));
@@ -497,11 +517,11 @@ impl MissionClient {
         message: &MavMessage,
     ) -> (Result<Download, Vec<MissionItemInt>>, bool) {
         match (state, message) {
-            (Download::AwaitingCount(_), MavMessage::MissionCount(c))
+            (Download::AwaitingCount(w), MavMessage::MissionCount(c))
                 if for_me(self.own, c.target_system, c.target_component)
                     && c.mission_type == ty =>
             {
-                if c.count == 0 {
+                if c.count <= w.first {
                     self.send(
                         target,
                         ack(target, ty, MavMissionResult::MAV_MISSION_ACCEPTED),
@@ -509,13 +529,16 @@ impl MissionClient {
                     return (Err(Vec::new()), true);
                 }
                 let mut next = AwaitingItem {
-                    seq: 0,
+                    seq: w.first,
                     count: c.count,
                     // Room for the first items only: a count is a claim (any peer may announce
                     // 65,535 items), and the list grows as items really arrive.
-                    items: Vec::with_capacity(usize::from(c.count).min(PREALLOCATED_ITEMS)),
+                    items: Vec::with_capacity(
+                        usize::from(c.count - w.first).min(PREALLOCATED_ITEMS),
+                    ),
                     ahead: Vec::new(),
-                    next: 0,
+                    next: w.first,
+                    asked_again: w.first,
                     attempts: 1,
                     deadline: now + self.item_wait(),
                 };
@@ -538,6 +561,13 @@ impl MissionClient {
                     }
                 } else {
                     s.ahead.push(*item);
+                    // Asked for before it, the items still missing were lost on the way.
+                    for seq in s.seq.max(s.asked_again)..item.seq {
+                        if !s.ahead.iter().any(|a| a.seq == seq) {
+                            self.send(target, request_int(target, ty, seq));
+                        }
+                    }
+                    s.asked_again = s.asked_again.max(item.seq);
                 }
                 if s.seq >= s.count {
                     self.send(
@@ -599,7 +629,7 @@ impl MissionClient {
                 items: s.items,
                 last: s.last,
                 attempts: 1,
-                deadline: now + self.config.timeout,
+                deadline: now + self.item_wait(),
             });
         }
         Upload::AwaitingRequest(s)
@@ -748,8 +778,9 @@ impl Service for MissionClient {
                 (&mut s.attempts, m, (&mut s.deadline, w))
             }
             Op::Upload(Upload::AwaitingAck(s)) => {
+                let w = if s.last.is_none() { wait } else { item_wait };
                 let m = upload_message(target, ty, &s.items, s.last);
-                (&mut s.attempts, m, (&mut s.deadline, wait))
+                (&mut s.attempts, m, (&mut s.deadline, w))
             }
             Op::Download(Download::AwaitingCount(s)) => (
                 &mut s.attempts,

@@ -55,6 +55,8 @@ pub enum Download {
 /// Waiting for MISSION_COUNT.
 #[derive(Debug)]
 pub struct AwaitingCount {
+    /// The first item to download (0: the whole plan).
+    pub(super) first: u16,
     pub(super) attempts: u8,
     pub(super) deadline: Instant,
 }
@@ -62,7 +64,7 @@ pub struct AwaitingCount {
 /// Waiting for item `seq`, the first not received yet.
 #[derive(Debug)]
 pub struct AwaitingItem {
-    /// The first item not received (items `0..seq` are in).
+    /// The first item not received (the items from the first asked for up to it are in).
     pub seq: u16,
     pub(super) count: u16,
     pub(super) items: Vec<MissionItemInt>,
@@ -70,6 +72,10 @@ pub struct AwaitingItem {
     pub(super) ahead: Vec<MissionItemInt>,
     /// The first item not requested yet (`seq + 1` without a window).
     pub(super) next: u16,
+    /// With a window: every item before it that had not come when a later one came was asked
+    /// for again then (the vehicle answers in order: its request or answer was lost). Each
+    /// item is asked for so at most once; the timeout asks again after that.
+    pub(super) asked_again: u16,
     pub(super) attempts: u8,
     pub(super) deadline: Instant,
 }

@@ -32,13 +32,16 @@ impl Mission {
         Self { system }
     }
 
-    fn client(&self) -> MissionClient {
-        let config = MissionConfig {
+    fn config(&self) -> MissionConfig {
+        MissionConfig {
             retries: self.system.retries(),
             ..MissionConfig::default()
         }
-        .for_autopilot(self.system.autopilot());
-        MissionClient::new(self.system.own(), config)
+        .for_autopilot(self.system.autopilot())
+    }
+
+    fn client(&self) -> MissionClient {
+        MissionClient::new(self.system.own(), self.config())
     }
 
     /// The convention between a plan and this system: a plan (`as_plan`: item 0 is home,
@@ -128,13 +131,15 @@ impl Mission {
                 ..
             } => {
                 // The final ACK was lost; what the vehicle holds tells whether it took the
-                // plan.
+                // plan: all of it, or only its end where the vehicle stored the rest as it
+                // asked for it.
+                let first = self.config().readback_from(kind, items.len());
                 tracing::info!(
                     "mission upload: the final MISSION_ACK was lost ({result:?} to the last \
-                     item sent again): reading the plan back"
+                     item sent again): reading the plan back from item {first}"
                 );
-                let back = self.download(kind).await?;
-                if plan::same(&items, &back) {
+                let back = self.download_items(kind, first, |_, _| {}).await?;
+                if plan::same_from(&items, usize::from(first), &back) {
                     Ok(())
                 } else {
                     Err(SystemError::Mission {
@@ -189,13 +194,23 @@ impl Mission {
     pub async fn download_with_progress(
         &self,
         kind: MavMissionType,
+        progress: impl FnMut(usize, usize),
+    ) -> Result<Vec<MissionItemInt>, SystemError> {
+        self.download_items(kind, 0, progress).await
+    }
+
+    /// Downloads the items of the plan of `kind` from `first` on, telling `progress`.
+    async fn download_items(
+        &self,
+        kind: MavMissionType,
+        first: u16,
         mut progress: impl FnMut(usize, usize),
     ) -> Result<Vec<MissionItemInt>, SystemError> {
         let _one = self.system.inner.locks.mission.lock().await;
         let mut frames = self.system.frames().await;
         let mut client = self.client();
         client
-            .download(clock::now(), self.system.target(), kind)
+            .download_from(clock::now(), self.system.target(), kind, first)
             .map_err(|e| SystemError::Busy(e.to_string()))?;
         let mut told = (0, 0);
         let event = run::drive(
