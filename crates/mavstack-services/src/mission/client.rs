@@ -635,14 +635,19 @@ impl MissionClient {
         Upload::AwaitingRequest(s)
     }
 
-    /// Sends the items of the window not sent since it last went back, in order.
-    fn send_window(&mut self, target: Address, s: &mut AwaitingRequest) {
+    /// Where an upload's window ends (the first item past it): `upload_window` items from
+    /// the last the vehicle asked for, at most the plan's end.
+    fn window_end(&self, s: &AwaitingRequest) -> u16 {
         let len = u16::try_from(s.items.len()).unwrap_or(u16::MAX);
-        let end = s
-            .last
+        s.last
             .unwrap_or(0)
             .saturating_add(self.upload_window())
-            .min(len);
+            .min(len)
+    }
+
+    /// Sends the items of the window not sent since it last went back, in order.
+    fn send_window(&mut self, target: Address, s: &mut AwaitingRequest) {
+        let end = self.window_end(s);
         while s.send_next < end {
             if let Some(item) = s.items.get(usize::from(s.send_next)) {
                 self.send(target, MavMessage::MissionItemInt(*item));
@@ -763,8 +768,7 @@ impl Service for MissionClient {
                     && let Some(h) = s.last
                 {
                     // Go back: the window again from the item asked for (`m`).
-                    let len = u16::try_from(s.items.len()).unwrap_or(u16::MAX);
-                    let end = h.saturating_add(window).min(len);
+                    let end = self.window_end(s);
                     then.extend(
                         s.items
                             .get(usize::from(h) + 1..usize::from(end))
