@@ -713,18 +713,28 @@ fn sim_windowed_downloads_are_whole_and_take_fewer_round_trips() {
             download(Knobs::hostile(), seed, window);
         }
     }
+    window_saves_round_trips("download", |knobs, window| download(knobs, 1, window));
+}
+
+/// A 200-item transfer (`transfer(knobs, window)`, its virtual time) on a clean slow link,
+/// 100 ms each way: one round trip per item without a window, about an eighth of them with a
+/// window of 8.
+fn window_saves_round_trips(what: &str, transfer: impl Fn(Knobs, u16) -> Duration) {
     let slow = Knobs {
         latency: Duration::from_millis(100),
         ..Knobs::clean()
     };
     let round_trips = |t: Duration| t.as_millis() / 200;
-    let one = round_trips(download(slow, 1, 1));
-    let eight = round_trips(download(slow, 1, 8));
+    let one = round_trips(transfer(slow, 1));
+    let eight = round_trips(transfer(slow, 8));
     eprintln!(
-        "200 items over 100 ms each way: {one} round trips one at a time, {eight} with a window of 8"
+        "{what} of 200 items over 100 ms each way: {one} round trips one at a time, {eight} with a window of 8"
     );
-    assert!(one >= 200, "one at a time: {one} round trips");
-    assert!(eight <= 200 / 8 + 3, "a window of 8: {eight} round trips");
+    assert!(one >= 200, "{what} one at a time: {one} round trips");
+    assert!(
+        eight <= 200 / 8 + 3,
+        "{what} with a window of 8: {eight} round trips"
+    );
 }
 
 /// The items a client sent: their numbers, in order.
@@ -830,18 +840,9 @@ fn sim_windowed_uploads_are_whole_and_take_fewer_round_trips() {
             }
         }
     }
-    let slow = Knobs {
-        latency: Duration::from_millis(100),
-        ..Knobs::clean()
-    };
-    let round_trips = |t: Duration| t.as_millis() / 200;
-    let one = round_trips(upload(slow, 1, 1, StrayItems::ArduPilot));
-    let eight = round_trips(upload(slow, 1, 8, StrayItems::ArduPilot));
-    eprintln!(
-        "200 items over 100 ms each way: {one} round trips one at a time, {eight} with a window of 8"
-    );
-    assert!(one >= 200, "one at a time: {one} round trips");
-    assert!(eight <= 200 / 8 + 3, "a window of 8: {eight} round trips");
+    window_saves_round_trips("upload", |knobs, window| {
+        upload(knobs, 1, window, StrayItems::ArduPilot)
+    });
 }
 
 /// A download from item `first` on asks only for the items from it to the vehicle's count,
