@@ -54,8 +54,12 @@ pub(crate) struct MessageType {
     /// Field indexes in wire order (pymavlink's `ordered_fieldnames`).
     pub(crate) wire_order: Vec<usize>,
     /// Field index by name.
-    by_name: HashMap<String, usize>,
+    by_name: FastMap<String, usize>,
 }
+
+/// A map keyed by what the dialect defines (never by what the network sends), looked up for
+/// every message received: foldhash rather than SipHash.
+type FastMap<K, V> = HashMap<K, V, foldhash::fast::FixedState>;
 
 impl MessageType {
     /// The field called `name`.
@@ -77,7 +81,7 @@ pub(crate) struct Dialect {
     /// Every enum entry's name and value, and `MAVLINK_MSG_ID_<NAME>` of every message
     /// (pymavlink's module constants).
     pub(crate) constants: Vec<(String, u64)>,
-    by_id: HashMap<u32, usize>,
+    by_id: FastMap<u32, usize>,
     by_name: HashMap<String, usize>,
 }
 

@@ -22,7 +22,7 @@
 
 use core::sync::atomic::{AtomicBool, AtomicU8, Ordering};
 use core::time::Duration;
-use std::collections::HashMap;
+use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
@@ -151,7 +151,8 @@ struct State {
     /// pymavlink's `sysid`: the target system (0 until the first vehicle HEARTBEAT).
     sysid: u8,
     target_component: u8,
-    systems: HashMap<u8, SystemState>,
+    /// By system id (a B-tree finds one of the few heard without hashing).
+    systems: BTreeMap<u8, SystemState>,
     conditions: Conditions,
     last_type: Option<(Py<PyAny>, Arc<Vec<bool>>)>,
     /// Frames of message ids the dialect does not define (counted, never returned).
@@ -242,7 +243,7 @@ impl LiveLink {
         });
         let (node, frames) =
             started.map_err(|e| PyOSError::new_err(format!("cannot open \"{shown}\": {e}")))?;
-        let mut systems = HashMap::new();
+        let mut systems = BTreeMap::new();
         systems.insert(0, SystemState::new(py));
         Ok(Self {
             device: shown,

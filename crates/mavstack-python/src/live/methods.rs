@@ -19,7 +19,7 @@ use pyo3::types::{PyDict, PyTuple};
 
 use super::fields::encode_payload;
 use super::heartbeat::ardupilot_modes;
-use super::receive::Posted;
+use super::receive::{Deadline, Posted};
 use super::{CUSTOM_MODE_ENABLED, LiveLink, lock, runtime, unix_now};
 use crate::message::Message;
 
@@ -30,7 +30,7 @@ impl LiveLink {
     fn recv_msg(&self, py: Python<'_>) -> PyResult<Option<Py<Message>>> {
         let mut rx = lock(py, &self.frames);
         let mut found = None;
-        while let Some(i) = self.next_frame(py, &mut rx, false, None)? {
+        while let Some(i) = self.next_frame(py, &mut rx, false, &mut Deadline::never())? {
             if let Posted::Message(m, _) = self.post(py, &mut rx, i, |_| true)? {
                 found = Some(m);
                 break;
@@ -58,12 +58,7 @@ impl LiveLink {
             Some(t) if !t.is_none() => Some(self.wanted_cached(t)?),
             _ => None,
         };
-        let deadline = match timeout {
-            Some(t) if t.is_finite() => {
-                Some(Instant::now() + Duration::try_from_secs_f64(t.max(0.0)).unwrap_or_default())
-            }
-            _ => None,
-        };
+        let deadline = Deadline::after(timeout);
         let mut rx = lock(py, &self.frames);
         let found = self.match_next(
             py,

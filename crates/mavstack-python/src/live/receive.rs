@@ -25,6 +25,9 @@ use super::{LiveLink, SAFETY_ARMED, SIGNAL_CHECK, State, SystemState, lock, unix
 use crate::connection::eval_condition;
 use crate::message::Message;
 
+/// HEARTBEAT's message id, the same in every dialect.
+const HEARTBEAT_ID: u32 = 0;
+
 /// The receiving side of a connection: the node's batches and the one being read.
 pub(super) struct Receiver {
     frames: BatchSubscription,
@@ -62,6 +65,38 @@ pub(super) struct RawFrame {
     marked: bool,
 }
 
+/// A receive call's timeout. Its deadline is read from the clock only when first needed, at
+/// the first wait or the first new batch: most calls find their message waiting and never
+/// look. The timeout then runs from that moment, at most one batch's frames after the call.
+pub(super) struct Deadline {
+    timeout: Option<Duration>,
+    at: Option<Instant>,
+}
+
+impl Deadline {
+    /// `timeout` seconds (none: wait forever; negative: no wait).
+    pub(super) fn after(timeout: Option<f64>) -> Self {
+        let timeout = timeout
+            .filter(|t| t.is_finite())
+            .map(|t| Duration::try_from_secs_f64(t.max(0.0)).unwrap_or_default());
+        Self { timeout, at: None }
+    }
+
+    /// No deadline: wait forever.
+    pub(super) const fn never() -> Self {
+        Self {
+            timeout: None,
+            at: None,
+        }
+    }
+
+    /// The deadline, read from the clock the first time.
+    fn get(&mut self) -> Option<Instant> {
+        let timeout = self.timeout?;
+        Some(*self.at.get_or_insert_with(|| Instant::now() + timeout))
+    }
+}
+
 /// What [`LiveLink::post`] made of a frame.
 pub(super) enum Posted {
     /// A message id the dialect does not define (counted).
@@ -81,7 +116,7 @@ impl LiveLink {
         py: Python<'_>,
         rx: &mut Receiver,
         blocking: bool,
-        deadline: Option<Instant>,
+        deadline: &mut Deadline,
     ) -> PyResult<Option<usize>> {
         loop {
             if rx.next < rx.batch.len() {
@@ -96,7 +131,7 @@ impl LiveLink {
                 if !blocking {
                     return Ok(None);
                 }
-                let wait = match deadline {
+                let wait = match deadline.get() {
                     Some(d) => {
                         let now = Instant::now();
                         if d <= now {
@@ -131,14 +166,14 @@ impl LiveLink {
         condition: Option<&str>,
         wanted: Option<&[bool]>,
         blocking: bool,
-        deadline: Option<Instant>,
+        mut deadline: Deadline,
     ) -> PyResult<Option<Py<Message>>> {
         loop {
-            let Some(i) = self.next_frame(py, rx, blocking, deadline)? else {
+            let Some(i) = self.next_frame(py, rx, blocking, &mut deadline)? else {
                 return Ok(None);
             };
             // Waiting looks at the deadline; a stream that never lets it wait, at each batch.
-            if i == 0 && deadline.is_some_and(|d| Instant::now() >= d) {
+            if i == 0 && deadline.get().is_some_and(|d| Instant::now() >= d) {
                 rx.next = 0;
                 return Ok(None);
             }
@@ -188,7 +223,8 @@ impl LiveLink {
         let verified = matches!(f.auth, Authentication::Verified { .. });
         let (sysid, compid) = (frame.sysid(), frame.compid());
         let ty = &self.dialect.messages[index];
-        let heartbeat = (ty.name == "HEARTBEAT").then(|| heartbeat_fields(ty, frame.payload()));
+        let heartbeat =
+            (frame.msg_id() == HEARTBEAT_ID).then(|| heartbeat_fields(ty, frame.payload()));
         let mut st = lock(py, &self.state);
         st.received += 1;
         let target_unset = st.sysid == 0;
