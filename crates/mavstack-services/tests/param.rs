@@ -168,6 +168,46 @@ fn list_fetch_phases_are_types() {
     }
 }
 
+/// Each re-request has its own wait: answers to the others (the window sliding on) do not
+/// hold back the resend of one the vehicle dropped (ArduPilot drops a PARAM_REQUEST_READ
+/// that does not fit its queue of 20).
+#[test]
+fn a_dropped_re_request_is_sent_again_while_the_others_are_answered() {
+    let config = ParamConfig {
+        rerequest_batch: 3,
+        ..ParamConfig::default()
+    };
+    let mut c = ParamClient::new(config, Encoding::Bytewise);
+    let mut s = table(10, Encoding::Bytewise);
+    c.fetch_all(T0, VEHICLE).unwrap();
+    let req = c.poll_transmit().unwrap();
+    s.handle_message(T0, GCS, &req.message);
+    let values: Vec<_> = core::iter::from_fn(|| s.poll_transmit()).collect();
+    for (i, v) in values.iter().enumerate() {
+        if !(1..=6).contains(&i) {
+            c.handle_message(T0, VEHICLE, &v.message);
+        }
+    }
+    let asked = |c: &mut ParamClient| -> Vec<i16> {
+        core::iter::from_fn(|| c.poll_transmit())
+            .map(|o| match o.message {
+                MavMessage::ParamRequestRead(r) => r.param_index,
+                other => panic!("{other:?}"),
+            })
+            .collect()
+    };
+    let t = c.poll_timeout().unwrap();
+    c.handle_timeout(t);
+    assert_eq!(asked(&mut c), [1, 2, 3]);
+    let lost_at = c.poll_timeout().unwrap();
+    // 1 is answered (2 and 3 were dropped): 4 takes its place, and 2 and 3 keep their wait.
+    c.handle_message(t + Duration::from_millis(5), VEHICLE, &values[1].message);
+    assert_eq!(asked(&mut c), [4]);
+    assert_eq!(c.poll_timeout(), Some(lost_at));
+    c.handle_timeout(lost_at);
+    assert_eq!(asked(&mut c), [2, 3]);
+}
+
 #[test]
 fn a_component_without_parameters_times_out() {
     let mut p = sim(
@@ -380,5 +420,30 @@ fn server_answers_reads_by_name_and_broadcasts_sets() {
     c.handle_message(T0, VEHICLE, &s.poll_transmit().unwrap().message);
     assert!(
         matches!(c.poll_event(), Some(ParamEvent::Value { from: VEHICLE, param }) if param.value == Value::U8(9))
+    );
+}
+
+/// ArduPilot keeps at most 16 re-requests out (its queue holds 20, shared by its links);
+/// other autopilots keep the configured window.
+#[test]
+fn the_re_request_window_fits_the_autopilot() {
+    use mavstack_dialects::common::MavAutopilot;
+    let config = ParamConfig::default();
+    assert_eq!(
+        config
+            .for_autopilot(MavAutopilot::ARDUPILOTMEGA)
+            .rerequest_batch,
+        16
+    );
+    assert_eq!(config.for_autopilot(MavAutopilot::PX4), config);
+    let small = ParamConfig {
+        rerequest_batch: 4,
+        ..config
+    };
+    assert_eq!(
+        small
+            .for_autopilot(MavAutopilot::ARDUPILOTMEGA)
+            .rerequest_batch,
+        4
     );
 }

@@ -43,10 +43,13 @@ pub struct Collecting {
     values: Vec<Option<(Name, Value)>>,
     missing: BTreeSet<u16>,
     deadline: Instant,
-    /// Timer expiries in a row that brought no new value.
+    /// Rounds in a row that brought no new value: a round is a timer expiry at least a
+    /// re-request's wait after the round before (re-requests expire one by one).
     fruitless: u8,
-    /// Whether anything new arrived since the last expiry.
+    /// Whether anything new arrived since the round began.
     progressed: bool,
+    /// When the next round may begin.
+    round_end: Instant,
     /// Indices re-requested and not answered yet (at most `rerequest_batch`), with when
     /// and whether more than once (Karn's rule for the RTT).
     outstanding: BTreeMap<u16, (Instant, bool)>,
@@ -76,9 +79,17 @@ impl Collecting {
             .min(config.list_timeout)
     }
 
-    /// How long to wait for the answers to a round of re-requests.
+    /// How long to wait for the answer to a re-request.
     fn rerequest_wait(&self, config: &ParamConfig) -> Duration {
         self.rtt.timeout(config.timeout)
+    }
+
+    /// When the oldest re-request still outstanding is presumed lost: each has its own
+    /// wait, so answers to the others (a sliding window) do not hold back the resend of
+    /// one the vehicle dropped (ArduPilot drops a request that does not fit its queue).
+    fn rerequest_deadline(&self, now: Instant, config: &ParamConfig) -> Instant {
+        let oldest = self.outstanding.values().map(|(sent, _)| *sent).min();
+        oldest.unwrap_or(now) + self.rerequest_wait(config)
     }
 }
 
@@ -139,6 +150,7 @@ impl AwaitingCount {
             deadline: now,
             fruitless: 0,
             progressed: false,
+            round_end: now,
             outstanding: BTreeMap::new(),
             rerequesting: false,
             rtt,
@@ -217,13 +229,13 @@ impl Collecting {
             self.gap_us = Some(self.gap_us.map_or(gap, |g| (7 * g + gap) / 8));
         }
         self.last_value = now;
-        // The inactivity timer restarts with every value.
-        self.deadline = now
-            + if self.rerequesting {
-                self.rerequest_wait(config)
-            } else {
-                self.stream_wait(config)
-            };
+        // The stream's inactivity timer restarts with every value; a re-request's runs from
+        // when it was sent.
+        self.deadline = if self.rerequesting {
+            self.rerequest_deadline(now, config)
+        } else {
+            now + self.stream_wait(config)
+        };
         if self.missing.is_empty() {
             let params = self.values.into_iter().flatten().collect();
             return ListFetch::Done(Done {
@@ -240,26 +252,36 @@ impl Collecting {
         config: &ParamConfig,
         out: &mut VecDeque<Outgoing>,
     ) -> Result<ListFetch, ParamError> {
+        let wait = self.rerequest_wait(config);
         if self.progressed {
             self.fruitless = 0;
-        } else {
+            self.progressed = false;
+            self.round_end = now + wait;
+        } else if now >= self.round_end {
             self.fruitless += 1;
+            self.round_end = now + wait;
         }
-        self.progressed = false;
         if self.fruitless > config.retries {
             return Err(ParamError::ListIncomplete {
                 missing: self.missing.len(),
                 count: self.values.len(),
             });
         }
-        // Whatever was outstanding is presumed lost: re-request the gaps, a window at a
-        // time, by index (as QGC does).
-        let lost: Vec<u16> = self.outstanding.keys().copied().collect();
+        // The re-requests whose wait is over are presumed lost: re-request the gaps, a window
+        // at a time, by index (as QGC does).
+        let lost: Vec<u16> = self
+            .outstanding
+            .iter()
+            .filter(|(_, (sent, _))| *sent + wait <= now)
+            .map(|(index, _)| *index)
+            .collect();
+        for index in &lost {
+            self.outstanding.remove(index);
+        }
         self.retried.extend(lost);
-        self.outstanding.clear();
         self.rerequesting = true;
         self.top_up(now, config, out);
-        self.deadline = now + self.rerequest_wait(config);
+        self.deadline = self.rerequest_deadline(now, config);
         Ok(ListFetch::Collecting(self))
     }
 

@@ -26,7 +26,9 @@ use alloc::vec::Vec;
 use core::time::Duration;
 
 use mavstack_core::time::Instant;
-use mavstack_dialects::common::{MavMessage, MavParamType, ParamRequestRead, ParamSet};
+use mavstack_dialects::common::{
+    MavAutopilot, MavMessage, MavParamType, ParamRequestRead, ParamSet,
+};
 
 use crate::{Address, Outgoing, Service, earliest};
 
@@ -50,8 +52,25 @@ pub struct ParamConfig {
     /// 2 s). The fetch waits less on a fast link: 32 of the stream's smoothed gaps between
     /// values or 4 round-trip timeouts, whichever is longer.
     pub list_timeout: Duration,
-    /// How many missing indices are re-requested per round (default 64).
+    /// How many re-requests of missing indices are out at once (default 64; see
+    /// [`ParamConfig::for_autopilot`]).
     pub rerequest_batch: usize,
+}
+
+impl ParamConfig {
+    /// This configuration as a vehicle of `autopilot` takes it: ArduPilot queues
+    /// PARAM_REQUEST_READs in a ring of 20 shared by all its links (`GCS_Param.cpp`) and
+    /// drops what does not fit, so at most 16 are kept out; every other autopilot, as given.
+    #[must_use]
+    pub fn for_autopilot(self, autopilot: MavAutopilot) -> Self {
+        match autopilot {
+            MavAutopilot::ARDUPILOTMEGA => Self {
+                rerequest_batch: self.rerequest_batch.min(16),
+                ..self
+            },
+            _ => self,
+        }
+    }
 }
 
 impl Default for ParamConfig {

@@ -140,7 +140,8 @@ impl Params {
         let config = ParamConfig {
             retries: self.system.retries(),
             ..ParamConfig::default()
-        };
+        }
+        .for_autopilot(self.system.autopilot());
         ParamClient::new(config, self.system.encoding())
     }
 
