@@ -10,30 +10,17 @@ use std::sync::{Arc, Mutex};
 
 use mavstack::core::MessageSet as _;
 use mavstack::dialects::common::{
-    CommandAck, Heartbeat, MavAutopilot, MavCmd, MavFrame, MavMessage, MavMissionResult,
-    MavMissionType, MavResult, MavState, MavType, MissionAck, MissionCount, MissionItemInt,
-    MissionRequestInt,
+    CommandAck, Heartbeat, MavAutopilot, MavMessage, MavMissionResult, MavMissionType, MavResult,
+    MavState, MavType, MissionAck, MissionCount, MissionItemInt, MissionRequestInt,
 };
 use mavstack::system::{System, SystemError, Wanted};
 use mavstack::{LinkSpec, Node};
 
+mod common;
+use common::plan;
+
 fn none(_: &str) -> Option<u32> {
     None
-}
-
-fn plan(n: u16) -> Vec<MissionItemInt> {
-    (0..n)
-        .map(|i| MissionItemInt {
-            seq: i,
-            frame: MavFrame::GLOBAL_RELATIVE_ALT_INT,
-            command: MavCmd::NAV_WAYPOINT,
-            autocontinue: 1,
-            x: -353_632_610 + i32::from(i) * 100,
-            y: 1_491_652_300,
-            z: 20.0,
-            ..MissionItemInt::default()
-        })
-        .collect()
 }
 
 /// What the scripted vehicle saw and holds.

@@ -11,7 +11,7 @@ use std::process::{Child, Command as Process};
 use mavstack::channel::{FallbackReason, HandshakeResult};
 use mavstack::core::Message as _;
 use mavstack::dialects::common::{
-    Attitude, CommandLong, MavCmd, MavFrame, MavMissionType, MavResult, MissionItemInt,
+    Attitude, CommandLong, MavCmd, MavMissionType, MavResult, MissionItemInt,
 };
 use mavstack::router::{LinkRole, ProtocolVersionSupport};
 use mavstack::services::command::Command;
@@ -23,28 +23,15 @@ use mavstack::sim_vehicle::SimVehicle;
 use mavstack::system::{Discovery, System, SystemError, Wanted};
 use mavstack::{LinkSpec, Node};
 
+mod common;
+use common::plan;
+
 fn none(_: &str) -> Option<u32> {
     None
 }
 
 fn ground_station() -> mavstack::NodeBuilder {
     Node::ground_station(255, 190)
-}
-
-/// `n` waypoints around the simulator's home.
-fn plan(n: u16) -> Vec<MissionItemInt> {
-    (0..n)
-        .map(|i| MissionItemInt {
-            seq: i,
-            frame: MavFrame::GLOBAL_RELATIVE_ALT_INT,
-            command: MavCmd::NAV_WAYPOINT,
-            autocontinue: 1,
-            x: -353_632_610 + i32::from(i) * 100,
-            y: 1_491_652_300 + i32::from(i) * 100,
-            z: 20.0 + f32::from(i),
-            ..MissionItemInt::default()
-        })
-        .collect()
 }
 
 fn same_plan(a: &[MissionItemInt], b: &[MissionItemInt]) -> bool {
