@@ -454,12 +454,14 @@ impl MissionClient {
                 let is_last = usize::from(seq) + 1 == items.len();
                 let (attempts, deadline) = (1, now + self.item_wait());
                 r.op = Op::Upload(if is_last {
-                    // The vehicle answers the last item at once, as any other.
+                    // The final ACK gets the first answer's wait: each resend of the last item
+                    // draws a refusal from ArduPilot once the upload is over, and one still
+                    // on its way would end the read-back that the first starts.
                     Upload::AwaitingAck(AwaitingAck {
                         items,
                         last,
                         attempts,
-                        deadline,
+                        deadline: now + self.config.timeout,
                     })
                 } else {
                     Upload::AwaitingRequest(AwaitingRequest::new(items, last, attempts, deadline))
@@ -629,7 +631,7 @@ impl MissionClient {
                 items: s.items,
                 last: s.last,
                 attempts: 1,
-                deadline: now + self.item_wait(),
+                deadline: now + self.config.timeout,
             });
         }
         Upload::AwaitingRequest(s)
@@ -782,9 +784,8 @@ impl Service for MissionClient {
                 (&mut s.attempts, m, (&mut s.deadline, w))
             }
             Op::Upload(Upload::AwaitingAck(s)) => {
-                let w = if s.last.is_none() { wait } else { item_wait };
                 let m = upload_message(target, ty, &s.items, s.last);
-                (&mut s.attempts, m, (&mut s.deadline, w))
+                (&mut s.attempts, m, (&mut s.deadline, wait))
             }
             Op::Download(Download::AwaitingCount(s)) => (
                 &mut s.attempts,

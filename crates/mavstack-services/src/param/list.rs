@@ -44,7 +44,8 @@ pub struct Collecting {
     missing: BTreeSet<u16>,
     deadline: Instant,
     /// Rounds in a row that brought no new value: a round is a timer expiry at least a
-    /// re-request's wait after the round before (re-requests expire one by one).
+    /// re-request's wait, and at least [`ParamConfig::timeout`], after the round before
+    /// (re-requests expire one by one).
     fruitless: u8,
     /// Whether anything new arrived since the round began.
     progressed: bool,
@@ -253,13 +254,18 @@ impl Collecting {
         out: &mut VecDeque<Outgoing>,
     ) -> Result<ListFetch, ParamError> {
         let wait = self.rerequest_wait(config);
+        // A round lasts at least `config.timeout`, whatever the round trip measured: a gap
+        // re-requested while the list still streams may be answered by the stream at once,
+        // and such samples can bring the wait down to its floor, where a pause of the stream
+        // (a relay or radio that delivers in bursts) would use up every round in a moment.
+        let round = wait.max(config.timeout);
         if self.progressed {
             self.fruitless = 0;
             self.progressed = false;
-            self.round_end = now + wait;
+            self.round_end = now + round;
         } else if now >= self.round_end {
             self.fruitless += 1;
-            self.round_end = now + wait;
+            self.round_end = now + round;
         }
         if self.fruitless > config.retries {
             return Err(ParamError::ListIncomplete {
