@@ -447,3 +447,41 @@ fn the_re_request_window_fits_the_autopilot() {
         4
     );
 }
+
+/// A stream that pauses does not end the fetch early: each round without a new value lasts
+/// at least `ParamConfig::timeout`, however short the measured round trip (here 1 ms, as
+/// when gap requests are answered at once by the stream itself), so six of them take 3 s.
+#[test]
+fn a_pause_in_a_fast_stream_does_not_end_the_fetch() {
+    let mut c = ParamClient::new(ParamConfig::default(), Encoding::Bytewise);
+    let mut s = table(40, Encoding::Bytewise);
+    c.fetch_all(T0, VEHICLE).unwrap();
+    let req = c.poll_transmit().unwrap();
+    s.handle_message(T0, GCS, &req.message);
+    let values: Vec<_> = core::iter::from_fn(|| s.poll_transmit()).collect();
+    let t1 = T0 + Duration::from_millis(1);
+    for v in &values[..10] {
+        c.handle_message(t1, VEHICLE, &v.message);
+    }
+    // Nothing more for 2 s: the client asks for the gaps, round after round.
+    let mut now = t1;
+    while let Some(t) = c.poll_timeout() {
+        if t > t1 + Duration::from_secs(2) {
+            break;
+        }
+        now = t;
+        c.handle_timeout(now);
+        while c.poll_transmit().is_some() {}
+        assert!(c.poll_event().is_none(), "gave up at {:?}", now - t1);
+    }
+    // The rest comes: the table is whole.
+    for v in &values[10..] {
+        c.handle_message(now, VEHICLE, &v.message);
+    }
+    match c.poll_event() {
+        Some(ParamEvent::List {
+            result: Ok(list), ..
+        }) => assert_eq!(list.len(), 40),
+        other => panic!("{other:?}"),
+    }
+}
