@@ -55,6 +55,18 @@ def median_of(values):
     return bad[0] if bad else statistics.median(values)
 
 
+async def transfer_rounds(out, rounds, upload, download, timeout):
+    """`rounds` timed uploads and downloads (`upload()` and `download()` make their
+    coroutines), TRANSFER_SETTLE seconds before each; their medians into `out`."""
+    ups, downs = [], []
+    for _ in range(rounds):
+        await asyncio.sleep(TRANSFER_SETTLE)
+        ups.append(await timed(upload(), timeout))
+        await asyncio.sleep(TRANSFER_SETTLE)
+        downs.append(await timed(download(), timeout))
+    out["upload"], out["download"] = median_of(ups), median_of(downs)
+
+
 def free_udp():
     import socket
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -97,13 +109,7 @@ async def bench_aio(url, n, rounds, timeout):
         h = (home.lat_deg, home.lon_deg, home.alt_m) if home else (-35.363261, 149.16523, 584.0)
         items = [aio.MissionItem(16, frame=0 if i == 0 else 3, x=int(lat * 1e7), y=int(lon * 1e7), z=alt)
                  for i, (lat, lon, alt) in enumerate(plan(h, n))]
-        ups, downs = [], []
-        for _ in range(rounds):
-            await asyncio.sleep(TRANSFER_SETTLE)
-            ups.append(await timed(v.mission.upload(items), timeout))
-            await asyncio.sleep(TRANSFER_SETTLE)
-            downs.append(await timed(v.mission.download(), timeout))
-        out["upload"], out["download"] = median_of(ups), median_of(downs)
+        await transfer_rounds(out, rounds, lambda: v.mission.upload(items), v.mission.download, timeout)
         rtts = []
         for _ in range(10):
             t = time.monotonic()
@@ -144,13 +150,8 @@ async def bench_mavsdk(url, n, rounds, timeout):
         items = [MissionItem(i, 0 if i == 0 else 3, 16, 1 if i == 0 else 0, 1, 0.0, 0.0, 0.0, float("nan"),
                              int(lat * 1e7), int(lon * 1e7), float(alt), 0)
                  for i, (lat, lon, alt) in enumerate(plan(h, n))]
-        ups, downs = [], []
-        for _ in range(rounds):
-            await asyncio.sleep(TRANSFER_SETTLE)
-            ups.append(await timed(mission.upload_mission(items), timeout))
-            await asyncio.sleep(TRANSFER_SETTLE)
-            downs.append(await timed(mission.download_mission(), timeout))
-        out["upload"], out["download"] = median_of(ups), median_of(downs)
+        await transfer_rounds(out, rounds, lambda: mission.upload_mission(items), mission.download_mission,
+                              timeout)
         rtts = []
         for _ in range(10):
             t = time.monotonic()
