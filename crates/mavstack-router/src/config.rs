@@ -283,7 +283,7 @@ pub struct RouterConfig {
     /// force collisions with it; whatever it returns, only equal bytes are duplicates.
     #[doc(hidden)]
     pub dedup_hash: Option<fn(&[u8]) -> u64>,
-    /// Frames for the router itself ([`crate::Event::Local`]): none, the ones addressed to
+    /// Frames for the router itself ([`crate::Router::take_local`]): none, the ones addressed to
     /// it or broadcast, or every frame (a sniffer).
     pub local: LocalDelivery,
     /// Whether frames are forwarded between links (default on). Off, the links only carry

@@ -44,6 +44,7 @@ mod convert;
 mod dedup;
 pub mod dialect;
 mod limit;
+pub mod local;
 pub mod log_readers;
 pub mod manual;
 pub mod options;
@@ -58,6 +59,7 @@ pub use config::{
     RateLimits, RouterConfig, VersionMode,
 };
 pub use dialect::{is_control, target_of};
+pub use local::{LocalFrame, LocalFrames};
 pub use mavstack_core::MessageTable;
 pub use options::OptionError;
 pub use route::Route;
@@ -123,6 +125,7 @@ pub fn fuzz_router(data: &[u8]) {
     }
     let mut now = Instant::from_secs(1_767_225_600);
     let mut buf = [0u8; MAX_FRAME_LEN];
+    let mut local = LocalFrames::new();
     let mut rest = data;
     let mut inputs = alloc::vec![alloc::vec::Vec::new(); links.len()];
     while let Some((&control, tail)) = rest.split_first() {
@@ -139,6 +142,13 @@ pub fn fuzz_router(data: &[u8]) {
         now += core::time::Duration::from_millis(u64::from(control & 3) * 400);
         router.handle_timeout(now);
         while router.poll_event().is_some() {}
+        router.take_local(&mut local);
+        for f in local.iter() {
+            assert!(
+                Frame::new_checked(f.bytes).is_ok_and(|v| v.frame_len() == f.bytes.len()),
+                "a local frame is not exactly one frame"
+            );
+        }
         while let Some(t) = router.poll_transmit(&mut buf) {
             let frame = Frame::new_checked(&buf[..t.len]);
             assert!(

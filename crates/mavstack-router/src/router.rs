@@ -6,8 +6,7 @@ use core::time::Duration;
 
 use mavstack_channel::{
     Channel, CommandEncoding, ConfigError, HandshakeError, HandshakeMethod, HandshakeOutcome,
-    LinkVersion, ProtocolVersionAnswer, ReceivedFrame, Rejected, SigningConfig, SigningSetup,
-    SwitchCause, Target,
+    LinkVersion, ProtocolVersionAnswer, Rejected, SigningConfig, SigningSetup, SwitchCause, Target,
 };
 use mavstack_core::MessageTable;
 use mavstack_core::message::Message as _;
@@ -19,6 +18,7 @@ use crate::config::{LinkConfig, RouterConfig, VersionMode};
 use crate::dedup::Dedup;
 use crate::dialect::{is_control, target_of};
 use crate::limit::Limiter;
+use crate::local::LocalFrames;
 use crate::log_readers::LogReaders;
 use crate::queue::OutQueue;
 use crate::route::{Route, Routes};
@@ -63,13 +63,6 @@ impl core::fmt::Display for LinkId {
 #[derive(Clone, Debug)]
 #[non_exhaustive]
 pub enum Event {
-    /// A frame for the router's own component (see [`RouterConfig::local`]).
-    Local {
-        /// The link it came from.
-        link: LinkId,
-        /// The frame.
-        frame: ReceivedFrame,
-    },
     /// A link's version changed (an auto link's peer sent its first MAVLink 2 frame).
     VersionChanged {
         /// The link.
@@ -201,7 +194,8 @@ impl LinkState {
 /// [`handle_timeout`](Self::handle_timeout); frames to send come out of
 /// [`poll_transmit`](Self::poll_transmit) (or per link,
 /// [`poll_link_transmit`](Self::poll_link_transmit)), events out of
-/// [`poll_event`](Self::poll_event). It never reads a clock, sleeps or touches a socket, and
+/// [`poll_event`](Self::poll_event), frames for its own component out of
+/// [`take_local`](Self::take_local). It never reads a clock, sleeps or touches a socket, and
 /// does not allocate per frame once its tables have grown.
 ///
 /// ```
@@ -237,6 +231,8 @@ pub struct Router {
     log_readers: LogReaders,
     dedup: Option<Dedup>,
     events: VecDeque<Event>,
+    /// Frames for the router's own component, until [`Router::take_local`].
+    local: LocalFrames,
     events_dropped: u64,
     ready: VecDeque<LinkId>,
     scratch: Vec<LinkId>,
@@ -263,6 +259,7 @@ impl Router {
             log_readers: LogReaders::default(),
             dedup,
             events: VecDeque::new(),
+            local: LocalFrames::new(),
             events_dropped: 0,
             ready: VecDeque::new(),
             scratch: Vec::new(),
@@ -378,7 +375,8 @@ impl Router {
         self.systems.iter()
     }
 
-    /// Events dropped because nobody drained [`poll_event`](Self::poll_event).
+    /// Events and local frames dropped because nobody drained
+    /// [`poll_event`](Self::poll_event) or [`take_local`](Self::take_local).
     #[must_use]
     pub const fn events_dropped(&self) -> u64 {
         self.events_dropped
@@ -645,6 +643,14 @@ impl Router {
         self.events.pop_front()
     }
 
+    /// Hands over the frames for the router's own component (see [`RouterConfig::local`])
+    /// accepted since the last call, in order: `into` is emptied and swapped with the
+    /// router's, so that neither allocates once both have grown to the burst size.
+    pub fn take_local(&mut self, into: &mut LocalFrames) {
+        into.clear();
+        core::mem::swap(into, &mut self.local);
+    }
+
     // ----- time ------------------------------------------------------------------------
 
     /// When to call [`handle_timeout`](Self::handle_timeout) next.
@@ -728,6 +734,7 @@ impl core::fmt::Debug for Router {
             .field("links", &self.links.iter().flatten().count())
             .field("routes", &self.routes.len())
             .field("events", &self.events.len())
+            .field("local", &self.local.len())
             .finish_non_exhaustive()
     }
 }

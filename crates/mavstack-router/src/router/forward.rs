@@ -212,11 +212,8 @@ impl Router {
                 LocalDelivery::Addressed => for_us,
                 LocalDelivery::All => true,
             };
-            if deliver {
-                self.push_event(Event::Local {
-                    link: src,
-                    frame: received.clone(),
-                });
+            if deliver && !self.local.push(src, received) {
+                self.events_dropped += 1;
             }
         }
         self.scratch = dests;

@@ -20,10 +20,10 @@
 use core::time::Duration;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 
-use mavstack_channel::{Authentication, ReceivedFrame};
+use mavstack_channel::Authentication;
 use mavstack_core::time::Instant;
 use mavstack_core::wire::Frame;
-use mavstack_router::LinkId;
+use mavstack_router::{LinkId, LocalFrame};
 
 /// How many frames may wait for a batch reader; a reader that falls further behind loses
 /// the newest ones (counted in [`NodeReport::subscriber_drops`](super::NodeReport)).
@@ -114,17 +114,16 @@ impl FrameBatch {
     }
 
     /// Appends one frame; `false` (nothing appended) when it holds [`BATCH_DEPTH`] frames.
-    fn push(&mut self, link_id: LinkId, frame: &ReceivedFrame) -> bool {
-        let bytes = frame.frame.as_bytes();
+    fn push(&mut self, frame: &LocalFrame<'_>) -> bool {
         self.push_bytes(
             BatchEntry {
                 start: 0,
-                len: u16::try_from(bytes.len()).unwrap_or(u16::MAX),
-                link_id,
+                len: u16::try_from(frame.bytes.len()).unwrap_or(u16::MAX),
+                link_id: frame.link,
                 auth: frame.auth,
                 received_at: frame.received_at,
             },
-            bytes,
+            frame.bytes,
         )
     }
 
@@ -259,8 +258,8 @@ impl BatchSink {
     }
 
     /// Stages one frame.
-    pub(super) fn push(&mut self, link_id: LinkId, frame: &ReceivedFrame) {
-        if !self.staging.push(link_id, frame) {
+    pub(super) fn push(&mut self, frame: &LocalFrame<'_>) {
+        if !self.staging.push(frame) {
             self.lost += 1;
         }
     }
@@ -302,7 +301,7 @@ impl Drop for BatchSink {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use mavstack_channel::OwnedFrame;
+    use mavstack_channel::{OwnedFrame, ReceivedFrame};
     use mavstack_core::wire::{self, FrameHeader, MAX_FRAME_LEN, Version};
 
     fn received(seq: u8) -> ReceivedFrame {
@@ -326,6 +325,15 @@ mod tests {
         }
     }
 
+    /// Stages `frame` from `link` as the driver does, from the router's local frames.
+    fn push(sink: &mut BatchSink, link: LinkId, frame: &ReceivedFrame) {
+        let mut local = mavstack_router::LocalFrames::new();
+        assert!(local.push(link, frame));
+        for f in local.iter() {
+            sink.push(&f);
+        }
+    }
+
     fn seqs(batch: &FrameBatch) -> Vec<u8> {
         batch.iter().map(|f| f.view().seq()).collect()
     }
@@ -336,11 +344,11 @@ mod tests {
         let mut batch = FrameBatch::new();
         assert_eq!(sub.wait(&mut batch, Duration::ZERO), BatchWait::TimedOut);
         for seq in 0..3 {
-            sink.push(LinkId::new(2), &received(seq));
+            push(&mut sink, LinkId::new(2), &received(seq));
         }
         assert_eq!(sink.publish(), 0);
         // A second turn before the reader looked: appended behind the first.
-        sink.push(LinkId::new(2), &received(3));
+        push(&mut sink, LinkId::new(2), &received(3));
         assert_eq!(sink.publish(), 0);
         assert_eq!(sub.wait(&mut batch, Duration::ZERO), BatchWait::Frames);
         assert_eq!(seqs(&batch), [0, 1, 2, 3]);
@@ -350,7 +358,7 @@ mod tests {
         assert_eq!(first.bytes, received(0).frame.as_bytes());
         assert_eq!(sub.wait(&mut batch, Duration::ZERO), BatchWait::TimedOut);
         assert!(batch.is_empty());
-        sink.push(LinkId::new(2), &received(4));
+        push(&mut sink, LinkId::new(2), &received(4));
         drop(sink);
         // What was staged before the node stopped is still delivered, then the end.
         assert_eq!(sub.wait(&mut batch, Duration::ZERO), BatchWait::Frames);
@@ -366,10 +374,10 @@ mod tests {
         let (mut sink, mut sub) = BatchSink::new();
         let extra = 5;
         for i in 0..BATCH_DEPTH + extra {
-            sink.push(LinkId::new(0), &received(i as u8));
+            push(&mut sink, LinkId::new(0), &received(i as u8));
         }
         assert_eq!(sink.publish(), extra as u64);
-        sink.push(LinkId::new(0), &received(1));
+        push(&mut sink, LinkId::new(0), &received(1));
         assert_eq!(sink.publish(), 1, "the pending batch is full");
         let mut batch = FrameBatch::new();
         assert_eq!(sub.wait(&mut batch, Duration::ZERO), BatchWait::Frames);
@@ -397,7 +405,7 @@ mod tests {
             );
             std::thread::yield_now();
         }
-        sink.push(LinkId::new(0), &received(7));
+        push(&mut sink, LinkId::new(0), &received(7));
         assert_eq!(sink.publish(), 0);
         let (got, seqs) = reader.join().expect("the reader ends");
         assert_eq!((got, seqs), (BatchWait::Frames, vec![7]));

@@ -6,7 +6,9 @@ use std::path::PathBuf;
 
 use mavstack_core::wire::MAX_FRAME_LEN;
 use mavstack_core::{MAX_PAYLOAD_LEN, Message};
-use mavstack_router::{LinkConfig, LinkRole, LocalDelivery, MessageTable, Router, RouterConfig};
+use mavstack_router::{
+    LinkConfig, LinkRole, LocalDelivery, LocalFrames, MessageTable, Router, RouterConfig,
+};
 use mavstack_transport::{Link, Options, clock};
 use tokio::sync::mpsc;
 
@@ -322,6 +324,7 @@ impl NodeBuilder {
             buf: [0; MAX_FRAME_LEN],
             subscribers: Vec::new(),
             batches: Vec::new(),
+            local: LocalFrames::new(),
             subscriber_drops: 0,
             watchers: self.watchers,
             pending: Vec::new(),

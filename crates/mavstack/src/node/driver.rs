@@ -6,7 +6,7 @@ use std::collections::HashMap;
 use mavstack_core::Message;
 use mavstack_core::time::Instant;
 use mavstack_core::wire::MAX_FRAME_LEN;
-use mavstack_router::{Event, LinkConfig, LinkId, Router, SendTo};
+use mavstack_router::{Event, LinkConfig, LinkId, LocalFrames, Router, SendTo};
 use mavstack_transport::protocol::Framing;
 use mavstack_transport::{Dest, Input, Link, PeerId, PeerInfo, clock};
 use tokio::sync::mpsc;
@@ -44,6 +44,8 @@ pub(super) struct Driver {
     pub(super) subscribers: Vec<mpsc::Sender<Incoming>>,
     /// Batch subscribers ([`super::NodeHandle::subscribe_batched`]).
     pub(super) batches: Vec<BatchSink>,
+    /// The router's local frames of the turn being delivered (kept for its allocation).
+    pub(super) local: LocalFrames,
     pub(super) subscriber_drops: u64,
     pub(super) watchers: Vec<mpsc::Sender<NodeEvent>>,
     /// Peer events of the last dispatch, for the watchers.
@@ -387,40 +389,52 @@ impl Driver {
             .min()
     }
 
+    /// Hands the frames for the node (the router's local frames) to the traffic log, the
+    /// batch subscribers and the subscribers, each frame copied once per batch and once per
+    /// subscriber.
+    fn deliver_local(&mut self) {
+        let mut local = core::mem::take(&mut self.local);
+        self.router.take_local(&mut local);
+        for frame in local.iter() {
+            if let Some(log) = &mut self.log {
+                let slot = self.owners.get(frame.link.index()).copied().flatten();
+                log.push(
+                    slot.map(|(s, _)| s),
+                    frame.received_at.as_micros(),
+                    frame.bytes,
+                );
+            }
+            if self.log_local_only {
+                continue;
+            }
+            for b in &mut self.batches {
+                b.push(&frame);
+            }
+            if self.subscribers.is_empty() {
+                continue;
+            }
+            let Some(received) = frame.to_received() else {
+                continue;
+            };
+            let incoming = Incoming {
+                link: self.link_label(frame.link),
+                link_id: frame.link,
+                frame: received,
+            };
+            self.subscribers.retain(|s| !s.is_closed());
+            for s in &self.subscribers {
+                if s.try_send(incoming.clone()).is_err() {
+                    self.subscriber_drops += 1;
+                }
+            }
+        }
+        self.local = local;
+    }
+
     pub(super) fn drain_events(&mut self) -> Result<(), NodeError> {
+        self.deliver_local();
         while let Some(event) = self.router.poll_event() {
             match event {
-                Event::Local { link, frame } => {
-                    if let Some(log) = &mut self.log {
-                        let slot = self.owners.get(link.index()).copied().flatten();
-                        log.push(
-                            slot.map(|(s, _)| s),
-                            frame.received_at.as_micros(),
-                            frame.frame.as_bytes(),
-                        );
-                    }
-                    if self.log_local_only {
-                        continue;
-                    }
-                    for b in &mut self.batches {
-                        b.push(link, &frame);
-                    }
-                    if self.subscribers.is_empty() {
-                        continue;
-                    }
-                    let name = self.link_label(link);
-                    let incoming = Incoming {
-                        link: name,
-                        link_id: link,
-                        frame,
-                    };
-                    self.subscribers.retain(|s| !s.is_closed());
-                    for s in &self.subscribers {
-                        if s.try_send(incoming.clone()).is_err() {
-                            self.subscriber_drops += 1;
-                        }
-                    }
-                }
                 Event::VersionChanged {
                     link,
                     from,
