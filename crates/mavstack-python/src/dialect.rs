@@ -8,6 +8,8 @@ use mavstack_core::MessageTable;
 use mavstack_xml::PrimitiveType;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+use pyo3::sync::PyOnceLock;
+use pyo3::types::PyString;
 
 /// One field of a message.
 #[derive(Debug)]
@@ -41,7 +43,6 @@ impl FieldLayout {
 }
 
 /// One message of the dialect.
-#[derive(Debug)]
 pub(crate) struct MessageType {
     /// Its id.
     pub(crate) id: u32,
@@ -55,16 +56,44 @@ pub(crate) struct MessageType {
     pub(crate) wire_order: Vec<usize>,
     /// Field index by name.
     by_name: FastMap<String, usize>,
+    /// The fields' names as interned Python strings, made at the first look-up.
+    interned: PyOnceLock<Box<[Py<PyString>]>>,
 }
 
 /// A map keyed by what the dialect defines (never by what the network sends), looked up for
 /// every message received: foldhash rather than SipHash.
 type FastMap<K, V> = HashMap<K, V, foldhash::fast::FixedState>;
 
+impl core::fmt::Debug for MessageType {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("MessageType")
+            .field("id", &self.id)
+            .field("name", &self.name)
+            .field("fields", &self.fields)
+            .finish_non_exhaustive()
+    }
+}
+
 impl MessageType {
     /// The field called `name`.
     pub(crate) fn field(&self, name: &str) -> Option<&FieldLayout> {
         self.by_name.get(name).map(|&i| &self.fields[i])
+    }
+
+    /// The field called `name`: found by identity among the interned field names first (an
+    /// attribute name written in Python code is interned), else by its text.
+    pub(crate) fn field_named(&self, name: &Bound<'_, PyString>) -> Option<&FieldLayout> {
+        let py = name.py();
+        let interned = self.interned.get_or_init(py, || {
+            self.fields
+                .iter()
+                .map(|f| PyString::intern(py, &f.name).unbind())
+                .collect()
+        });
+        match interned.iter().position(|n| n.as_ptr() == name.as_ptr()) {
+            Some(i) => self.fields.get(i),
+            None => self.field(name.to_str().ok()?),
+        }
     }
 }
 
@@ -138,6 +167,7 @@ impl Dialect {
                 fields,
                 wire_order,
                 by_name,
+                interned: PyOnceLock::new(),
             }));
         }
         let by_id = messages

@@ -37,7 +37,7 @@ use pyo3::sync::MutexExt as _;
 use pyo3::types::{PyDict, PyString};
 use tokio::runtime::Runtime;
 
-use crate::connection::{Conditions, wanted_mask};
+use crate::connection::Conditions;
 use crate::dialect::{Dialect, MessageType};
 
 mod fields;
@@ -136,6 +136,9 @@ pub(crate) struct LiveLink {
     frames: Mutex<Receiver>,
     /// What the received frames built up.
     state: Mutex<State>,
+    /// Some system has frames recorded without a message object (`SystemState::marked`):
+    /// set with `state` held, read without it (most calls find nothing to make).
+    marked: AtomicBool,
     /// The router links (peers) heard from or reported, for `write`, and when the node was
     /// last asked for them.
     peers: Mutex<(Vec<LinkId>, Option<Instant>)>,
@@ -154,13 +157,10 @@ struct State {
     /// By system id (a B-tree finds one of the few heard without hashing).
     systems: BTreeMap<u8, SystemState>,
     conditions: Conditions,
-    last_type: Option<(Py<PyAny>, Arc<Vec<bool>>)>,
     /// Frames of message ids the dialect does not define (counted, never returned).
     unknown_id: u64,
     /// Messages received.
     received: u64,
-    /// Some system has frames recorded without a message object (`SystemState::marked`).
-    marked: bool,
 }
 
 impl State {
@@ -257,33 +257,14 @@ impl LiveLink {
                 target_component: 0,
                 systems,
                 conditions: Conditions::default(),
-                last_type: None,
                 unknown_id: 0,
                 received: 0,
-                marked: false,
             }),
+            marked: AtomicBool::new(false),
             peers: Mutex::new((Vec::new(), None)),
             encode_seq: AtomicU8::new(0),
             names,
         })
-    }
-
-    /// The type mask of a `type` argument, remembered for the same argument as last time.
-    fn wanted_cached(&self, ty: &Bound<'_, PyAny>) -> PyResult<Arc<Vec<bool>>> {
-        let py = ty.py();
-        let last = lock(py, &self.state)
-            .last_type
-            .as_ref()
-            .map(|(t, m)| (t.clone_ref(py), Arc::clone(m)));
-        if let Some((last, mask)) = last {
-            let last = last.bind(py);
-            if last.is(ty) || (last.get_type().is(ty.get_type()) && last.eq(ty)?) {
-                return Ok(mask);
-            }
-        }
-        let mask = Arc::new(wanted_mask(&self.dialect, ty)?);
-        lock(py, &self.state).last_type = Some((ty.clone().unbind(), Arc::clone(&mask)));
-        Ok(mask)
     }
 
     /// The message type called `name` (a message's name, any case).

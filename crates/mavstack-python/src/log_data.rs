@@ -81,15 +81,6 @@ impl LogBytes {
         }))
     }
 
-    /// One frame received on a live link: the bytes of a message that has no file behind it.
-    pub(crate) fn from_frame(bytes: Vec<u8>) -> Arc<Self> {
-        Arc::new(Self {
-            bytes,
-            file: None,
-            path: PathBuf::new(),
-        })
-    }
-
     /// `Err` when the file is now shorter than what was read (a log truncated by another
     /// program while it is read: what is in memory is no longer the file).
     pub(crate) fn check_length(&self) -> Result<(), Truncated> {

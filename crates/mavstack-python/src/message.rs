@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use mavstack_core::wire::{Frame, Version};
+use mavstack_core::wire::{Frame, MAX_FRAME_LEN, Version};
 use mavstack_xml::PrimitiveType;
 use pyo3::exceptions::PyAttributeError;
 use pyo3::prelude::*;
@@ -137,15 +137,39 @@ impl Header {
     }
 }
 
+/// Where a [`Message`]'s frame is: in the log it was read from (shared, not copied), or in
+/// the message itself (a live link's frame: no allocation of its own).
+// The frame inline is the point: a live message costs no allocation besides its object.
+#[allow(clippy::large_enum_variant)]
+enum FrameBytes {
+    Log {
+        log: Arc<LogBytes>,
+        start: usize,
+        len: usize,
+    },
+    Own {
+        buf: [u8; MAX_FRAME_LEN],
+        len: u16,
+    },
+}
+
+impl FrameBytes {
+    /// The frame's bytes.
+    fn get(&self) -> &[u8] {
+        match self {
+            Self::Log { log, start, len } => &log[*start..*start + *len],
+            Self::Own { buf, len } => &buf[..usize::from(*len)],
+        }
+    }
+}
+
 /// One MAVLink message read from a log, with pymavlink's methods and attributes: fields as
 /// attributes (`m.roll`), `get_type()`, `get_srcSystem()`, `get_seq()`, `_timestamp`,
 /// `to_dict()` and the rest. Fields are decoded from the frame's bytes when read.
 #[pyclass(module = "mavstack", name = "MAVLinkMessage")]
 pub(crate) struct Message {
     ty: Arc<MessageType>,
-    log: Arc<LogBytes>,
-    start: usize,
-    len: usize,
+    bytes: FrameBytes,
     verified: bool,
     /// The tlog timestamp in seconds since the Unix epoch (0.0 in a raw log).
     #[pyo3(get, set, name = "_timestamp")]
@@ -168,9 +192,7 @@ impl Message {
     ) -> Self {
         Self {
             ty,
-            log,
-            start,
-            len,
+            bytes: FrameBytes::Log { log, start, len },
             verified,
             // pymavlink: `tusec * 1.0e-6`, the same floating-point operation.
             timestamp: if tlog { ts_us as f64 * 1.0e-6 } else { 0.0 },
@@ -181,18 +203,16 @@ impl Message {
     /// A message received on a live link (or encoded to be sent): the whole frame in
     /// `frame`, `timestamp` its arrival in seconds since the Unix epoch (pymavlink's
     /// `time.time()` at receipt), `verified` whether its signature was checked with a key.
-    pub(crate) fn live(
-        ty: Arc<MessageType>,
-        frame: Vec<u8>,
-        timestamp: f64,
-        verified: bool,
-    ) -> Self {
-        let len = frame.len();
+    pub(crate) fn live(ty: Arc<MessageType>, frame: &[u8], timestamp: f64, verified: bool) -> Self {
+        let len = frame.len().min(MAX_FRAME_LEN);
+        let mut buf = [0; MAX_FRAME_LEN];
+        buf[..len].copy_from_slice(&frame[..len]);
         Self {
             ty,
-            log: LogBytes::from_frame(frame),
-            start: 0,
-            len,
+            bytes: FrameBytes::Own {
+                buf,
+                len: len as u16,
+            },
             verified,
             timestamp,
             link: 0,
@@ -211,12 +231,11 @@ impl Message {
             Version::V1 => mavstack_core::wire::HEADER_LEN_V1,
             Version::V2 => mavstack_core::wire::HEADER_LEN_V2,
         };
-        let at = self.start + header;
-        &self.log[at..at + f.payload_len()]
+        &self.bytes.get()[header..header + f.payload_len()]
     }
 
     fn frame(&self) -> Frame<&[u8]> {
-        Frame::new_unchecked(&self.log[self.start..self.start + self.len])
+        Frame::new_unchecked(self.bytes.get())
     }
 
     fn value<'py>(&self, py: Python<'py>, f: &FieldLayout) -> PyResult<Bound<'py, PyAny>> {
@@ -409,9 +428,7 @@ impl Message {
         let py = slf.py();
         {
             let me = slf.borrow();
-            if let Ok(n) = name.to_str()
-                && let Some(f) = me.ty.field(n)
-            {
+            if let Some(f) = me.ty.field_named(name) {
                 return me.value(py, f);
             }
         }

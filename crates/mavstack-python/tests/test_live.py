@@ -338,6 +338,26 @@ def test_signing_set_up_before_any_peer():
         conn.close()
 
 
+def test_a_timeout_too_long_to_count_waits_for_the_message():
+    """pymavlink waits `timeout` seconds whatever their number: 1e300 (or infinity) is
+    "forever", never "at once". The message is sent 0.3 s after the call starts."""
+    port = free_port()
+    conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % port)
+    enc = apm.MAVLink(None, srcSystem=1, srcComponent=1)
+    out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        for timeout in (1e300, float("inf")):
+            timer = threading.Timer(0.3, lambda: out.sendto(
+                enc.attitude_encode(1, 0.1, 0.2, 0.3, 0.01, 0.02, 0.03).pack(enc), ("127.0.0.1", port)))
+            timer.start()
+            m = conn.recv_match(type="ATTITUDE", blocking=True, timeout=timeout)
+            timer.join()
+            assert m is not None and m.time_boot_ms == 1, timeout
+    finally:
+        out.close()
+        conn.close()
+
+
 def test_messages_hold_what_recv_match_filtered_out_as_pymavlinks_do():
     """Frames `recv_match` does not return still become the latest of their type, as in
     pymavlink (its `post_message` runs for every frame): the same datagrams to a pymavlink

@@ -754,7 +754,7 @@ impl AioStream {
         let frame = incoming.frame.frame.view();
         let m = Message::live(
             Arc::clone(&self.ty),
-            frame.as_bytes().to_vec(),
+            frame.as_bytes(),
             crate::live::unix_now(),
             verified,
         );

@@ -30,7 +30,7 @@ impl LiveLink {
     fn recv_msg(&self, py: Python<'_>) -> PyResult<Option<Py<Message>>> {
         let mut rx = lock(py, &self.frames);
         let mut found = None;
-        while let Some(i) = self.next_frame(py, &mut rx, false, &mut Deadline::never())? {
+        while let Some(i) = self.next_frame(py, &mut rx, false, &mut Deadline::after(None))? {
             if let Posted::Message(m, _) = self.post(py, &mut rx, i, |_| true)? {
                 found = Some(m);
                 break;
@@ -54,20 +54,23 @@ impl LiveLink {
         blocking: bool,
         timeout: Option<f64>,
     ) -> PyResult<Option<Py<Message>>> {
-        let wanted = match r#type {
-            Some(t) if !t.is_none() => Some(self.wanted_cached(t)?),
-            _ => None,
-        };
         let deadline = Deadline::after(timeout);
         let mut rx = lock(py, &self.frames);
+        let wanted = match r#type {
+            Some(t) if !t.is_none() => Some(rx.take_type(&self.dialect, t)?),
+            _ => None,
+        };
         let found = self.match_next(
             py,
             &mut rx,
             condition,
-            wanted.as_ref().map(|w| w.as_slice()),
+            wanted.as_ref().map(|(_, w)| w.as_slice()),
             blocking,
             deadline,
         );
+        if let Some(w) = wanted {
+            rx.keep_type(w);
+        }
         drop(rx);
         self.materialize(py)?;
         found
@@ -208,7 +211,7 @@ impl LiveLink {
         let mut out = [0u8; wire::MAX_FRAME_LEN];
         let len = wire::emit(&header, info, &payload, &mut out)
             .map_err(|e| PyValueError::new_err(format!("{}: {e}", ty.name)))?;
-        Ok(Message::live(ty, out[..len].to_vec(), unix_now(), false))
+        Ok(Message::live(ty, &out[..len], unix_now(), false))
     }
 
     /// Sends message `name` from its fields' values in XML order: pymavlink's `*_send`.

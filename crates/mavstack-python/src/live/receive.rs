@@ -10,6 +10,7 @@
 //! what pymavlink's would whenever Python code runs, and a stream `recv_match` does not want
 //! costs no Python object per frame.
 
+use core::sync::atomic::Ordering;
 use core::time::Duration;
 use std::time::Instant;
 
@@ -22,7 +23,8 @@ use pyo3::prelude::*;
 
 use super::heartbeat::{heartbeat_fields, mode_string, probably_vehicle};
 use super::{LiveLink, SAFETY_ARMED, SIGNAL_CHECK, State, SystemState, lock, unix_now};
-use crate::connection::eval_condition;
+use crate::connection::{eval_condition, wanted_mask};
+use crate::dialect::Dialect;
 use crate::message::Message;
 
 /// HEARTBEAT's message id, the same in every dialect.
@@ -40,6 +42,9 @@ pub(super) struct Receiver {
     last_link: Option<LinkId>,
     /// The node has stopped.
     closed: bool,
+    /// The last `type` argument of `recv_match` and its mask, reused while the next call's
+    /// is the same.
+    last_type: Option<(Py<PyAny>, Vec<bool>)>,
 }
 
 impl Receiver {
@@ -51,7 +56,34 @@ impl Receiver {
             taken_at: 0.0,
             last_link: None,
             closed: false,
+            last_type: None,
         }
+    }
+}
+
+impl Receiver {
+    /// Takes the mask of `recv_match`'s `type` argument `ty` (made, or reused when `ty` is
+    /// the last call's argument or equal to it); give it back with [`Self::keep_type`].
+    pub(super) fn take_type(
+        &mut self,
+        dialect: &Dialect,
+        ty: &Bound<'_, PyAny>,
+    ) -> PyResult<(Py<PyAny>, Vec<bool>)> {
+        if let Some((last, mask)) = self.last_type.take() {
+            let same = {
+                let last = last.bind(ty.py());
+                last.is(ty) || (last.get_type().is(ty.get_type()) && last.eq(ty)?)
+            };
+            if same {
+                return Ok((last, mask));
+            }
+        }
+        Ok((ty.clone().unbind(), wanted_mask(dialect, ty)?))
+    }
+
+    /// Keeps `ty` and its mask for the next call.
+    pub(super) fn keep_type(&mut self, ty: (Py<PyAny>, Vec<bool>)) {
+        self.last_type = Some(ty);
     }
 }
 
@@ -69,31 +101,26 @@ pub(super) struct RawFrame {
 /// the first wait or the first new batch: most calls find their message waiting and never
 /// look. The timeout then runs from that moment, at most one batch's frames after the call.
 pub(super) struct Deadline {
-    timeout: Option<Duration>,
+    /// Seconds, as given (none: wait forever; negative: no wait).
+    timeout: Option<f64>,
     at: Option<Instant>,
 }
 
 impl Deadline {
     /// `timeout` seconds (none: wait forever; negative: no wait).
-    pub(super) fn after(timeout: Option<f64>) -> Self {
-        let timeout = timeout
-            .filter(|t| t.is_finite())
-            .map(|t| Duration::try_from_secs_f64(t.max(0.0)).unwrap_or_default());
+    pub(super) const fn after(timeout: Option<f64>) -> Self {
         Self { timeout, at: None }
     }
 
-    /// No deadline: wait forever.
-    pub(super) const fn never() -> Self {
-        Self {
-            timeout: None,
-            at: None,
-        }
-    }
-
-    /// The deadline, read from the clock the first time.
+    /// The deadline, read from the clock the first time; none for a timeout too long for a
+    /// `Duration` (infinity included) or NaN.
     fn get(&mut self) -> Option<Instant> {
-        let timeout = self.timeout?;
-        Some(*self.at.get_or_insert_with(|| Instant::now() + timeout))
+        if self.at.is_none() {
+            let timeout = self.timeout.filter(|t| !t.is_nan())?;
+            let timeout = Duration::try_from_secs_f64(timeout.max(0.0)).ok()?;
+            self.at = Instant::now().checked_add(timeout);
+        }
+        self.at
     }
 }
 
@@ -245,7 +272,7 @@ impl LiveLink {
         let system = st.system(py, sysid);
         if !wanted(index) {
             system.mark(types, index, &f, rx.taken_at, verified);
-            st.marked = true;
+            self.marked.store(true, Ordering::Release);
             return Ok(Posted::Recorded);
         }
         if let Some(Some(raw)) = system.latest.get_mut(index) {
@@ -253,12 +280,7 @@ impl LiveLink {
         }
         let message = Py::new(
             py,
-            Message::live(
-                std::sync::Arc::clone(ty),
-                f.bytes.to_vec(),
-                rx.taken_at,
-                verified,
-            ),
+            Message::live(std::sync::Arc::clone(ty), f.bytes, rx.taken_at, verified),
         )?;
         system
             .messages
@@ -270,10 +292,12 @@ impl LiveLink {
     /// Makes the message objects of the frames recorded without one and puts them in the
     /// `messages` dicts (see the module docs).
     pub(super) fn materialize(&self, py: Python<'_>) -> PyResult<()> {
-        let mut st = lock(py, &self.state);
-        if !core::mem::take(&mut st.marked) {
+        if !self.marked.load(Ordering::Acquire) {
             return Ok(());
         }
+        let mut st = lock(py, &self.state);
+        // Set only with `state` held: nothing is marked between this and the loop's end.
+        self.marked.store(false, Ordering::Relaxed);
         for system in st.systems.values_mut() {
             let mut marked = core::mem::take(&mut system.marked);
             for &index in &marked {
@@ -285,7 +309,7 @@ impl LiveLink {
                 }
                 let message = Message::live(
                     std::sync::Arc::clone(&self.dialect.messages[index]),
-                    raw.bytes[..raw.len].to_vec(),
+                    &raw.bytes[..raw.len],
                     raw.timestamp,
                     raw.verified,
                 );
