@@ -758,8 +758,10 @@ impl Service for MissionClient {
         // `None`: an item's wait, the round trip's timeout backing off with each resend.
         let item_wait = None;
         (r.sent, r.resent) = (now, true);
-        // What goes out after the resend (the rest of a window), in order.
+        // What goes out after the resend (a download window's missing items), in order.
         let mut then = Vec::new();
+        // An upload window goes out again after the resend.
+        let mut go_back = false;
         let window = self.upload_window();
         // (attempts so far, message to resend, wait)
         let (attempts, resend, wait) = match &mut r.op {
@@ -769,17 +771,11 @@ impl Service for MissionClient {
                 if window > 1
                     && let Some(h) = s.last
                 {
-                    // Go back: the window again from the item asked for (`m`).
-                    let end = self.window_end(s);
-                    then.extend(
-                        s.items
-                            .get(usize::from(h) + 1..usize::from(end))
-                            .unwrap_or_default()
-                            .iter()
-                            .map(|i| MavMessage::MissionItemInt(*i)),
-                    );
+                    // Go back: the window again from the item asked for (`m`), the rest of
+                    // it sent after `m` (`send_window` below).
                     s.went_back = Some(h);
-                    s.send_next = end.max(h + 1);
+                    s.send_next = h + 1;
+                    go_back = true;
                 }
                 (&mut s.attempts, m, (&mut s.deadline, w))
             }
@@ -827,6 +823,9 @@ impl Service for MissionClient {
         });
         self.out
             .extend(then.into_iter().map(|message| Outgoing { target, message }));
+        if go_back && let Op::Upload(Upload::AwaitingRequest(s)) = &mut r.op {
+            self.send_window(target, s);
+        }
         self.running = Some(r);
     }
 
