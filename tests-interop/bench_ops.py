@@ -5,7 +5,8 @@ API (`examples/bench_ops.rs`), `mavstack.aio`, MAVSDK 4.1.0 (native binding) and
 (20 % of the datagrams dropped each way, 100 ms each way).
 
 usage: bench_ops.py --port P --name NAME [--rust BIN] [--tools rust,aio,mavsdk,pymavlink]
-                    [--links clean,lossy] [--items 100] [--rounds 3] [--seed 7] [--out FILE.json]
+                    [--links clean,lossy] [--items 100] [--rounds 3] [--commands 10] [--seed 7]
+                    [--out FILE.json]
                     [--md FILE.md]
 
 The vehicle sends UDP to 127.0.0.1:P (PX4 SITL: 14550; `mavstack vehicle udpout:127.0.0.1:P`;
@@ -18,8 +19,11 @@ then, each timed alone (with SETTLE seconds after the parameter table):
   download  the same plan read back
             (upload and download: --rounds times on the clean link, once through loss, with
             TRANSFER_SETTLE seconds before each; the median is reported)
-  command   DO_SET_MODE to the vehicle's hold mode, the median of 10 round trips (MAVSDK:
-            action.hold())
+  command   DO_SET_MODE to the vehicle's hold mode, --commands round trips (default 10; MAVSDK:
+            action.hold()): the median and the mean of those answered, and how many were not
+            (through loss a command answered at the first attempt takes one round trip and one
+            resent takes the tool's resend wait more, so a median of few samples mostly says how
+            many were lucky: use --commands 50 there)
 A step not done in --timeout seconds (default 120) is 'timed out'. Prints a Markdown table.
 """
 import argparse
@@ -98,7 +102,16 @@ async def timed(coro, timeout):
     return time.monotonic() - t
 
 
-async def bench_aio(url, n, rounds, timeout):
+def commands_result(rtts, failed):
+    """The command step's result: median and mean of the round trips answered, and how many
+    commands went unanswered."""
+    if not rtts:
+        return "failed"
+    return {"median": statistics.median(rtts), "mean": statistics.mean(rtts), "failed": failed,
+            "n": len(rtts) + failed}
+
+
+async def bench_aio(url, n, rounds, commands, timeout):
     import mavstack.aio as aio
     out = {}
     async with aio.connect(url) as gcs:
@@ -110,18 +123,22 @@ async def bench_aio(url, n, rounds, timeout):
         items = [aio.MissionItem(16, frame=0 if i == 0 else 3, x=int(lat * 1e7), y=int(lon * 1e7), z=alt)
                  for i, (lat, lon, alt) in enumerate(plan(h, n))]
         await transfer_rounds(out, rounds, lambda: v.mission.upload(items), v.mission.download, timeout)
-        rtts = []
-        for _ in range(10):
+        rtts, failed = [], 0
+        for _ in range(commands):
             t = time.monotonic()
-            r = await v.command("DO_SET_MODE", *hold_params(v.autopilot))
+            try:
+                r = await v.command("DO_SET_MODE", *hold_params(v.autopilot))
+            except aio.Error:
+                r = None
             if str(r) != "ACCEPTED":
-                break
+                failed += 1
+                continue
             rtts.append(time.monotonic() - t)
-        out["command"] = statistics.median(rtts) if rtts else "failed"
+        out["command"] = commands_result(rtts, failed)
     return out
 
 
-async def bench_mavsdk(url, n, rounds, timeout):
+async def bench_mavsdk(url, n, rounds, commands, timeout):
     from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
     from mavsdk.asyncio.plugins.action import ActionAsync
     from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
@@ -152,21 +169,22 @@ async def bench_mavsdk(url, n, rounds, timeout):
                  for i, (lat, lon, alt) in enumerate(plan(h, n))]
         await transfer_rounds(out, rounds, lambda: mission.upload_mission(items), mission.download_mission,
                               timeout)
-        rtts = []
-        for _ in range(10):
+        rtts, failed = [], 0
+        for _ in range(commands):
             t = time.monotonic()
             try:
                 await asyncio.wait_for(action.hold(), timeout)
             except Exception:  # noqa: BLE001
-                break
+                failed += 1
+                continue
             rtts.append(time.monotonic() - t)
-        out["command"] = statistics.median(rtts) if rtts else "failed"
+        out["command"] = commands_result(rtts, failed)
     finally:
         m.destroy()
     return out
 
 
-def bench_pymavlink(url, n, rounds, timeout):
+def bench_pymavlink(url, n, rounds, commands, timeout):
     from pymavlink import mavutil
     c = mavutil.mavlink_connection(url, source_system=255, source_component=190)
     hb = c.wait_heartbeat(timeout=60)
@@ -246,23 +264,24 @@ def bench_pymavlink(url, n, rounds, timeout):
     out["upload"], out["download"] = median_of(ups), median_of(downs)
 
     p = hold_params(hb.autopilot)
-    rtts = []
-    for _ in range(10):
+    rtts, failed = [], 0
+    for _ in range(commands):
         t = time.monotonic()
         c.mav.command_long_send(ts, tc, 176, 0, p[0], p[1], p[2], 0, 0, 0, 0)
         m = c.recv_match(type="COMMAND_ACK", blocking=True, timeout=3)
         if m is None or m.command != 176:
-            break
+            failed += 1
+            continue
         rtts.append(time.monotonic() - t)
-    out["command"] = statistics.median(rtts) if rtts else "failed"
+    out["command"] = commands_result(rtts, failed)
     c.close()
     return out
 
 
-def bench_rust(binary, url, n, rounds, timeout):
+def bench_rust(binary, url, n, rounds, commands, timeout):
     try:
-        p = subprocess.run([binary, url, str(n), str(rounds)], capture_output=True, text=True,
-                           timeout=timeout * (2 * rounds + 2) + 60)
+        p = subprocess.run([binary, url, str(n), str(rounds), str(commands)], capture_output=True,
+                           text=True, timeout=timeout * (2 * rounds + 2) + 60 + 5 * commands)
         r = json.loads(p.stdout.splitlines()[-1])
     except (subprocess.TimeoutExpired, ValueError, IndexError) as e:
         return {s: "failed: %s" % type(e).__name__ for s in STEPS}
@@ -271,7 +290,8 @@ def bench_rust(binary, url, n, rounds, timeout):
         return v if v is not None else "failed: %s" % "; ".join(r["errors"])[:80]
 
     return {"params": step(r["params_s"]), "upload": median_of([step(v) for v in r["upload_s"]]),
-            "download": median_of([step(v) for v in r["download_s"]]), "command": step(r["command_s"])}
+            "download": median_of([step(v) for v in r["download_s"]]),
+            "command": commands_result(r["command_rtts"], r["command_failed"])}
 
 
 def run_tool(tool, link, a):
@@ -286,19 +306,23 @@ def run_tool(tool, link, a):
         relay.start()
         port = tool_port
     try:
+        c = a.commands
         if tool == "rust":
-            return bench_rust(a.rust, "udpin:127.0.0.1:%d" % port, a.items, rounds, a.timeout)
+            return bench_rust(a.rust, "udpin:127.0.0.1:%d" % port, a.items, rounds, c, a.timeout)
         if tool == "aio":
-            return asyncio.run(bench_aio("udpin:127.0.0.1:%d" % port, a.items, rounds, a.timeout))
+            return asyncio.run(bench_aio("udpin:127.0.0.1:%d" % port, a.items, rounds, c, a.timeout))
         if tool == "mavsdk":
-            return asyncio.run(bench_mavsdk("udpin://127.0.0.1:%d" % port, a.items, rounds, a.timeout))
-        return bench_pymavlink("udpin:127.0.0.1:%d" % port, a.items, rounds, a.timeout)
+            return asyncio.run(bench_mavsdk("udpin://127.0.0.1:%d" % port, a.items, rounds, c, a.timeout))
+        return bench_pymavlink("udpin:127.0.0.1:%d" % port, a.items, rounds, c, a.timeout)
     finally:
         if relay is not None:
             relay.stop()
 
 
 def fmt(v):
+    if isinstance(v, dict):
+        lost = ", %d of %d unanswered" % (v["failed"], v["n"]) if v["failed"] else ""
+        return "%.1f (mean %.1f%s)" % (v["median"] * 1000, v["mean"] * 1000, lost)
     return "%.1f" % (v * 1000) if isinstance(v, float) else str(v)
 
 
@@ -312,6 +336,7 @@ def main():
     ap.add_argument("--items", type=int, default=100)
     ap.add_argument("--rounds", type=int, default=3,
                     help="transfers timed per tool on the clean link (the median is reported)")
+    ap.add_argument("--commands", type=int, default=10, help="commands timed per tool")
     ap.add_argument("--timeout", type=float, default=120.0)
     ap.add_argument("--seed", type=int, default=7,
                     help="the lossy relay's seed: which datagrams it drops is a function of it and of"

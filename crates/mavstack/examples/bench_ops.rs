@@ -1,12 +1,13 @@
 //! Microservice operations timed in a connected session of the Rust API, from the call to
 //! the result (what `tests-interop/bench_ops.py` sets beside MAVSDK, pymavlink and
 //! `mavstack.aio`): the whole parameter table, a plan of home + N waypoints uploaded and
-//! downloaded ROUNDS times (one second's pause before each), and a command's round trip
-//! (DO_SET_MODE to the vehicle's hold mode, the median of 10).
+//! downloaded ROUNDS times (one second's pause before each), and COMMANDS commands' round
+//! trips (DO_SET_MODE to the vehicle's hold mode, 10 by default).
 //!
-//! `cargo run --release -p mavstack --features services --example bench_ops -- CONN [N [ROUNDS]]`
+//! `cargo run --release -p mavstack --features services --example bench_ops -- CONN [N [ROUNDS [COMMANDS]]]`
 //! prints one JSON object: `{"connect_s", "params_s", "params", "upload_s": [..],
-//! "download_s": [..], "command_s"}` (a step that failed is `null`, with its error in
+//! "download_s": [..], "command_rtts": [..], "command_failed"}` (a step that failed is
+//! `null`, a command that failed is counted in `command_failed`, each with its error in
 //! `errors`).
 
 use core::time::Duration;
@@ -49,9 +50,10 @@ fn plan(home: (f64, f64, f32), n: usize) -> Vec<MissionItemInt> {
 #[tokio::main]
 async fn main() -> Result<(), Error> {
     let mut args = std::env::args().skip(1);
-    let conn = args.next().ok_or("usage: bench_ops CONN [N [ROUNDS]]")?;
+    let conn = args.next().ok_or("usage: bench_ops CONN [N [ROUNDS [COMMANDS]]]")?;
     let n: usize = args.next().map_or(Ok(100), |a| a.parse())?;
     let rounds: usize = args.next().map_or(Ok(1), |a| a.parse())?;
+    let commands: usize = args.next().map_or(Ok(10), |a| a.parse())?;
     let t = Instant::now();
     let session = System::connect(
         LinkSpec::parse(&conn, &|_| None)?,
@@ -115,21 +117,20 @@ async fn main() -> Result<(), Error> {
             [p1, p2, p3, 0., 0., 0., 0.],
         ))
     });
-    let mut rtts = Vec::new();
+    let mut command_rtts = Vec::new();
+    let mut command_failed = 0;
     if let Some(command) = command {
-        for _ in 0..10 {
+        for _ in 0..commands {
             let t = Instant::now();
             match v.commands().send(command.clone()).await {
-                Ok(_) => rtts.push(t.elapsed().as_secs_f64()),
+                Ok(_) => command_rtts.push(t.elapsed().as_secs_f64()),
                 Err(e) => {
                     errors.push(format!("command: {}", mavstack::error_chain(&e)));
-                    break;
+                    command_failed += 1;
                 }
             }
         }
     }
-    rtts.sort_by(f64::total_cmp);
-    let command_s = rtts.get(rtts.len() / 2).copied();
     println!(
         "{}",
         json!({
@@ -138,7 +139,8 @@ async fn main() -> Result<(), Error> {
             "params": count,
             "upload_s": upload_s,
             "download_s": download_s,
-            "command_s": command_s,
+            "command_rtts": command_rtts,
+            "command_failed": command_failed,
             "errors": errors,
         })
     );
