@@ -485,3 +485,49 @@ fn a_pause_in_a_fast_stream_does_not_end_the_fetch() {
         other => panic!("{other:?}"),
     }
 }
+
+/// The PARAM_REQUEST_READs `c` has queued, by index.
+fn re_requests(c: &mut ParamClient) -> Vec<u16> {
+    core::iter::from_fn(|| c.poll_transmit())
+        .map(|o| match o.message {
+            MavMessage::ParamRequestRead(r) => r.param_index.unsigned_abs(),
+            other => panic!("{other:?}"),
+        })
+        .collect()
+}
+
+/// ArduPilot sends the first value of its list alone and the rest about 100 ms later. That
+/// pause is no gap of the stream: with nothing to compare it to, the fetch waits as long as
+/// before any value. (The first value counted as a gap of zero, so the fetch asked for the
+/// whole table by index 20 ms after it; through the relay ArduPilot then answered those
+/// requests instead of streaming, 50 values a second, and the table took 62 s.)
+#[test]
+fn the_pause_after_the_first_value_does_not_start_the_re_requests() {
+    let mut c = ParamClient::new(ParamConfig::default(), Encoding::Bytewise);
+    let mut s = table(40, Encoding::Bytewise);
+    c.fetch_all(T0, VEHICLE).unwrap();
+    let req = c.poll_transmit().unwrap();
+    s.handle_message(T0, GCS, &req.message);
+    let values: Vec<_> = core::iter::from_fn(|| s.poll_transmit()).collect();
+    let first = T0 + Duration::from_millis(200);
+    c.handle_message(first, VEHICLE, &values[0].message);
+    let rest = first + Duration::from_millis(100);
+    while let Some(t) = c.poll_timeout().filter(|&t| t < rest) {
+        c.handle_timeout(t);
+        let asked = re_requests(&mut c);
+        assert!(
+            asked.is_empty(),
+            "asked for {asked:?} {:?} after the first value",
+            t - first
+        );
+    }
+    for v in &values[1..] {
+        c.handle_message(rest, VEHICLE, &v.message);
+    }
+    match c.poll_event() {
+        Some(ParamEvent::List {
+            result: Ok(list), ..
+        }) => assert_eq!(list.len(), 40),
+        other => panic!("{other:?}"),
+    }
+}

@@ -58,8 +58,10 @@ pub struct Collecting {
     rerequesting: bool,
     /// The round trip of requests to this target.
     rtt: Rtt,
-    /// The last value's arrival, and the smoothed gap between values of the stream (µs).
-    last_value: Instant,
+    /// The last value's arrival (none before the first), and the smoothed gap between
+    /// values of the stream (µs; none before the second value: the first has nothing to be
+    /// compared to).
+    last_value: Option<Instant>,
     gap_us: Option<u64>,
     /// Indices whose re-request was lost once already: their next one counts as resent.
     retried: BTreeSet<u16>,
@@ -155,7 +157,7 @@ impl AwaitingCount {
             outstanding: BTreeMap::new(),
             rerequesting: false,
             rtt,
-            last_value: now,
+            last_value: None,
             gap_us: None,
             retried: BTreeSet::new(),
         };
@@ -224,12 +226,14 @@ impl Collecting {
                 self.rtt.sample(sent, now);
             }
             self.top_up(now, config, out);
-        } else if !self.rerequesting {
-            let gap = u64::try_from(now.saturating_duration_since(self.last_value).as_micros())
-                .unwrap_or(u64::MAX);
+        } else if !self.rerequesting
+            && let Some(last) = self.last_value
+        {
+            let gap =
+                u64::try_from(now.saturating_duration_since(last).as_micros()).unwrap_or(u64::MAX);
             self.gap_us = Some(self.gap_us.map_or(gap, |g| (7 * g + gap) / 8));
         }
-        self.last_value = now;
+        self.last_value = Some(now);
         // The stream's inactivity timer restarts with every value; a re-request's runs from
         // when it was sent.
         self.deadline = if self.rerequesting {
