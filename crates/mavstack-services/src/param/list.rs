@@ -51,8 +51,10 @@ pub struct Collecting {
     progressed: bool,
     /// When the next round may begin.
     round_end: Instant,
-    /// Indices re-requested and not answered yet (at most `rerequest_batch`), with when
-    /// and whether more than once (Karn's rule for the RTT).
+    /// Indices re-requested and not answered yet (at most `rerequest_batch`), with when,
+    /// and whether the answer is no round-trip sample: a resent request's (Karn's rule), or
+    /// one of an index past the highest received (the stream, in index order, may bring it
+    /// at once, and did: such samples brought the wait to its floor on a 200 ms link).
     outstanding: BTreeMap<u16, (Instant, bool)>,
     /// Whether the stream has ended and gaps are being re-requested.
     rerequesting: bool,
@@ -65,6 +67,8 @@ pub struct Collecting {
     gap_us: Option<u64>,
     /// Indices whose re-request was lost once already: their next one counts as resent.
     retried: BTreeSet<u16>,
+    /// The highest index received.
+    highest: Option<u16>,
 }
 
 impl Collecting {
@@ -160,6 +164,7 @@ impl AwaitingCount {
             last_value: None,
             gap_us: None,
             retried: BTreeSet::new(),
+            highest: None,
         };
         c.on_value(now, v, config, out)
     }
@@ -219,10 +224,11 @@ impl Collecting {
         {
             *slot = Some((v.name, v.value));
             self.progressed = true;
+            self.highest = self.highest.max(Some(v.index));
         }
         // An answered re-request frees its place for the next gap (a sliding window).
-        if let Some((sent, resent)) = self.outstanding.remove(&v.index) {
-            if !resent {
+        if let Some((sent, no_sample)) = self.outstanding.remove(&v.index) {
+            if !no_sample {
                 self.rtt.sample(sent, now);
             }
             self.top_up(now, config, out);
@@ -310,7 +316,8 @@ impl Collecting {
             .collect();
         for index in next {
             let resent = self.retried.contains(&index);
-            self.outstanding.insert(index, (now, resent));
+            let ahead = self.highest.is_none_or(|h| index > h);
+            self.outstanding.insert(index, (now, resent || ahead));
             out.push_back(Outgoing {
                 target: self.target,
                 message: MavMessage::ParamRequestRead(ParamRequestRead {
