@@ -57,6 +57,8 @@ fi
 # Four pytest workers (pytest-xdist): the tests wait on simulated vehicles and sockets far more
 # than they compute (about 6 minutes one at a time, 2 with four workers).
 (cd crates/mavstack-python && "$MAVSTACK_PYTHON" -m pytest -q -p no:cacheprovider -n 4 tests)
+# The bench harness's step timing: a tool's own TimeoutError is a failure, not the caller's timeout.
+"$MAVSTACK_PYTHON" -m pytest -q -p no:cacheprovider tests-interop/test_bench_ops.py
 # Types: the stubs against the installed extension (stubtest: every module of the package,
 # mavstack.aio and the generated mavstack.messages included; stubtest-allowlist.txt says why
 # each entry is there), then the typed examples under mypy --strict and pyright in strict mode

@@ -24,7 +24,8 @@ then, each timed alone (with SETTLE seconds after the parameter table):
             (through loss a command answered at the first attempt takes one round trip and one
             resent takes the tool's resend wait more, so a median of few samples mostly says how
             many were lucky: use --commands 50 there)
-A step not done in --timeout seconds (default 120) is 'timed out'. Prints a Markdown table.
+A step not done in --timeout seconds (default 120) is 'timed out'; one that raised is 'failed
+after S s' with its error (a tool's own TimeoutError included). Prints a Markdown table.
 """
 import argparse
 import asyncio
@@ -92,14 +93,23 @@ def hold_params(autopilot):
 
 
 async def timed(coro, timeout):
+    """Seconds `coro` took; 'timed out' only when it had not ended after `timeout` seconds,
+    'failed after S s: ...' when it raised. (A tool's own timeout error is a failure of the
+    tool: mavstack.aio's TimeoutError, raised when a parameter list stays incomplete after
+    the retries, is a builtins.TimeoutError like asyncio.wait_for's, and was reported as the
+    caller's timeout.)"""
     t = time.monotonic()
-    try:
-        await asyncio.wait_for(coro, timeout)
-    except asyncio.TimeoutError:
+    task = asyncio.ensure_future(coro)
+    done, _ = await asyncio.wait({task}, timeout=timeout)
+    if not done:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
         return "timed out"
-    except Exception as e:  # noqa: BLE001 - the table says what failed
-        return "failed: %s" % str(e)[:80]
-    return time.monotonic() - t
+    took = time.monotonic() - t
+    if task.exception() is not None:
+        e = task.exception()
+        return "failed after %.1f s: %s: %s" % (took, type(e).__name__, str(e)[:80])
+    return took
 
 
 def commands_result(rtts, failed):

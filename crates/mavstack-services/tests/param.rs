@@ -485,3 +485,97 @@ fn a_pause_in_a_fast_stream_does_not_end_the_fetch() {
         other => panic!("{other:?}"),
     }
 }
+
+/// The PARAM_REQUEST_READs `c` has queued, by index.
+fn re_requests(c: &mut ParamClient) -> Vec<u16> {
+    core::iter::from_fn(|| c.poll_transmit())
+        .map(|o| match o.message {
+            MavMessage::ParamRequestRead(r) => r.param_index.unsigned_abs(),
+            other => panic!("{other:?}"),
+        })
+        .collect()
+}
+
+/// ArduPilot sends the first value of its list alone and the rest about 100 ms later. That
+/// pause is no gap of the stream: with nothing to compare it to, the fetch waits as long as
+/// before any value. (The first value counted as a gap of zero, so the fetch asked for the
+/// whole table by index 20 ms after it; through the relay ArduPilot then answered those
+/// requests instead of streaming, 50 values a second, and the table took 62 s.)
+#[test]
+fn the_pause_after_the_first_value_does_not_start_the_re_requests() {
+    let mut c = ParamClient::new(ParamConfig::default(), Encoding::Bytewise);
+    let mut s = table(40, Encoding::Bytewise);
+    c.fetch_all(T0, VEHICLE).unwrap();
+    let req = c.poll_transmit().unwrap();
+    s.handle_message(T0, GCS, &req.message);
+    let values: Vec<_> = core::iter::from_fn(|| s.poll_transmit()).collect();
+    let first = T0 + Duration::from_millis(200);
+    c.handle_message(first, VEHICLE, &values[0].message);
+    let rest = first + Duration::from_millis(100);
+    while let Some(t) = c.poll_timeout().filter(|&t| t < rest) {
+        c.handle_timeout(t);
+        let asked = re_requests(&mut c);
+        assert!(
+            asked.is_empty(),
+            "asked for {asked:?} {:?} after the first value",
+            t - first
+        );
+    }
+    for v in &values[1..] {
+        c.handle_message(rest, VEHICLE, &v.message);
+    }
+    match c.poll_event() {
+        Some(ParamEvent::List {
+            result: Ok(list), ..
+        }) => assert_eq!(list.len(), 40),
+        other => panic!("{other:?}"),
+    }
+}
+
+/// A re-request of an index the stream has not reached yet may be answered by the stream
+/// itself, at once: such an answer says nothing of the round trip. (Taken as samples, they
+/// brought the wait of every re-request to its 20 ms floor on a 200 ms link, and the client
+/// resent its whole window every 20 ms: 47,000 requests in a 62 s fetch from ArduPilot.)
+#[test]
+fn a_re_request_the_stream_answers_is_no_round_trip_sample() {
+    let mut c = ParamClient::new(ParamConfig::default(), Encoding::Bytewise);
+    let mut s = table(100, Encoding::Bytewise);
+    c.fetch_all(T0, VEHICLE).unwrap();
+    let req = c.poll_transmit().unwrap();
+    s.handle_message(T0, GCS, &req.message);
+    let values: Vec<_> = core::iter::from_fn(|| s.poll_transmit()).collect();
+    // The round trip is 200 ms; the stream comes in two bursts with a pause between.
+    let t1 = T0 + Duration::from_millis(200);
+    for v in &values[..10] {
+        c.handle_message(t1, VEHICLE, &v.message);
+    }
+    let asked_at = c.poll_timeout().unwrap();
+    c.handle_timeout(asked_at);
+    let ahead = re_requests(&mut c);
+    assert!(ahead.first() == Some(&10), "{ahead:?}");
+    // The second burst answers those re-requests 1 ms after they went; then the stream
+    // ends (the last 30 values are lost).
+    let t2 = asked_at + Duration::from_millis(1);
+    for v in &values[10..70] {
+        c.handle_message(t2, VEHICLE, &v.message);
+    }
+    let mut sent: std::collections::BTreeMap<u16, mavstack_core::time::Instant> =
+        re_requests(&mut c).into_iter().map(|i| (i, t2)).collect();
+    for i in ahead.into_iter().filter(|i| *i >= 70) {
+        sent.insert(i, asked_at);
+    }
+    // Nothing more comes: no re-request is sent again before a round trip has passed.
+    let end = t2 + Duration::from_secs(1);
+    while let Some(t) = c.poll_timeout().filter(|&t| t < end) {
+        c.handle_timeout(t);
+        for i in re_requests(&mut c) {
+            if let Some(before) = sent.insert(i, t) {
+                assert!(
+                    t - before >= Duration::from_millis(200),
+                    "{i} sent again after {:?}",
+                    t - before
+                );
+            }
+        }
+    }
+}

@@ -51,18 +51,24 @@ pub struct Collecting {
     progressed: bool,
     /// When the next round may begin.
     round_end: Instant,
-    /// Indices re-requested and not answered yet (at most `rerequest_batch`), with when
-    /// and whether more than once (Karn's rule for the RTT).
+    /// Indices re-requested and not answered yet (at most `rerequest_batch`), with when,
+    /// and whether the answer is no round-trip sample: a resent request's (Karn's rule), or
+    /// one of an index past the highest received (the stream, in index order, may bring it
+    /// at once, and did: such samples brought the wait to its floor on a 200 ms link).
     outstanding: BTreeMap<u16, (Instant, bool)>,
     /// Whether the stream has ended and gaps are being re-requested.
     rerequesting: bool,
     /// The round trip of requests to this target.
     rtt: Rtt,
-    /// The last value's arrival, and the smoothed gap between values of the stream (µs).
-    last_value: Instant,
+    /// The last value's arrival (none before the first), and the smoothed gap between
+    /// values of the stream (µs; none before the second value: the first has nothing to be
+    /// compared to).
+    last_value: Option<Instant>,
     gap_us: Option<u64>,
     /// Indices whose re-request was lost once already: their next one counts as resent.
     retried: BTreeSet<u16>,
+    /// The highest index received.
+    highest: Option<u16>,
 }
 
 impl Collecting {
@@ -155,9 +161,10 @@ impl AwaitingCount {
             outstanding: BTreeMap::new(),
             rerequesting: false,
             rtt,
-            last_value: now,
+            last_value: None,
             gap_us: None,
             retried: BTreeSet::new(),
+            highest: None,
         };
         c.on_value(now, v, config, out)
     }
@@ -217,19 +224,22 @@ impl Collecting {
         {
             *slot = Some((v.name, v.value));
             self.progressed = true;
+            self.highest = self.highest.max(Some(v.index));
         }
         // An answered re-request frees its place for the next gap (a sliding window).
-        if let Some((sent, resent)) = self.outstanding.remove(&v.index) {
-            if !resent {
+        if let Some((sent, no_sample)) = self.outstanding.remove(&v.index) {
+            if !no_sample {
                 self.rtt.sample(sent, now);
             }
             self.top_up(now, config, out);
-        } else if !self.rerequesting {
-            let gap = u64::try_from(now.saturating_duration_since(self.last_value).as_micros())
-                .unwrap_or(u64::MAX);
+        } else if !self.rerequesting
+            && let Some(last) = self.last_value
+        {
+            let gap =
+                u64::try_from(now.saturating_duration_since(last).as_micros()).unwrap_or(u64::MAX);
             self.gap_us = Some(self.gap_us.map_or(gap, |g| (7 * g + gap) / 8));
         }
-        self.last_value = now;
+        self.last_value = Some(now);
         // The stream's inactivity timer restarts with every value; a re-request's runs from
         // when it was sent.
         self.deadline = if self.rerequesting {
@@ -306,7 +316,8 @@ impl Collecting {
             .collect();
         for index in next {
             let resent = self.retried.contains(&index);
-            self.outstanding.insert(index, (now, resent));
+            let ahead = self.highest.is_none_or(|h| index > h);
+            self.outstanding.insert(index, (now, resent || ahead));
             out.push_back(Outgoing {
                 target: self.target,
                 message: MavMessage::ParamRequestRead(ParamRequestRead {
