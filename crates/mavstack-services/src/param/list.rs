@@ -285,16 +285,14 @@ impl Collecting {
         }
         // The re-requests whose wait is over are presumed lost: re-request the gaps, a window
         // at a time, by index (as QGC does).
-        let lost: Vec<u16> = self
-            .outstanding
-            .iter()
-            .filter(|(_, (sent, _))| *sent + wait <= now)
-            .map(|(index, _)| *index)
-            .collect();
-        for index in &lost {
-            self.outstanding.remove(index);
-        }
-        self.retried.extend(lost);
+        let retried = &mut self.retried;
+        self.outstanding.retain(|&index, (sent, _)| {
+            let lost = *sent + wait <= now;
+            if lost {
+                retried.insert(index);
+            }
+            !lost
+        });
         self.rerequesting = true;
         self.top_up(now, config, out);
         self.deadline = self.rerequest_deadline(now, config);
