@@ -50,7 +50,9 @@ fn plan(home: (f64, f64, f32), n: usize) -> Vec<MissionItemInt> {
 #[tokio::main]
 async fn main() -> Result<(), Error> {
     let mut args = std::env::args().skip(1);
-    let conn = args.next().ok_or("usage: bench_ops CONN [N [ROUNDS [COMMANDS]]]")?;
+    let conn = args
+        .next()
+        .ok_or("usage: bench_ops CONN [N [ROUNDS [COMMANDS]]]")?;
     let n: usize = args.next().map_or(Ok(100), |a| a.parse())?;
     let rounds: usize = args.next().map_or(Ok(1), |a| a.parse())?;
     let commands: usize = args.next().map_or(Ok(10), |a| a.parse())?;
