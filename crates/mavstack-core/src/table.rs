@@ -33,8 +33,11 @@ use crate::parse::CrcExtra;
 pub struct MessageTable {
     entries: &'static [MessageInfo],
     /// A generated dialect's own id dispatch (a `match` the compiler makes into a jump
-    /// table); `None`: binary search over `entries`.
+    /// table); `None`: `direct`, then binary search over `entries`.
     find: Option<fn(u32) -> Option<&'static MessageInfo>>,
+    /// For a table made at run time ([`MessageTable::with_direct_index`]): by id, for the ids
+    /// below its length, 1 + the entry's index, or 0 for an id the dialect does not define.
+    direct: &'static [u16],
 }
 
 /// The entries given to [`MessageTable::new`] are not sorted by id without repeats.
@@ -72,7 +75,51 @@ impl MessageTable {
         Ok(Self {
             entries,
             find: None,
+            direct: &[],
         })
+    }
+
+    /// The table with `index` as its direct index: `index[id]` is 1 + the position of
+    /// message `id` in the entries, or 0 where no message has that id, for the ids below
+    /// `index.len()` (see [`direct_index`](Self::direct_index)); an id is then found with one
+    /// load instead of a binary search. An index that does not match the entries (or a
+    /// generated dialect's table, which has its own dispatch) leaves the table as it was.
+    #[must_use]
+    pub fn with_direct_index(self, index: &'static [u16]) -> Self {
+        let fits = self.find.is_none()
+            && index.iter().enumerate().all(|(id, &i)| {
+                i == 0
+                    || self
+                        .entries
+                        .get(usize::from(i) - 1)
+                        .is_some_and(|m| m.id as usize == id)
+            })
+            && self
+                .entries
+                .iter()
+                .enumerate()
+                .filter(|(_, m)| (m.id as usize) < index.len())
+                .all(|(i, m)| usize::from(index[m.id as usize]) == i + 1);
+        if fits {
+            Self {
+                direct: index,
+                ..self
+            }
+        } else {
+            self
+        }
+    }
+
+    /// Fills `index` (its length: the ids it covers) as [`with_direct_index`]
+    /// (Self::with_direct_index) wants it for these entries; ids past `u16::MAX` entries are
+    /// left to the binary search.
+    pub fn direct_index(&self, index: &mut [u16]) {
+        index.fill(0);
+        for (i, m) in self.entries.iter().enumerate() {
+            if let (Some(slot), Ok(i)) = (index.get_mut(m.id as usize), u16::try_from(i + 1)) {
+                *slot = i;
+            }
+        }
     }
 
     /// The table of a generated dialect `M` (e.g. `mavstack_dialects::common::MavMessage`).
@@ -81,6 +128,7 @@ impl MessageTable {
         Self {
             entries: M::all(),
             find: Some(M::info),
+            direct: &[],
         }
     }
 
@@ -90,6 +138,7 @@ impl MessageTable {
         Self {
             entries: &[],
             find: None,
+            direct: &[],
         }
     }
 
@@ -101,6 +150,9 @@ impl MessageTable {
             return find(id);
         }
         let entries = self.entries;
+        if let Some(&i) = self.direct.get(id as usize) {
+            return usize::from(i).checked_sub(1).and_then(|i| entries.get(i));
+        }
         entries
             .binary_search_by_key(&id, |m| m.id)
             .ok()
@@ -151,6 +203,7 @@ impl core::fmt::Debug for MessageTable {
         f.debug_struct("MessageTable")
             .field("messages", &self.entries.len())
             .field("generated", &self.find.is_some())
+            .field("direct", &self.direct.len())
             .finish()
     }
 }
@@ -186,6 +239,25 @@ mod tests {
         assert_eq!(t.by_name("c"), None);
         assert_eq!((t.len(), t.is_empty()), (3, false));
         assert!(MessageTable::empty().info(0).is_none());
+    }
+
+    #[test]
+    fn a_direct_index_finds_what_the_search_finds() {
+        static INDEX: [u16; 8] = [1, 0, 0, 0, 0, 2, 0, 0];
+        let plain = MessageTable::new(&SORTED).unwrap();
+        let mut made = [9u16; 8];
+        plain.direct_index(&mut made);
+        assert_eq!(made, INDEX);
+        let t = plain.with_direct_index(&INDEX);
+        assert_eq!(t.direct.len(), 8);
+        for id in [0, 1, 4, 5, 6, 7, 8, 69999, 70000, 70001, u32::MAX] {
+            assert_eq!(t.info(id), plain.info(id), "id {id}");
+        }
+        // An index that disagrees with the entries is not taken.
+        static WRONG: [u16; 6] = [1, 0, 0, 0, 0, 0];
+        assert!(plain.with_direct_index(&WRONG).direct.is_empty());
+        static OFF: [u16; 2] = [2, 0];
+        assert!(plain.with_direct_index(&OFF).direct.is_empty());
     }
 
     #[test]

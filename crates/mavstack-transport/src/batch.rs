@@ -12,6 +12,10 @@ pub(crate) const RECV_BATCH: usize = 32;
 /// Bytes per receive slot: a datagram longer than this is cut and counted as an error
 /// (MAVLink datagrams hold a few frames of at most 280 bytes).
 pub(crate) const RECV_SLOT: usize = 8192;
+/// Bytes from one slot's start to the next: a slot and a cache line more, so that the slots'
+/// first lines (where a small datagram lies) fall in different cache sets. At a stride of
+/// exactly 8 KiB they all compete for the ways of one set.
+const SLOT_STRIDE: usize = RECV_SLOT + 64;
 /// Datagrams per send call.
 pub(crate) const SEND_BATCH: usize = 64;
 /// The largest datagram frames are packed into: an Ethernet MTU less the IP and UDP headers.
@@ -58,7 +62,7 @@ pub(crate) struct Received {
 impl RecvBatch {
     pub(crate) fn new() -> Self {
         Self {
-            buf: vec![0; RECV_BATCH * RECV_SLOT],
+            buf: vec![0; RECV_BATCH * SLOT_STRIDE],
             got: Vec::with_capacity(RECV_BATCH),
             truncated: 0,
             busy: false,
@@ -108,7 +112,7 @@ impl RecvBatch {
     /// Datagram `i` of the last receive: its bytes and sender.
     pub(crate) fn get(&self, i: usize) -> Option<(&[u8], SocketAddr)> {
         let &(slot, len, from) = self.got.get(i)?;
-        let start = slot * RECV_SLOT;
+        let start = slot * SLOT_STRIDE;
         Some((&self.buf[start..start + len], from))
     }
 
@@ -141,7 +145,9 @@ impl RecvBatch {
         let (buf, got, truncated) = (&mut self.buf, &mut self.got, &mut self.truncated);
         HEADERS.with(|headers| {
             let mut headers = headers.borrow_mut();
-            let mut chunks = buf.chunks_exact_mut(RECV_SLOT);
+            let mut chunks = buf
+                .chunks_exact_mut(SLOT_STRIDE)
+                .map(|c| &mut c[..RECV_SLOT]);
             let mut slices: [[IoSliceMut<'_>; 1]; N] =
                 core::array::from_fn(|_| [IoSliceMut::new(chunks.next().unwrap_or(&mut []))]);
             let results = recvmmsg(

@@ -12,6 +12,10 @@ use crate::model::{Dialect, Message};
 /// memory.
 static MADE: Mutex<Vec<MessageTable>> = Mutex::new(Vec::new());
 
+/// The ids a table's direct index covers, at most (two bytes each: 128 KiB for a dialect
+/// with an id near 65,535, once per process).
+const DIRECT_IDS: usize = 1 << 16;
+
 /// The entry of `m`; the layout checks keep lengths and offsets within a payload (255).
 fn entry_of(m: &Message, name: &'static str) -> MessageInfo {
     let byte = |n: usize| u8::try_from(n).unwrap_or(u8::MAX);
@@ -66,6 +70,14 @@ impl Dialect {
         let entries: &'static [MessageInfo] = Box::leak(entries.into_boxed_slice());
         // `messages` is sorted by id without repeats (the loader rejects duplicate ids).
         let table = MessageTable::new(entries).unwrap_or_else(|_| MessageTable::empty());
+        // An id found with one load rather than a binary search (what the parser and the
+        // router do for every frame): an index over the ids below 65,536, made once.
+        let covered = entries
+            .last()
+            .map_or(0, |m| (m.id as usize + 1).min(DIRECT_IDS));
+        let mut index = vec![0u16; covered];
+        table.direct_index(&mut index);
+        let table = table.with_direct_index(Box::leak(index.into_boxed_slice()));
         made.push(table);
         table
     }
@@ -81,5 +93,22 @@ mod tests {
         let c = crate::load("common").unwrap().message_table();
         assert_eq!(c.crc_extra(0), Some(50));
         assert!(!core::ptr::eq(a.entries(), c.entries()));
+    }
+
+    #[test]
+    fn the_direct_index_finds_what_a_search_finds() {
+        let t = crate::load("ardupilotmega").unwrap().message_table();
+        assert!(
+            !format!("{t:?}").contains("direct: 0 }"),
+            "an index over the ids: {t:?}"
+        );
+        for id in (0..70_000).chain([u32::MAX]) {
+            let searched = t
+                .entries()
+                .binary_search_by_key(&id, |m| m.id)
+                .ok()
+                .map(|i| &t.entries()[i]);
+            assert_eq!(t.info(id), searched, "id {id}");
+        }
     }
 }
