@@ -5,7 +5,8 @@
 //! A frame's bytes are copied once, from the channel's event into the buffer, and only as
 //! many as the frame has; what the channel knew of it is kept beside, in an index. Taking
 //! swaps the caller's (emptied) [`LocalFrames`] with the router's, so once both have grown
-//! to the burst size nothing is allocated.
+//! to the burst size nothing is allocated. The same type carries frames further, whole, from
+//! one thread to another (the `mavstack` node's batch subscriptions).
 
 use alloc::vec::Vec;
 
@@ -15,9 +16,10 @@ use mavstack_core::wire::Frame;
 
 use crate::router::LinkId;
 
-/// How many frames wait for [`Router::take_local`](crate::Router::take_local); more are
-/// dropped and counted ([`Router::events_dropped`](crate::Router::events_dropped)).
-pub const LOCAL_CAPACITY: usize = 4096;
+/// How many frames a [`LocalFrames`] holds: more waiting for
+/// [`Router::take_local`](crate::Router::take_local) are dropped and counted
+/// ([`Router::events_dropped`](crate::Router::events_dropped)).
+pub const LOCAL_CAPACITY: usize = 8192;
 
 /// What the router knows of one local frame, and where its bytes are.
 #[derive(Clone, Copy, Debug)]
@@ -130,19 +132,34 @@ impl LocalFrames {
     /// Appends `frame` from `link`; `false` (nothing appended) when it holds
     /// [`LOCAL_CAPACITY`] frames.
     pub fn push(&mut self, link: LinkId, frame: &ReceivedFrame) -> bool {
-        let bytes = frame.frame.as_bytes();
-        let (Ok(start), Ok(len)) = (u32::try_from(self.bytes.len()), u16::try_from(bytes.len()))
-        else {
+        self.push_frame(&LocalFrame {
+            link,
+            received_at: frame.received_at,
+            auth: frame.auth,
+            crc_checked: frame.crc_checked,
+            answered: frame.answered,
+            protocol_version_request: frame.protocol_version_request,
+            bytes: frame.frame.as_bytes(),
+        })
+    }
+
+    /// Appends a copy of `frame` (of another [`LocalFrames`]); `false` (nothing appended)
+    /// when it holds [`LOCAL_CAPACITY`] frames.
+    pub fn push_frame(&mut self, frame: &LocalFrame<'_>) -> bool {
+        let (Ok(start), Ok(len)) = (
+            u32::try_from(self.bytes.len()),
+            u16::try_from(frame.bytes.len()),
+        ) else {
             return false;
         };
         if self.entries.len() >= LOCAL_CAPACITY {
             return false;
         }
-        self.bytes.extend_from_slice(bytes);
+        self.bytes.extend_from_slice(frame.bytes);
         self.entries.push(Entry {
             start,
             len,
-            link,
+            link: frame.link,
             received_at: frame.received_at,
             auth: frame.auth,
             crc_checked: frame.crc_checked,
@@ -150,5 +167,11 @@ impl LocalFrames {
             protocol_version_request: frame.protocol_version_request,
         });
         true
+    }
+
+    /// Appends `other`'s frames while there is room; how many did not fit.
+    pub fn append(&mut self, other: &Self) -> u64 {
+        let fits = other.iter().take_while(|f| self.push_frame(f)).count();
+        (other.len() - fits) as u64
     }
 }

@@ -272,7 +272,7 @@ async fn a_batch_subscription_gets_every_frame_in_order_then_the_end() {
             largest = largest.max(batch.len());
             for f in batch.iter() {
                 got.push(f.bytes.to_vec());
-                links.push(f.link_id);
+                links.push(f.link);
             }
         }
         (got, links, largest, frames)

@@ -240,11 +240,11 @@ impl LiveLink {
             lock(py, &self.state).unknown_id += 1;
             return Ok(Posted::Unknown);
         };
-        if rx.last_link != Some(f.link_id) {
-            rx.last_link = Some(f.link_id);
+        if rx.last_link != Some(f.link) {
+            rx.last_link = Some(f.link);
             let mut peers = lock(py, &self.peers);
-            if !peers.0.contains(&f.link_id) {
-                peers.0.push(f.link_id);
+            if !peers.0.contains(&f.link) {
+                peers.0.push(f.link);
             }
         }
         let verified = matches!(f.auth, Authentication::Verified { .. });

@@ -3,14 +3,14 @@
 //! lowest cost per frame.
 //!
 //! ```text
-//!  driver turn: Event::Local ─push─► staging FrameBatch (the driver's, no lock)
+//!  driver turn: the router's LocalFrames ─copy─► staging FrameBatch (the driver's, no lock)
 //!  end of the turn: one lock ─► pending FrameBatch (swapped whole when the reader took the
 //!                               last one, else appended) ─► one wake-up if the reader waits
 //!  reader: one lock ─► pending swapped whole with its own (emptied) batch
 //! ```
 //!
-//! A batch is one byte arena holding the frames back to back and an index of
-//! [`BatchEntry`]s; the three batches (the driver's staging one, the pending one and the
+//! A batch is the router's [`LocalFrames`]: one byte arena holding the frames back to back
+//! and an index. The three batches (the driver's staging one, the pending one and the
 //! reader's) change hands whole, so once they have grown to the stream's burst size nothing
 //! is allocated, and a frame's bytes are copied once on the way (into the arena). The reader
 //! is woken (a condition variable) only when it waits, once per batch.
@@ -20,143 +20,19 @@
 use core::time::Duration;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 
-use mavstack_channel::Authentication;
-use mavstack_core::time::Instant;
-use mavstack_core::wire::Frame;
-use mavstack_router::{LinkId, LocalFrame};
+use mavstack_router::local::LOCAL_CAPACITY;
+use mavstack_router::{LocalFrame, LocalFrames};
 
 /// How many frames may wait for a batch reader; a reader that falls further behind loses
 /// the newest ones (counted in [`NodeReport::subscriber_drops`](super::NodeReport)).
-pub const BATCH_DEPTH: usize = 8192;
-
-/// Where one frame of a [`FrameBatch`] is, and what the node knows of it.
-#[derive(Clone, Copy, Debug)]
-struct BatchEntry {
-    /// Its first byte in the arena.
-    start: u32,
-    /// Its length.
-    len: u16,
-    link_id: LinkId,
-    auth: Authentication,
-    received_at: Instant,
-}
+pub const BATCH_DEPTH: usize = LOCAL_CAPACITY;
 
 /// Frames for the node, back to back in one buffer, with an index (see the module docs).
-#[derive(Debug, Default)]
-pub struct FrameBatch {
-    bytes: Vec<u8>,
-    entries: Vec<BatchEntry>,
-}
+pub type FrameBatch = LocalFrames;
 
-/// One frame of a [`FrameBatch`].
-#[derive(Clone, Copy, Debug)]
-#[non_exhaustive]
-pub struct BatchFrame<'a> {
-    /// The router link (one peer of a link) it came from.
-    pub link_id: LinkId,
-    /// How the link's channel authenticated it.
-    pub auth: Authentication,
-    /// When its link's channel was handed its bytes.
-    pub received_at: Instant,
-    /// The whole frame, exactly as received (its checksum checked as the channel does).
-    pub bytes: &'a [u8],
-}
-
-impl BatchFrame<'_> {
-    /// The frame as a view (header, payload, signature).
-    #[must_use]
-    pub fn view(&self) -> Frame<&[u8]> {
-        Frame::new_unchecked(self.bytes)
-    }
-}
-
-impl FrameBatch {
-    /// An empty batch (it allocates nothing until frames are put in).
-    #[must_use]
-    pub fn new() -> Self {
-        Self::default()
-    }
-
-    /// How many frames it holds.
-    #[must_use]
-    pub fn len(&self) -> usize {
-        self.entries.len()
-    }
-
-    /// Whether it holds no frame.
-    #[must_use]
-    pub fn is_empty(&self) -> bool {
-        self.entries.is_empty()
-    }
-
-    /// Frame `i`, in the order they were received.
-    #[must_use]
-    pub fn get(&self, i: usize) -> Option<BatchFrame<'_>> {
-        let e = self.entries.get(i)?;
-        let start = e.start as usize;
-        Some(BatchFrame {
-            link_id: e.link_id,
-            auth: e.auth,
-            received_at: e.received_at,
-            bytes: self.bytes.get(start..start + usize::from(e.len))?,
-        })
-    }
-
-    /// The frames in the order they were received.
-    pub fn iter(&self) -> impl Iterator<Item = BatchFrame<'_>> {
-        (0..self.len()).filter_map(|i| self.get(i))
-    }
-
-    /// Empties it, keeping what it had allocated.
-    pub fn clear(&mut self) {
-        self.bytes.clear();
-        self.entries.clear();
-    }
-
-    /// Appends one frame; `false` (nothing appended) when it holds [`BATCH_DEPTH`] frames.
-    fn push(&mut self, frame: &LocalFrame<'_>) -> bool {
-        self.push_bytes(
-            BatchEntry {
-                start: 0,
-                len: u16::try_from(frame.bytes.len()).unwrap_or(u16::MAX),
-                link_id: frame.link,
-                auth: frame.auth,
-                received_at: frame.received_at,
-            },
-            frame.bytes,
-        )
-    }
-
-    fn push_bytes(&mut self, mut entry: BatchEntry, bytes: &[u8]) -> bool {
-        let Ok(start) = u32::try_from(self.bytes.len()) else {
-            return false;
-        };
-        if self.entries.len() >= BATCH_DEPTH {
-            return false;
-        }
-        entry.start = start;
-        self.bytes.extend_from_slice(bytes);
-        self.entries.push(entry);
-        true
-    }
-
-    /// Appends `other`'s frames while there is room; how many did not fit.
-    fn append(&mut self, other: &Self) -> u64 {
-        let mut lost = 0;
-        for (i, e) in other.entries.iter().enumerate() {
-            let start = e.start as usize;
-            let fits = other
-                .bytes
-                .get(start..start + usize::from(e.len))
-                .is_some_and(|b| self.push_bytes(*e, b));
-            if !fits {
-                lost = (other.entries.len() - i) as u64;
-                break;
-            }
-        }
-        lost
-    }
-}
+/// One frame of a [`FrameBatch`]: its bytes, the router link it came from, and what its
+/// link's channel knew of it.
+pub type BatchFrame<'a> = LocalFrame<'a>;
 
 /// What the driver and the reader share.
 #[derive(Debug, Default)]
@@ -259,7 +135,7 @@ impl BatchSink {
 
     /// Stages one frame.
     pub(super) fn push(&mut self, frame: &LocalFrame<'_>) {
-        if !self.staging.push(frame) {
+        if !self.staging.push_frame(frame) {
             self.lost += 1;
         }
     }
@@ -301,8 +177,10 @@ impl Drop for BatchSink {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use mavstack_channel::{OwnedFrame, ReceivedFrame};
+    use mavstack_channel::{Authentication, OwnedFrame, ReceivedFrame};
+    use mavstack_core::time::Instant;
     use mavstack_core::wire::{self, FrameHeader, MAX_FRAME_LEN, Version};
+    use mavstack_router::LinkId;
 
     fn received(seq: u8) -> ReceivedFrame {
         let header = FrameHeader {
@@ -327,7 +205,7 @@ mod tests {
 
     /// Stages `frame` from `link` as the driver does, from the router's local frames.
     fn push(sink: &mut BatchSink, link: LinkId, frame: &ReceivedFrame) {
-        let mut local = mavstack_router::LocalFrames::new();
+        let mut local = LocalFrames::new();
         assert!(local.push(link, frame));
         for f in local.iter() {
             sink.push(&f);
@@ -353,7 +231,7 @@ mod tests {
         assert_eq!(sub.wait(&mut batch, Duration::ZERO), BatchWait::Frames);
         assert_eq!(seqs(&batch), [0, 1, 2, 3]);
         let first = batch.get(0).expect("a frame");
-        assert_eq!(first.link_id, LinkId::new(2));
+        assert_eq!(first.link, LinkId::new(2));
         assert_eq!(first.received_at, Instant::from_micros(0));
         assert_eq!(first.bytes, received(0).frame.as_bytes());
         assert_eq!(sub.wait(&mut batch, Duration::ZERO), BatchWait::TimedOut);
