@@ -9,7 +9,7 @@ use mavstack_services::param::{
     Encoding, Name, Param, ParamClient, ParamConfig, ParamError, ParamEvent, ParamHandle, ParamRef,
     ParamRequestError, ParamServer, ParamServerEvent, Value, list::ListFetch,
 };
-use mavstack_services::{Address, Service};
+use mavstack_services::{Address, Outgoing, Service};
 use util::{Knobs, Pair, T0};
 
 const GCS: Address = Address::new(255, 190);
@@ -62,6 +62,27 @@ fn finished(c: &mut ParamClient) -> Vec<(ParamHandle, Result<Param, ParamError>)
 
 /// Fetches the whole list; returns it with the virtual time and messages it took.
 type ListResult = Result<Vec<(Name, Value)>, ParamError>;
+
+/// A client (`config`) that asked a table of `n` values for its list, and what the table
+/// sent in answer.
+fn list_asked(config: ParamConfig, n: usize) -> (ParamClient, Vec<Outgoing>) {
+    let mut c = ParamClient::new(config, Encoding::Bytewise);
+    let mut s = table(n, Encoding::Bytewise);
+    c.fetch_all(T0, VEHICLE).unwrap();
+    let req = c.poll_transmit().unwrap();
+    s.handle_message(T0, GCS, &req.message);
+    (c, core::iter::from_fn(|| s.poll_transmit()).collect())
+}
+
+/// The client's next event is the whole list, `count` values.
+fn assert_listed(c: &mut ParamClient, count: usize) {
+    match c.poll_event() {
+        Some(ParamEvent::List {
+            result: Ok(list), ..
+        }) => assert_eq!(list.len(), count),
+        other => panic!("{other:?}"),
+    }
+}
 
 fn fetch(p: &mut Sim) -> (ListResult, Duration, u64) {
     let start = p.now;
@@ -160,12 +181,7 @@ fn list_fetch_phases_are_types() {
     for i in [3, 7] {
         c.handle_message(t, VEHICLE, &values[i].message);
     }
-    match c.poll_event() {
-        Some(ParamEvent::List {
-            result: Ok(list), ..
-        }) => assert_eq!(list.len(), 10),
-        other => panic!("{other:?}"),
-    }
+    assert_listed(&mut c, 10);
 }
 
 /// Each re-request has its own wait: answers to the others (the window sliding on) do not
@@ -177,12 +193,7 @@ fn a_dropped_re_request_is_sent_again_while_the_others_are_answered() {
         rerequest_batch: 3,
         ..ParamConfig::default()
     };
-    let mut c = ParamClient::new(config, Encoding::Bytewise);
-    let mut s = table(10, Encoding::Bytewise);
-    c.fetch_all(T0, VEHICLE).unwrap();
-    let req = c.poll_transmit().unwrap();
-    s.handle_message(T0, GCS, &req.message);
-    let values: Vec<_> = core::iter::from_fn(|| s.poll_transmit()).collect();
+    let (mut c, values) = list_asked(config, 10);
     for (i, v) in values.iter().enumerate() {
         if !(1..=6).contains(&i) {
             c.handle_message(T0, VEHICLE, &v.message);
@@ -453,12 +464,7 @@ fn the_re_request_window_fits_the_autopilot() {
 /// when gap requests are answered at once by the stream itself), so six of them take 3 s.
 #[test]
 fn a_pause_in_a_fast_stream_does_not_end_the_fetch() {
-    let mut c = ParamClient::new(ParamConfig::default(), Encoding::Bytewise);
-    let mut s = table(40, Encoding::Bytewise);
-    c.fetch_all(T0, VEHICLE).unwrap();
-    let req = c.poll_transmit().unwrap();
-    s.handle_message(T0, GCS, &req.message);
-    let values: Vec<_> = core::iter::from_fn(|| s.poll_transmit()).collect();
+    let (mut c, values) = list_asked(ParamConfig::default(), 40);
     let t1 = T0 + Duration::from_millis(1);
     for v in &values[..10] {
         c.handle_message(t1, VEHICLE, &v.message);
@@ -478,12 +484,7 @@ fn a_pause_in_a_fast_stream_does_not_end_the_fetch() {
     for v in &values[10..] {
         c.handle_message(now, VEHICLE, &v.message);
     }
-    match c.poll_event() {
-        Some(ParamEvent::List {
-            result: Ok(list), ..
-        }) => assert_eq!(list.len(), 40),
-        other => panic!("{other:?}"),
-    }
+    assert_listed(&mut c, 40);
 }
 
 /// The PARAM_REQUEST_READs `c` has queued, by index.
@@ -503,12 +504,7 @@ fn re_requests(c: &mut ParamClient) -> Vec<u16> {
 /// requests instead of streaming, 50 values a second, and the table took 62 s.)
 #[test]
 fn the_pause_after_the_first_value_does_not_start_the_re_requests() {
-    let mut c = ParamClient::new(ParamConfig::default(), Encoding::Bytewise);
-    let mut s = table(40, Encoding::Bytewise);
-    c.fetch_all(T0, VEHICLE).unwrap();
-    let req = c.poll_transmit().unwrap();
-    s.handle_message(T0, GCS, &req.message);
-    let values: Vec<_> = core::iter::from_fn(|| s.poll_transmit()).collect();
+    let (mut c, values) = list_asked(ParamConfig::default(), 40);
     let first = T0 + Duration::from_millis(200);
     c.handle_message(first, VEHICLE, &values[0].message);
     let rest = first + Duration::from_millis(100);
@@ -524,12 +520,7 @@ fn the_pause_after_the_first_value_does_not_start_the_re_requests() {
     for v in &values[1..] {
         c.handle_message(rest, VEHICLE, &v.message);
     }
-    match c.poll_event() {
-        Some(ParamEvent::List {
-            result: Ok(list), ..
-        }) => assert_eq!(list.len(), 40),
-        other => panic!("{other:?}"),
-    }
+    assert_listed(&mut c, 40);
 }
 
 /// A re-request of an index the stream has not reached yet may be answered by the stream
@@ -538,12 +529,7 @@ fn the_pause_after_the_first_value_does_not_start_the_re_requests() {
 /// resent its whole window every 20 ms: 47,000 requests in a 62 s fetch from ArduPilot.)
 #[test]
 fn a_re_request_the_stream_answers_is_no_round_trip_sample() {
-    let mut c = ParamClient::new(ParamConfig::default(), Encoding::Bytewise);
-    let mut s = table(100, Encoding::Bytewise);
-    c.fetch_all(T0, VEHICLE).unwrap();
-    let req = c.poll_transmit().unwrap();
-    s.handle_message(T0, GCS, &req.message);
-    let values: Vec<_> = core::iter::from_fn(|| s.poll_transmit()).collect();
+    let (mut c, values) = list_asked(ParamConfig::default(), 100);
     // The round trip is 200 ms; the stream comes in two bursts with a pause between.
     let t1 = T0 + Duration::from_millis(200);
     for v in &values[..10] {
