@@ -110,9 +110,9 @@ impl MessageTable {
         }
     }
 
-    /// Fills `index` (its length: the ids it covers) as [`with_direct_index`]
-    /// (Self::with_direct_index) wants it for these entries; ids past `u16::MAX` entries are
-    /// left to the binary search.
+    /// Fills `index` (its length: the ids it covers) as
+    /// [`with_direct_index`](Self::with_direct_index) wants it for these entries; ids past
+    /// `u16::MAX` entries are left to the binary search.
     pub fn direct_index(&self, index: &mut [u16]) {
         index.fill(0);
         for (i, m) in self.entries.iter().enumerate() {
