@@ -97,6 +97,47 @@ def test_ctrl_c_interrupts_a_wait_without_timeout():
     assert out.strip() == "interrupted"
 
 
+def test_ctrl_c_interrupts_a_wait_while_other_messages_stream_in():
+    """A stream of messages the call does not want (here ATTITUDE, one a millisecond, while it
+    waits for a HEARTBEAT) never leaves it idle long enough to time out a wait: Ctrl-C must
+    still get through."""
+    port = free_port()
+    code = textwrap.dedent("""
+        from mavstack import mavutil
+        conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d")
+        print("waiting", flush=True)
+        try:
+            conn.wait_heartbeat()
+        except KeyboardInterrupt:
+            print("interrupted", flush=True)
+    """ % port)
+    enc = apm.MAVLink(None, srcSystem=1, srcComponent=1)
+    frame = enc.attitude_encode(1, 0.1, 0.2, 0.3, 0.01, 0.02, 0.03).pack(enc)
+    out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    stop = threading.Event()
+
+    def stream():
+        while not stop.is_set():
+            out.sendto(frame, ("127.0.0.1", port))
+            time.sleep(0.001)
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    t = threading.Thread(target=stream)
+    try:
+        assert p.stdout.readline().strip() == "waiting"
+        t.start()
+        time.sleep(0.5)
+        p.send_signal(signal.SIGINT)
+        got, _ = p.communicate(timeout=10)
+        assert got.strip() == "interrupted"
+    finally:
+        stop.set()
+        if t.is_alive():
+            t.join()
+        if p.poll() is None:
+            p.kill()
+        out.close()
+
+
 def test_sent_and_encoded_messages_decode_in_pymavlink():
     port = free_port()
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

@@ -177,6 +177,10 @@ impl LiveLink {
                 BatchWait::Frames => {
                     rx.next = 0;
                     rx.taken_at = unix_now();
+                    // A stream of frames the call does not want may never leave a wait to
+                    // time out: Ctrl-C is looked at with each batch too (the batch stays for
+                    // the next call).
+                    py.check_signals()?;
                 }
                 BatchWait::Closed => rx.closed = true,
                 _ => py.check_signals()?,
