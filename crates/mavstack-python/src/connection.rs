@@ -62,8 +62,8 @@ pub(crate) struct LogConnection {
     latest: HashMap<usize, Found>,
     /// Conditions compiled so far and their globals.
     conditions: Conditions,
-    /// The last `type` argument of `recv_match` and the message indexes it asks for.
-    last_type: Option<(Py<PyAny>, Arc<Vec<bool>>)>,
+    /// `recv_match`'s last `type` argument and its mask.
+    types: TypeCache,
 }
 
 impl LogConnection {
@@ -84,7 +84,7 @@ impl LogConnection {
             by_sysid: HashMap::new(),
             latest: HashMap::new(),
             conditions: Conditions::default(),
-            last_type: None,
+            types: TypeCache::default(),
         })
     }
 
@@ -119,18 +119,28 @@ impl LogConnection {
         Ok(Some(found))
     }
 
-    /// [`wanted_mask`], remembered for the same `type` argument as the last call's (a loop
-    /// calls `recv_match(type="ATTITUDE")` many times with the same string).
-    fn wanted_cached(slf: &Bound<'_, Self>, ty: &Bound<'_, PyAny>) -> PyResult<Arc<Vec<bool>>> {
-        if let Some((last, mask)) = &slf.borrow().last_type {
-            let last = last.bind(slf.py());
-            if last.is(ty) || (last.get_type().is(ty.get_type()) && last.eq(ty)?) {
-                return Ok(Arc::clone(mask));
+    /// `recv_match`'s loop: the next frame of a type `wanted` marks (any without a mask) for
+    /// which `condition` holds.
+    fn match_next(
+        slf: &Bound<'_, Self>,
+        py: Python<'_>,
+        condition: Option<&str>,
+        wanted: Option<&TypeMask>,
+    ) -> PyResult<Option<Found>> {
+        loop {
+            let Some(found) = slf.borrow_mut().next_found()? else {
+                return Ok(None);
+            };
+            if wanted.is_some_and(|w| !w.wants(found.message)) {
+                continue;
             }
+            if let Some(c) = condition
+                && !Self::condition_holds(slf, py, c, found.sysid)?
+            {
+                continue;
+            }
+            return Ok(Some(found));
         }
-        let mask = Arc::new(wanted_mask(&slf.borrow().dialect, ty)?);
-        slf.borrow_mut().last_type = Some((ty.clone().unbind(), Arc::clone(&mask)));
-        Ok(mask)
     }
 
     /// Evaluates `condition` against the latest messages of `sysid`, as pymavlink's
@@ -153,8 +163,51 @@ impl LogConnection {
     }
 }
 
+/// `recv_match`'s `type` argument and the message indexes it asks for.
+pub(crate) struct TypeMask {
+    ty: Py<PyAny>,
+    mask: Vec<bool>,
+}
+
+impl TypeMask {
+    /// Whether the message at `index` of the dialect is one of the types asked for.
+    pub(crate) fn wants(&self, index: usize) -> bool {
+        self.mask[index]
+    }
+}
+
+/// The mask of `recv_match`'s last `type` argument, reused while the next call passes the
+/// same object or an equal one: a loop calls `recv_match(type="ATTITUDE")` many times with
+/// the same string, and building the mask each time would cost a name lookup per call.
+#[derive(Default)]
+pub(crate) struct TypeCache(Option<TypeMask>);
+
+impl TypeCache {
+    /// The mask of `ty`, reused or made; give it back with [`Self::keep`] after the call.
+    pub(crate) fn take(&mut self, dialect: &Dialect, ty: &Bound<'_, PyAny>) -> PyResult<TypeMask> {
+        if let Some(last) = self.0.take() {
+            let same = {
+                let was = last.ty.bind(ty.py());
+                was.is(ty) || (was.get_type().is(ty.get_type()) && was.eq(ty)?)
+            };
+            if same {
+                return Ok(last);
+            }
+        }
+        Ok(TypeMask {
+            ty: ty.clone().unbind(),
+            mask: wanted_mask(dialect, ty)?,
+        })
+    }
+
+    /// Keeps `mask` for the next call.
+    pub(crate) fn keep(&mut self, mask: TypeMask) {
+        self.0 = Some(mask);
+    }
+}
+
 /// Which message indexes `type` asks for (a name, or a list, set or tuple of names).
-pub(crate) fn wanted_mask(dialect: &Dialect, ty: &Bound<'_, PyAny>) -> PyResult<Vec<bool>> {
+fn wanted_mask(dialect: &Dialect, ty: &Bound<'_, PyAny>) -> PyResult<Vec<bool>> {
     let mut mask = vec![false; dialect.messages.len()];
     let mut add = |name: &Bound<'_, PyAny>| -> PyResult<()> {
         let name: String = name.extract()?;
@@ -280,23 +333,18 @@ impl LogConnection {
     ) -> PyResult<Option<Message>> {
         let _ = (blocking, timeout);
         let wanted = match r#type {
-            Some(t) if !t.is_none() => Some(Self::wanted_cached(slf, t)?),
+            Some(t) if !t.is_none() => {
+                let mut this = slf.borrow_mut();
+                let this = &mut *this;
+                Some(this.types.take(&this.dialect, t)?)
+            }
             _ => None,
         };
-        loop {
-            let Some(found) = slf.borrow_mut().next_found()? else {
-                return Ok(None);
-            };
-            if wanted.as_ref().is_some_and(|w| !w[found.message]) {
-                continue;
-            }
-            if let Some(c) = condition
-                && !Self::condition_holds(slf, py, c, found.sysid)?
-            {
-                continue;
-            }
-            return Ok(Some(slf.borrow().message(&found)));
+        let found = Self::match_next(slf, py, condition, wanted.as_ref());
+        if let Some(w) = wanted {
+            slf.borrow_mut().types.keep(w);
         }
+        Ok(found?.map(|found| slf.borrow().message(&found)))
     }
 
     fn __iter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {

@@ -78,7 +78,10 @@ def test_a_blocking_receive_releases_the_gil():
         conn.close()
 
 
-def test_ctrl_c_interrupts_a_wait_without_timeout():
+def _wait_heartbeat_then_ctrl_c(port, while_waiting=lambda: None):
+    """Starts a child that waits for a HEARTBEAT without timeout on `port`, runs
+    `while_waiting` once it waits, then sends it SIGINT: the child must say it was
+    interrupted (a KeyboardInterrupt out of the wait)."""
     code = textwrap.dedent("""
         import signal
         # A harness that runs the tests in the background may have SIGINT ignored, and
@@ -91,13 +94,22 @@ def test_ctrl_c_interrupts_a_wait_without_timeout():
             conn.wait_heartbeat()
         except KeyboardInterrupt:
             print("interrupted", flush=True)
-    """ % free_port())
+    """ % port)
     p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
-    assert p.stdout.readline().strip() == "waiting"
-    time.sleep(0.3)
-    p.send_signal(signal.SIGINT)
-    out, _ = p.communicate(timeout=10)
-    assert out.strip() == "interrupted"
+    try:
+        assert p.stdout.readline().strip() == "waiting"
+        while_waiting()
+        time.sleep(0.3)
+        p.send_signal(signal.SIGINT)
+        got, _ = p.communicate(timeout=10)
+        assert got.strip() == "interrupted"
+    finally:
+        if p.poll() is None:
+            p.kill()
+
+
+def test_ctrl_c_interrupts_a_wait_without_timeout():
+    _wait_heartbeat_then_ctrl_c(free_port())
 
 
 def test_ctrl_c_interrupts_a_wait_while_other_messages_stream_in():
@@ -105,17 +117,6 @@ def test_ctrl_c_interrupts_a_wait_while_other_messages_stream_in():
     waits for a HEARTBEAT) never leaves it idle long enough to time out a wait: Ctrl-C must
     still get through."""
     port = free_port()
-    code = textwrap.dedent("""
-        import signal
-        signal.signal(signal.SIGINT, signal.default_int_handler)  # as in the test above
-        from mavstack import mavutil
-        conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d")
-        print("waiting", flush=True)
-        try:
-            conn.wait_heartbeat()
-        except KeyboardInterrupt:
-            print("interrupted", flush=True)
-    """ % port)
     enc = apm.MAVLink(None, srcSystem=1, srcComponent=1)
     frame = enc.attitude_encode(1, 0.1, 0.2, 0.3, 0.01, 0.02, 0.03).pack(enc)
     out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -125,21 +126,13 @@ def test_ctrl_c_interrupts_a_wait_while_other_messages_stream_in():
         while not stop.is_set():
             out.sendto(frame, ("127.0.0.1", port))
             time.sleep(0.001)
-    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
     t = threading.Thread(target=stream)
     try:
-        assert p.stdout.readline().strip() == "waiting"
-        t.start()
-        time.sleep(0.5)
-        p.send_signal(signal.SIGINT)
-        got, _ = p.communicate(timeout=10)
-        assert got.strip() == "interrupted"
+        _wait_heartbeat_then_ctrl_c(port, t.start)
     finally:
         stop.set()
         if t.is_alive():
             t.join()
-        if p.poll() is None:
-            p.kill()
         out.close()
 
 

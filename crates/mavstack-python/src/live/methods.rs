@@ -57,19 +57,12 @@ impl LiveLink {
         let deadline = Deadline::after(timeout);
         let mut rx = lock(py, &self.frames);
         let wanted = match r#type {
-            Some(t) if !t.is_none() => Some(rx.take_type(&self.dialect, t)?),
+            Some(t) if !t.is_none() => Some(rx.types.take(&self.dialect, t)?),
             _ => None,
         };
-        let found = self.match_next(
-            py,
-            &mut rx,
-            condition,
-            wanted.as_ref().map(|(_, w)| w.as_slice()),
-            blocking,
-            deadline,
-        );
+        let found = self.match_next(py, &mut rx, condition, wanted.as_ref(), blocking, deadline);
         if let Some(w) = wanted {
-            rx.keep_type(w);
+            rx.types.keep(w);
         }
         drop(rx);
         self.materialize(py)?;

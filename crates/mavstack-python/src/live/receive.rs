@@ -23,8 +23,7 @@ use pyo3::prelude::*;
 
 use super::heartbeat::{heartbeat_fields, mode_string, probably_vehicle};
 use super::{LiveLink, SAFETY_ARMED, SIGNAL_CHECK, State, SystemState, lock, unix_now};
-use crate::connection::{eval_condition, wanted_mask};
-use crate::dialect::Dialect;
+use crate::connection::{TypeCache, TypeMask, eval_condition};
 use crate::message::Message;
 
 /// HEARTBEAT's message id, the same in every dialect.
@@ -42,9 +41,8 @@ pub(super) struct Receiver {
     last_link: Option<LinkId>,
     /// The node has stopped.
     closed: bool,
-    /// The last `type` argument of `recv_match` and its mask, reused while the next call's
-    /// is the same.
-    last_type: Option<(Py<PyAny>, Vec<bool>)>,
+    /// `recv_match`'s last `type` argument and its mask.
+    pub(super) types: TypeCache,
 }
 
 impl Receiver {
@@ -56,34 +54,8 @@ impl Receiver {
             taken_at: 0.0,
             last_link: None,
             closed: false,
-            last_type: None,
+            types: TypeCache::default(),
         }
-    }
-}
-
-impl Receiver {
-    /// Takes the mask of `recv_match`'s `type` argument `ty` (made, or reused when `ty` is
-    /// the last call's argument or equal to it); give it back with [`Self::keep_type`].
-    pub(super) fn take_type(
-        &mut self,
-        dialect: &Dialect,
-        ty: &Bound<'_, PyAny>,
-    ) -> PyResult<(Py<PyAny>, Vec<bool>)> {
-        if let Some((last, mask)) = self.last_type.take() {
-            let same = {
-                let last = last.bind(ty.py());
-                last.is(ty) || (last.get_type().is(ty.get_type()) && last.eq(ty)?)
-            };
-            if same {
-                return Ok((last, mask));
-            }
-        }
-        Ok((ty.clone().unbind(), wanted_mask(dialect, ty)?))
-    }
-
-    /// Keeps `ty` and its mask for the next call.
-    pub(super) fn keep_type(&mut self, ty: (Py<PyAny>, Vec<bool>)) {
-        self.last_type = Some(ty);
     }
 }
 
@@ -195,7 +167,7 @@ impl LiveLink {
         py: Python<'_>,
         rx: &mut Receiver,
         condition: Option<&str>,
-        wanted: Option<&[bool]>,
+        wanted: Option<&TypeMask>,
         blocking: bool,
         mut deadline: Deadline,
     ) -> PyResult<Option<Py<Message>>> {
@@ -208,7 +180,7 @@ impl LiveLink {
                 rx.next = 0;
                 return Ok(None);
             }
-            let posted = self.post(py, rx, i, |index| wanted.is_none_or(|w| w[index]))?;
+            let posted = self.post(py, rx, i, |index| wanted.is_none_or(|w| w.wants(index)))?;
             let Posted::Message(message, sysid) = posted else {
                 continue;
             };
