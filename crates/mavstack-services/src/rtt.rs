@@ -35,6 +35,11 @@ impl Rtt {
         });
     }
 
+    /// The smoothed round trip in µs, once there is a sample.
+    pub(crate) fn srtt_us(&self) -> Option<u64> {
+        self.estimate.map(|(srtt, _)| srtt)
+    }
+
     /// How long to wait for an answer: the estimate's timeout within
     /// [[`Rtt::FLOOR`], `ceiling`], or `ceiling` before any sample.
     pub(crate) fn timeout(&self, ceiling: Duration) -> Duration {

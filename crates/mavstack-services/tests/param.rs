@@ -565,3 +565,128 @@ fn a_re_request_the_stream_answers_is_no_round_trip_sample() {
         }
     }
 }
+
+/// What `c` transmits next, once its timer runs out: its messages, and when.
+fn after_the_stream(c: &mut ParamClient) -> (mavstack_core::time::Instant, Vec<MavMessage>) {
+    let t = c.poll_timeout().unwrap();
+    c.handle_timeout(t);
+    (
+        t,
+        core::iter::from_fn(|| c.poll_transmit())
+            .map(|o| o.message)
+            .collect(),
+    )
+}
+
+/// Feeds `c` the values of `values` that `keep` lets through, `gap` apart from `start`;
+/// returns when the last one came.
+fn stream(
+    c: &mut ParamClient,
+    values: &[Outgoing],
+    start: mavstack_core::time::Instant,
+    gap: Duration,
+    keep: impl Fn(usize) -> bool,
+) -> mavstack_core::time::Instant {
+    let mut t = start;
+    for (i, v) in values.iter().enumerate() {
+        t += gap;
+        if keep(i) {
+            c.handle_message(t, VEHICLE, &v.message);
+        }
+    }
+    t
+}
+
+/// A fast stream that lost a quarter of its values: the table streams again in half a
+/// second, where 250 values one by one, 16 at a time, would take three. The client asks for
+/// the whole list again, then for the last gaps one by one.
+#[test]
+fn a_fast_lossy_stream_is_asked_for_again_whole() {
+    let config = ParamConfig {
+        rerequest_batch: 16,
+        ..ParamConfig::default()
+    };
+    let (mut c, values) = list_asked(config, 1000);
+    // The round trip is 200 ms; a value every 0.5 ms; every fourth lost.
+    let first = T0 + Duration::from_millis(200);
+    stream(&mut c, &values, first, Duration::from_micros(500), |i| {
+        i % 4 != 1
+    });
+    let (t, asked) = after_the_stream(&mut c);
+    assert!(
+        matches!(asked.as_slice(), [MavMessage::ParamRequestList(_)]),
+        "{asked:?}"
+    );
+    // The second pass loses one in eight of those (only the indexes ≡ 1 mod 32 are missing
+    // now, 32 of them): a third pass would take 0.7 s, these one by one less than half a
+    // second. They go one by one.
+    let second = t + Duration::from_millis(200);
+    stream(&mut c, &values, second, Duration::from_micros(500), |i| {
+        i % 32 != 1
+    });
+    let (t, asked) = after_the_stream(&mut c);
+    let indexes: Vec<u16> = asked
+        .iter()
+        .map(|m| match m {
+            MavMessage::ParamRequestRead(r) => r.param_index.unsigned_abs(),
+            other => panic!("{other:?}"),
+        })
+        .collect();
+    assert_eq!(indexes, (0..16).map(|k| 1 + 32 * k).collect::<Vec<u16>>());
+    // They are answered: the table is whole.
+    let mut now = t + Duration::from_millis(200);
+    loop {
+        for v in values.iter().skip(1).step_by(32) {
+            c.handle_message(now, VEHICLE, &v.message);
+        }
+        if let Some(ParamEvent::List { result, .. }) = c.poll_event() {
+            assert_eq!(result.unwrap().len(), 1000);
+            break;
+        }
+        while c.poll_transmit().is_some() {}
+        now += Duration::from_millis(200);
+        assert!(now < t + Duration::from_secs(5), "not done");
+    }
+}
+
+/// A telemetry radio: the table takes two seconds to stream and 5 % of it is lost. The
+/// gaps go one by one; a second pass would cost more than they do.
+#[test]
+fn a_slow_stream_has_its_gaps_asked_for_one_by_one() {
+    let (mut c, values) = list_asked(ParamConfig::default(), 200);
+    let first = T0 + Duration::from_millis(100);
+    stream(&mut c, &values, first, Duration::from_millis(10), |i| {
+        i % 20 != 7
+    });
+    let (_, asked) = after_the_stream(&mut c);
+    assert_eq!(asked.len(), 10, "{asked:?}");
+    assert!(
+        asked
+            .iter()
+            .all(|m| matches!(m, MavMessage::ParamRequestRead(_))),
+        "{asked:?}"
+    );
+}
+
+/// A fast, lossy stream that stopped half-way (the vehicle was busy, a relay paused): it
+/// says nothing of what a second pass would bring, so the gaps go one by one.
+#[test]
+fn a_stream_cut_short_is_not_asked_for_again() {
+    let (mut c, values) = list_asked(ParamConfig::default(), 1000);
+    let first = T0 + Duration::from_millis(200);
+    stream(
+        &mut c,
+        &values[..500],
+        first,
+        Duration::from_micros(500),
+        |i| i % 4 != 1,
+    );
+    let (_, asked) = after_the_stream(&mut c);
+    assert!(!asked.is_empty());
+    assert!(
+        asked
+            .iter()
+            .all(|m| matches!(m, MavMessage::ParamRequestRead(_))),
+        "{asked:?}"
+    );
+}

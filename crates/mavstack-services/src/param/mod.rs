@@ -4,8 +4,11 @@
 //! - [`ParamClient::fetch_all`] sends PARAM_REQUEST_LIST and collects the PARAM_VALUE
 //!   stream. An inactivity timer restarts with every value; when it expires the missing
 //!   indices are re-requested with PARAM_REQUEST_READ by index, a batch at a time, until the
-//!   set is complete ([`ParamEvent::List`]). The phases are types: [`list::AwaitingCount`] →
-//!   [`list::Collecting`] → [`list::Done`].
+//!   set is complete ([`ParamEvent::List`]). When a fast stream that went to the end of the
+//!   table lost many values, the whole list is asked for again instead, as long as another
+//!   pass (the table's streaming time, measured) should bring its share of the gaps sooner
+//!   than the requests by index would (their round trip and the loss the pass showed). The
+//!   phases are types: [`list::AwaitingCount`] → [`list::Collecting`] → [`list::Done`].
 //! - [`ParamClient::read`] asks for one value by name or index, [`ParamClient::set`] sends
 //!   PARAM_SET and waits for the PARAM_VALUE echo; both resend on timeout, and a set also
 //!   resends when the echo carries another value (the target keeps the old value when it
