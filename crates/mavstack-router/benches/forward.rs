@@ -67,7 +67,7 @@ fn bench(c: &mut Criterion) {
                 now += core::time::Duration::from_micros(10);
                 router.handle_datagram(now, vehicle, &frame[..len]);
                 fed += 1;
-                if fed % 32 == 0 {
+                if fed.is_multiple_of(32) {
                     router.take_local(&mut local);
                 }
                 local.len()

@@ -9,7 +9,15 @@
 //! MAV_RESULT_IN_PROGRESS reports [`CommandEvent::Progress`] and switches to the much longer
 //! [`CommandConfig::in_progress_timeout`] (3 s), extended by every further IN_PROGRESS;
 //! the final ACK ends the command with [`CommandEvent::Finished`]. Several commands can be
-//! in flight at once as long as they differ in target or command id.
+//! in flight at once as long as they differ in target or command id. A final ACK is
+//! followed by an *echo* window of half the round trip it ended (from the last send; at most
+//! half of [`CommandConfig::timeout`], none after IN_PROGRESS): within it, an ACK from the
+//! same source for the same command id answers nothing. A vehicle
+//! may acknowledge one command twice (PX4 1.16 sends a second, identical ACK for
+//! DO_SET_MODE 4–8 ms after the first; our own server acknowledges each copy that got
+//! through), and a command sent again at once gets its own answer a round trip later at the
+//! earliest: without the window, on a 200 ms link, the echo of the last DO_SET_MODE answered
+//! the next one within 10 ms, whatever the vehicle made of it.
 //!
 //! **Server** ([`CommandServer`]): answers every command addressed to it (or broadcast) by
 //! calling the caller's [`CommandHandler`], and ACKs with the result. Retries and
@@ -228,6 +236,8 @@ struct InFlight {
     command: Command,
     /// Sends so far.
     attempts: u8,
+    /// When it was last sent.
+    sent_at: Instant,
     deadline: Instant,
     progress: Option<u8>,
 }
@@ -241,7 +251,20 @@ pub struct CommandClient {
     in_flight: Vec<InFlight>,
     out: VecDeque<Outgoing>,
     events: VecDeque<CommandEvent>,
+    /// The echo windows of the final ACKs received lately (see the module docs).
+    echoes: Vec<Echo>,
 }
+
+/// An ACK from `from` for `command` before `until` is the echo of one already taken.
+#[derive(Debug)]
+struct Echo {
+    from: Address,
+    command: MavCmd,
+    until: Instant,
+}
+
+/// The most echo windows kept at once (one per source and command id; the oldest go first).
+const MAX_ECHOES: usize = 32;
 
 impl CommandClient {
     /// A client sending as `own` (its ids recognise ACKs addressed to us).
@@ -254,6 +277,7 @@ impl CommandClient {
             in_flight: Vec::new(),
             out: VecDeque::new(),
             events: VecDeque::new(),
+            echoes: Vec::new(),
         }
     }
 
@@ -293,6 +317,7 @@ impl CommandClient {
             target,
             command,
             attempts: 1,
+            sent_at: now,
             deadline: now + self.config.timeout,
             progress: None,
         });
@@ -326,6 +351,14 @@ impl CommandClient {
         {
             return false;
         }
+        self.echoes.retain(|e| now < e.until);
+        if self
+            .echoes
+            .iter()
+            .any(|e| e.from == from && e.command == ack.command)
+        {
+            return false;
+        }
         let Some(i) = self
             .in_flight
             .iter()
@@ -344,6 +377,20 @@ impl CommandClient {
             return true;
         }
         let f = self.in_flight.remove(i);
+        // After IN_PROGRESS the wait was the command's run, not the link's round trip. The
+        // window never outlasts half a resend wait: a command it keeps from its answer is
+        // answered again after its resend, past the window.
+        if f.progress.is_none() {
+            if self.echoes.len() >= MAX_ECHOES {
+                self.echoes.remove(0);
+            }
+            let half_round_trip = now.saturating_duration_since(f.sent_at) / 2;
+            self.echoes.push(Echo {
+                from,
+                command: ack.command,
+                until: now + half_round_trip.min(self.config.timeout / 2),
+            });
+        }
         let result = if ack.result == MavResult::ACCEPTED {
             Ok(*ack)
         } else {
@@ -391,6 +438,7 @@ impl Service for CommandClient {
                     message: f.command.to_message(f.attempts),
                 });
                 f.attempts = f.attempts.saturating_add(1);
+                f.sent_at = now;
                 f.deadline = now + self.config.timeout;
                 i += 1;
                 continue;

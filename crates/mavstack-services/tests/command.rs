@@ -538,3 +538,86 @@ fn sim_long_command_in_progress_under_loss() {
     );
     assert!(progress.len() >= 3);
 }
+
+/// PX4 1.16 acknowledges DO_SET_MODE twice, 4–8 ms apart. On a 200 ms link the second ACK
+/// of one command arrives just after the next one went: it must not answer it (the next
+/// command may be another mode, which the vehicle may refuse or never get). Its own ACK,
+/// a round trip later, does.
+#[test]
+fn the_echo_of_the_last_ack_does_not_answer_the_next_command() {
+    let mut c = CommandClient::new(GCS, CommandConfig::default());
+    let loiter = c.send(T0, VEHICLE, long(MavCmd::DO_SET_MODE, 4.0)).unwrap();
+    let accepted = ack(MavCmd::DO_SET_MODE, MavResult::ACCEPTED, 0);
+    let t1 = T0 + Duration::from_millis(200);
+    assert!(c.handle_message(t1, VEHICLE, &accepted));
+    assert_eq!(finished(&mut c).len(), 1);
+    let rtl = c.send(t1, VEHICLE, long(MavCmd::DO_SET_MODE, 5.0)).unwrap();
+    assert_ne!(loiter, rtl);
+    // The echo of the first, 8 ms later: nothing is answered.
+    let echo = t1 + Duration::from_millis(8);
+    assert!(!c.handle_message(echo, VEHICLE, &accepted));
+    assert!(finished(&mut c).is_empty());
+    // The vehicle refuses the second: that is its answer.
+    let refused = ack(MavCmd::DO_SET_MODE, MavResult::DENIED, 0);
+    assert!(c.handle_message(t1 + Duration::from_millis(200), VEHICLE, &refused));
+    let done = finished(&mut c);
+    assert_eq!(done.len(), 1);
+    assert_eq!(done[0].0, rtl);
+    assert!(matches!(
+        done[0].1,
+        Err(CommandError::Rejected {
+            result: MavResult::DENIED,
+            ..
+        })
+    ));
+}
+
+/// On a fast link whose vehicle acknowledges once (ArduPilot SITL: 5.8 ms), a command sent
+/// right after the last one is answered by its own ACK, which comes after the window (half
+/// the last round trip); another command id, or the same id from another system, has no
+/// window at all.
+#[test]
+fn the_echo_window_is_half_the_round_trip_and_per_source_and_id() {
+    let mut c = CommandClient::new(GCS, CommandConfig::default());
+    let accepted = ack(MavCmd::DO_SET_MODE, MavResult::ACCEPTED, 0);
+    c.send(T0, VEHICLE, long(MavCmd::DO_SET_MODE, 4.0)).unwrap();
+    let t1 = T0 + Duration::from_micros(5_800);
+    assert!(c.handle_message(t1, VEHICLE, &accepted));
+    c.send(t1, VEHICLE, long(MavCmd::DO_SET_MODE, 5.0)).unwrap();
+    let other = Address::new(2, 1);
+    c.send(t1, other, long(MavCmd::DO_SET_MODE, 5.0)).unwrap();
+    c.send(t1, VEHICLE, long(MavCmd::COMPONENT_ARM_DISARM, 1.0))
+        .unwrap();
+    let soon = t1 + Duration::from_millis(1);
+    assert!(c.handle_message(soon, other, &accepted));
+    assert!(c.handle_message(
+        soon,
+        VEHICLE,
+        &ack(MavCmd::COMPONENT_ARM_DISARM, MavResult::ACCEPTED, 0)
+    ));
+    assert!(!c.handle_message(soon, VEHICLE, &accepted));
+    assert!(c.handle_message(t1 + Duration::from_micros(5_800), VEHICLE, &accepted));
+    assert_eq!(finished(&mut c).len(), 4);
+}
+
+/// A command answered after IN_PROGRESS ran for seconds: that is no round trip, and the next
+/// command of that id is answered by the first ACK it gets.
+#[test]
+fn no_echo_window_after_in_progress() {
+    let mut c = CommandClient::new(GCS, CommandConfig::default());
+    c.send(T0, VEHICLE, long(MavCmd::NAV_TAKEOFF, 10.0))
+        .unwrap();
+    let t1 = T0 + Duration::from_millis(5);
+    assert!(c.handle_message(
+        t1,
+        VEHICLE,
+        &ack(MavCmd::NAV_TAKEOFF, MavResult::IN_PROGRESS, 0)
+    ));
+    let t2 = t1 + Duration::from_secs(2);
+    let done = ack(MavCmd::NAV_TAKEOFF, MavResult::ACCEPTED, 0);
+    assert!(c.handle_message(t2, VEHICLE, &done));
+    c.send(t2, VEHICLE, long(MavCmd::NAV_TAKEOFF, 10.0))
+        .unwrap();
+    assert!(c.handle_message(t2 + Duration::from_millis(5), VEHICLE, &done));
+    assert_eq!(finished(&mut c).len(), 2);
+}

@@ -690,3 +690,33 @@ fn a_stream_cut_short_is_not_asked_for_again() {
         "{asked:?}"
     );
 }
+
+/// The second pass of the stream pauses half-way (a vehicle sends its table in bursts):
+/// that the last index came in the first pass does not make the pause its end.
+#[test]
+fn a_pause_in_a_second_pass_does_not_end_it() {
+    let config = ParamConfig {
+        rerequest_batch: 16,
+        ..ParamConfig::default()
+    };
+    let (mut c, values) = list_asked(config, 1000);
+    let first = T0 + Duration::from_millis(200);
+    stream(&mut c, &values, first, Duration::from_millis(1), |i| {
+        i % 4 != 1
+    });
+    let (t, asked) = after_the_stream(&mut c);
+    assert!(
+        matches!(asked.as_slice(), [MavMessage::ParamRequestList(_)]),
+        "{asked:?}"
+    );
+    let half = stream(
+        &mut c,
+        &values[..500],
+        t + Duration::from_millis(200),
+        Duration::from_millis(1),
+        |_| true,
+    );
+    // 32 of the stream's 1 ms gaps, not the 20 ms floor of a stream that has ended.
+    let wait = c.poll_timeout().unwrap() - half;
+    assert!(wait >= Duration::from_millis(30), "{wait:?}");
+}

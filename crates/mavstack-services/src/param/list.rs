@@ -92,13 +92,17 @@ const MAX_RELISTS: u8 = 4;
 
 impl Collecting {
     /// How long the stream may pause before its gaps are re-requested: 32 of its usual
-    /// gaps (a vehicle sends its table in bursts), only 4 once the last index came (the
-    /// table goes out in index order: nothing more of the stream is on its way), at least
+    /// gaps (a vehicle sends its table in bursts), only 4 once this pass brought the last
+    /// index (the table goes out in index order: nothing more of the stream is on its way;
+    /// a value from an earlier pass says nothing of this one), at least
     /// [`Rtt::FLOOR`], at most [`ParamConfig::list_timeout`] (also before a gap is known).
     /// The round trip does not count: the stream's values are spaced by the sender, and a
     /// pause that waited for four round trips cost seconds on a slow link.
     fn stream_wait(&self, config: &ParamConfig) -> Duration {
-        let ended = self.values.last().is_some_and(Option::is_some);
+        let ended = self
+            .pass
+            .highest
+            .is_some_and(|h| usize::from(h) + 1 >= self.values.len());
         let gaps: u64 = if ended { 4 } else { 32 };
         Duration::from_micros(self.gap_us.map_or(u64::MAX, |g| g.saturating_mul(gaps)))
             .max(Rtt::FLOOR)
