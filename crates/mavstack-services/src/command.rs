@@ -252,11 +252,18 @@ pub struct CommandClient {
     out: VecDeque<Outgoing>,
     events: VecDeque<CommandEvent>,
     /// The echo windows of the final ACKs received lately (see the module docs).
-    echoes: Vec<Echo>,
+    echoes: AckEchoes,
 }
 
+/// The echo windows of the final ACKs a [`CommandClient`] took (see the module docs), for a
+/// caller that runs a client per command to hand from one to the next
+/// ([`CommandClient::with_echoes`], [`CommandClient::take_echoes`]): the echo of one
+/// command's ACK comes after that client is gone.
+#[derive(Clone, Debug, Default)]
+pub struct AckEchoes(Vec<Echo>);
+
 /// An ACK from `from` for `command` before `until` is the echo of one already taken.
-#[derive(Debug)]
+#[derive(Clone, Copy, Debug)]
 struct Echo {
     from: Address,
     command: MavCmd,
@@ -277,8 +284,20 @@ impl CommandClient {
             in_flight: Vec::new(),
             out: VecDeque::new(),
             events: VecDeque::new(),
-            echoes: Vec::new(),
+            echoes: AckEchoes::default(),
         }
+    }
+
+    /// This client, knowing the echo windows an earlier client took.
+    #[must_use]
+    pub fn with_echoes(mut self, echoes: AckEchoes) -> Self {
+        self.echoes = echoes;
+        self
+    }
+
+    /// The echo windows of the final ACKs taken so far (this client forgets them).
+    pub fn take_echoes(&mut self) -> AckEchoes {
+        core::mem::take(&mut self.echoes)
     }
 
     /// Sends `command` to `target` (its `target_*` fields are overwritten) and starts its
@@ -351,9 +370,10 @@ impl CommandClient {
         {
             return false;
         }
-        self.echoes.retain(|e| now < e.until);
+        self.echoes.0.retain(|e| now < e.until);
         if self
             .echoes
+            .0
             .iter()
             .any(|e| e.from == from && e.command == ack.command)
         {
@@ -381,11 +401,11 @@ impl CommandClient {
         // window never outlasts half a resend wait: a command it keeps from its answer is
         // answered again after its resend, past the window.
         if f.progress.is_none() {
-            if self.echoes.len() >= MAX_ECHOES {
-                self.echoes.remove(0);
+            if self.echoes.0.len() >= MAX_ECHOES {
+                self.echoes.0.remove(0);
             }
             let half_round_trip = now.saturating_duration_since(f.sent_at) / 2;
-            self.echoes.push(Echo {
+            self.echoes.0.push(Echo {
                 from,
                 command: ack.command,
                 until: now + half_round_trip.min(self.config.timeout / 2),

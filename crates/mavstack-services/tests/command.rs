@@ -621,3 +621,28 @@ fn no_echo_window_after_in_progress() {
     assert!(c.handle_message(t2 + Duration::from_millis(5), VEHICLE, &done));
     assert_eq!(finished(&mut c).len(), 2);
 }
+
+/// A caller that runs a client per command (`System` does) hands the echo windows on: the
+/// echo of the last command's ACK comes after its client is gone.
+#[test]
+fn echo_windows_pass_from_one_client_to_the_next() {
+    let accepted = ack(MavCmd::DO_SET_MODE, MavResult::ACCEPTED, 0);
+    let mut first = CommandClient::new(GCS, CommandConfig::default());
+    first
+        .send(T0, VEHICLE, long(MavCmd::DO_SET_MODE, 4.0))
+        .unwrap();
+    let t1 = T0 + Duration::from_millis(200);
+    assert!(first.handle_message(t1, VEHICLE, &accepted));
+    let mut next =
+        CommandClient::new(GCS, CommandConfig::default()).with_echoes(first.take_echoes());
+    next.send(t1, VEHICLE, long(MavCmd::DO_SET_MODE, 5.0))
+        .unwrap();
+    assert!(!next.handle_message(t1 + Duration::from_millis(8), VEHICLE, &accepted));
+    assert!(next.handle_message(t1 + Duration::from_millis(200), VEHICLE, &accepted));
+    // Without them, the echo answers.
+    let mut forgetful = CommandClient::new(GCS, CommandConfig::default());
+    forgetful
+        .send(t1, VEHICLE, long(MavCmd::DO_SET_MODE, 5.0))
+        .unwrap();
+    assert!(forgetful.handle_message(t1 + Duration::from_millis(8), VEHICLE, &accepted));
+}

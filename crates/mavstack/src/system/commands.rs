@@ -231,13 +231,14 @@ impl Commands {
         let id = command.id();
         let said_before = system.said_count();
         let result = {
-            let _one = system.inner.locks.commands.lock().await;
+            let mut echoes = system.inner.locks.commands.lock().await;
             let mut frames = system.frames().await;
-            let mut client = CommandClient::new(system.inner.own, CommandConfig::default());
+            let mut client = CommandClient::new(system.inner.own, CommandConfig::default())
+                .with_echoes(core::mem::take(&mut *echoes));
             let handle = client
                 .send(clock::now(), system.inner.target, command)
                 .map_err(|e| SystemError::Busy(e.to_string()))?;
-            run::drive(
+            let result = run::drive(
                 &system.inner,
                 &mut frames,
                 &mut client,
@@ -256,7 +257,9 @@ impl Commands {
                     })
                 },
             )
-            .await?
+            .await;
+            *echoes = client.take_echoes();
+            result?
         };
         match result {
             Ok(ack) => Ok(ack),

@@ -168,7 +168,9 @@ struct Locks {
     mission: tokio::sync::Mutex<()>,
     ftp: tokio::sync::Mutex<()>,
     logs: tokio::sync::Mutex<()>,
-    commands: tokio::sync::Mutex<()>,
+    /// One command exchange at a time; the echo windows of the ACKs taken, from one to the
+    /// next (PX4 acknowledges DO_SET_MODE twice: see `mavstack_services::command`).
+    commands: tokio::sync::Mutex<mavstack_services::command::AckEchoes>,
     /// The system has one shell.
     shell: tokio::sync::Mutex<()>,
     /// GPS_RTCM_DATA's sequence ids, held while a message's fragments go out.
