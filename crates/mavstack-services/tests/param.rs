@@ -654,6 +654,16 @@ fn a_fast_lossy_stream_is_asked_for_again_whole() {
     }
 }
 
+/// Every message of `asked` is a PARAM_REQUEST_READ (the gaps go one by one).
+fn assert_reads_only(asked: &[MavMessage]) {
+    assert!(
+        asked
+            .iter()
+            .all(|m| matches!(m, MavMessage::ParamRequestRead(_))),
+        "{asked:?}"
+    );
+}
+
 /// A telemetry radio: the table takes two seconds to stream and 5 % of it is lost. The
 /// gaps go one by one; a second pass would cost more than they do.
 #[test]
@@ -665,12 +675,7 @@ fn a_slow_stream_has_its_gaps_asked_for_one_by_one() {
     });
     let (_, asked) = after_the_stream(&mut c);
     assert_eq!(asked.len(), 10, "{asked:?}");
-    assert!(
-        asked
-            .iter()
-            .all(|m| matches!(m, MavMessage::ParamRequestRead(_))),
-        "{asked:?}"
-    );
+    assert_reads_only(&asked);
 }
 
 /// A fast, lossy stream that stopped half-way (the vehicle was busy, a relay paused): it
@@ -688,12 +693,7 @@ fn a_stream_cut_short_is_not_asked_for_again() {
     );
     let (_, asked) = after_the_stream(&mut c);
     assert!(!asked.is_empty());
-    assert!(
-        asked
-            .iter()
-            .all(|m| matches!(m, MavMessage::ParamRequestRead(_))),
-        "{asked:?}"
-    );
+    assert_reads_only(&asked);
 }
 
 /// The second pass of the stream pauses half-way (a vehicle sends its table in bursts):
