@@ -273,6 +273,29 @@ struct Echo {
 /// The most echo windows kept at once (one per source and command id; the oldest go first).
 const MAX_ECHOES: usize = 32;
 
+impl AckEchoes {
+    /// Whether an ACK from `from` for `command` at `now` is the echo of one already taken
+    /// (windows that have closed are forgotten).
+    fn covers(&mut self, now: Instant, from: Address, command: MavCmd) -> bool {
+        self.0.retain(|e| now < e.until);
+        self.0
+            .iter()
+            .any(|e| e.from == from && e.command == command)
+    }
+
+    /// Opens the window of a final ACK from `from` for `command`, until `until`.
+    fn open(&mut self, from: Address, command: MavCmd, until: Instant) {
+        if self.0.len() >= MAX_ECHOES {
+            self.0.remove(0);
+        }
+        self.0.push(Echo {
+            from,
+            command,
+            until,
+        });
+    }
+}
+
 impl CommandClient {
     /// A client sending as `own` (its ids recognise ACKs addressed to us).
     #[must_use]
@@ -370,13 +393,7 @@ impl CommandClient {
         {
             return false;
         }
-        self.echoes.0.retain(|e| now < e.until);
-        if self
-            .echoes
-            .0
-            .iter()
-            .any(|e| e.from == from && e.command == ack.command)
-        {
+        if self.echoes.covers(now, from, ack.command) {
             return false;
         }
         let Some(i) = self
@@ -401,15 +418,9 @@ impl CommandClient {
         // window never outlasts half a resend wait: a command it keeps from its answer is
         // answered again after its resend, past the window.
         if f.progress.is_none() {
-            if self.echoes.0.len() >= MAX_ECHOES {
-                self.echoes.0.remove(0);
-            }
             let half_round_trip = now.saturating_duration_since(f.sent_at) / 2;
-            self.echoes.0.push(Echo {
-                from,
-                command: ack.command,
-                until: now + half_round_trip.min(self.config.timeout / 2),
-            });
+            let until = now + half_round_trip.min(self.config.timeout / 2);
+            self.echoes.open(from, ack.command, until);
         }
         let result = if ack.result == MavResult::ACCEPTED {
             Ok(*ack)

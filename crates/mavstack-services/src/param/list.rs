@@ -86,6 +86,16 @@ struct Pass {
     highest: Option<u16>,
 }
 
+impl Pass {
+    /// A value of the stream at `index`; `new` when it was missing.
+    fn saw(&mut self, index: u16, new: bool) {
+        self.highest = self.highest.max(Some(index));
+        if new {
+            self.brought += 1;
+        }
+    }
+}
+
 /// How many times a fetch asks for the whole list again at most (see
 /// [`Collecting::relist_pays`]).
 const MAX_RELISTS: u8 = 4;
@@ -290,18 +300,18 @@ impl Collecting {
             };
             return again.on_value(now, v, config, out);
         }
-        if let Some(slot) = self.values.get_mut(usize::from(v.index))
+        let new = if let Some(slot) = self.values.get_mut(usize::from(v.index))
             && self.missing.remove(&v.index)
         {
             *slot = Some((v.name, v.value));
             self.progressed = true;
             self.highest = self.highest.max(Some(v.index));
-            if !self.rerequesting {
-                self.pass.brought += 1;
-            }
-        }
+            true
+        } else {
+            false
+        };
         if !self.rerequesting {
-            self.pass.highest = self.pass.highest.max(Some(v.index));
+            self.pass.saw(v.index, new);
         }
         // An answered re-request frees its place for the next gap (a sliding window).
         if let Some((sent, no_sample)) = self.outstanding.remove(&v.index) {
