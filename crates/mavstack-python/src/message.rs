@@ -137,28 +137,47 @@ impl Header {
     }
 }
 
-/// Where a [`Message`]'s frame is: in the log it was read from (shared, not copied), or in
-/// the message itself (a live link's frame: no allocation of its own).
-// The frame inline is the point: a live message costs no allocation besides its object.
-#[allow(clippy::large_enum_variant)]
+/// The longest frame a live message keeps inside itself: most telemetry (ATTITUDE and
+/// GLOBAL_POSITION_INT are 40 bytes in MAVLink 2) fits, so the object stays small; a longer
+/// frame is boxed.
+const INLINE_FRAME: usize = 80;
+
+/// Where a [`Message`]'s frame is: in the log it was read from (shared, not copied), in the
+/// message itself (a live link's frame of up to [`INLINE_FRAME`] bytes: no allocation of its
+/// own), or boxed (a longer one).
 enum FrameBytes {
     Log {
         log: Arc<LogBytes>,
         start: usize,
         len: usize,
     },
-    Own {
-        buf: [u8; MAX_FRAME_LEN],
-        len: u16,
+    Inline {
+        buf: [u8; INLINE_FRAME],
+        len: u8,
     },
+    Boxed(Box<[u8]>),
 }
 
 impl FrameBytes {
+    /// A copy of `frame` (at most a MAVLink frame's length of it).
+    fn copy_of(frame: &[u8]) -> Self {
+        let frame = &frame[..frame.len().min(MAX_FRAME_LEN)];
+        match u8::try_from(frame.len()) {
+            Ok(len) if frame.len() <= INLINE_FRAME => {
+                let mut buf = [0; INLINE_FRAME];
+                buf[..frame.len()].copy_from_slice(frame);
+                Self::Inline { buf, len }
+            }
+            _ => Self::Boxed(frame.into()),
+        }
+    }
+
     /// The frame's bytes.
     fn get(&self) -> &[u8] {
         match self {
             Self::Log { log, start, len } => &log[*start..*start + *len],
-            Self::Own { buf, len } => &buf[..usize::from(*len)],
+            Self::Inline { buf, len } => &buf[..usize::from(*len)],
+            Self::Boxed(b) => b,
         }
     }
 }
@@ -204,15 +223,9 @@ impl Message {
     /// `frame`, `timestamp` its arrival in seconds since the Unix epoch (pymavlink's
     /// `time.time()` at receipt), `verified` whether its signature was checked with a key.
     pub(crate) fn live(ty: Arc<MessageType>, frame: &[u8], timestamp: f64, verified: bool) -> Self {
-        let len = frame.len().min(MAX_FRAME_LEN);
-        let mut buf = [0; MAX_FRAME_LEN];
-        buf[..len].copy_from_slice(&frame[..len]);
         Self {
             ty,
-            bytes: FrameBytes::Own {
-                buf,
-                len: len as u16,
-            },
+            bytes: FrameBytes::copy_of(frame),
             verified,
             timestamp,
             link: 0,

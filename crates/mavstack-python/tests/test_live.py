@@ -448,3 +448,46 @@ def test_messages_hold_what_recv_match_filtered_out_as_pymavlinks_do():
     finally:
         for c in conns:
             c.close()
+
+
+def test_live_frames_short_and_long_come_whole():
+    """A live message keeps a short frame inside itself and a long one apart: frames on
+    both sides of that line (80 and 81 bytes), the longest (280, signed) and a 40-byte
+    ATTITUDE come back byte for byte and decode as pymavlink decodes them. The timeouts
+    are ints, as scripts write them."""
+    port = free_port()
+    conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % port)
+    enc = apm.MAVLink(None, srcSystem=1, srcComponent=1)
+    signer = apm.MAVLink(None, srcSystem=1, srcComponent=1)
+    signer.signing.secret_key = bytes(range(32))
+    signer.signing.sign_outgoing = True
+    out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+
+    def rtcm(n):
+        # Every data byte non-zero: MAVLink 2 keeps the payload's 2 + n bytes.
+        return enc.gps_rtcm_data_encode(0, n, [1 + i % 200 for i in range(n)] + [0] * (180 - n))
+
+    frames = [bytes(enc.attitude_encode(7, 0.1, 0.2, 0.3, 0.01, 0.02, 0.03).pack(enc)),
+              bytes(rtcm(66).pack(enc)), bytes(rtcm(67).pack(enc)),
+              bytes(signer.encapsulated_data_encode(9, [255 - i % 250 for i in range(253)]).pack(signer))]
+    assert [len(f) for f in frames] == [40, 80, 81, 280]
+    try:
+        assert conn.recv_match(blocking=True, timeout=0) is None
+        # A vehicle's HEARTBEAT makes system 1 the target, whose latest messages
+        # `messages` holds.
+        out.sendto(bytes(enc.heartbeat_encode(2, 3, 81, 4, 4).pack(enc)), ("127.0.0.1", port))
+        assert conn.recv_match(type="HEARTBEAT", blocking=True, timeout=5) is not None
+        for f in frames:
+            out.sendto(f, ("127.0.0.1", port))
+            m = conn.recv_match(blocking=True, timeout=5)
+            assert m is not None, len(f)
+            assert bytes(m.get_msgbuf()) == f
+            ref = apm.MAVLink(None)
+            if len(f) == 280:
+                ref.signing.secret_key = bytes(range(32))
+            expected = ref.parse_char(f)
+            assert m.to_dict() == expected.to_dict(), len(f)
+            assert conn.messages[m.get_type()].get_msgbuf() == m.get_msgbuf()
+    finally:
+        out.close()
+        conn.close()

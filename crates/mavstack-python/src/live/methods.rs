@@ -19,7 +19,7 @@ use pyo3::types::{PyDict, PyTuple};
 
 use super::fields::encode_payload;
 use super::heartbeat::ardupilot_modes;
-use super::receive::{Deadline, Posted};
+use super::receive::{Deadline, Posted, Seconds};
 use super::{CUSTOM_MODE_ENABLED, LiveLink, lock, runtime, unix_now};
 use crate::message::Message;
 
@@ -52,7 +52,7 @@ impl LiveLink {
         condition: Option<&str>,
         r#type: Option<&Bound<'_, PyAny>>,
         blocking: bool,
-        timeout: Option<f64>,
+        timeout: Option<Seconds>,
     ) -> PyResult<Option<Py<Message>>> {
         let deadline = Deadline::after(timeout);
         let mut rx = lock(py, &self.frames);

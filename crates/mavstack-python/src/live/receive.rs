@@ -20,6 +20,7 @@ use mavstack::router::LinkId;
 use mavstack::{BatchFrame, BatchSubscription, BatchWait, FrameBatch};
 use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
+use pyo3::types::PyInt;
 
 use super::heartbeat::{heartbeat_fields, mode_string, probably_vehicle};
 use super::{LiveLink, SAFETY_ARMED, SIGNAL_CHECK, State, SystemState, lock, unix_now};
@@ -69,6 +70,25 @@ pub(super) struct RawFrame {
     marked: bool,
 }
 
+/// A timeout argument in seconds: a float, or an int read without the float object that
+/// Python's own conversion would make for it (`timeout=1` is the common spelling).
+pub(super) struct Seconds(f64);
+
+impl<'py> FromPyObject<'_, 'py> for Seconds {
+    type Error = PyErr;
+
+    fn extract(obj: Borrowed<'_, 'py, PyAny>) -> PyResult<Self> {
+        if let Ok(int) = obj.cast::<PyInt>()
+            && let Ok(n) = int.extract::<i64>()
+        {
+            // Seconds as a count: exact far beyond any timeout anyone waits.
+            #[allow(clippy::cast_precision_loss)]
+            return Ok(Self(n as f64));
+        }
+        obj.extract::<f64>().map(Self)
+    }
+}
+
 /// A receive call's timeout. Its deadline is read from the clock only when first needed, at
 /// the first wait or the first new batch: most calls find their message waiting and never
 /// look. The timeout then runs from that moment, at most one batch's frames after the call.
@@ -80,8 +100,11 @@ pub(super) struct Deadline {
 
 impl Deadline {
     /// `timeout` seconds (none: wait forever; negative: no wait).
-    pub(super) const fn after(timeout: Option<f64>) -> Self {
-        Self { timeout, at: None }
+    pub(super) fn after(timeout: Option<Seconds>) -> Self {
+        Self {
+            timeout: timeout.map(|s| s.0),
+            at: None,
+        }
     }
 
     /// The deadline, read from the clock the first time; none for a timeout too long for a
