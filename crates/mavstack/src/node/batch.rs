@@ -3,16 +3,18 @@
 //! lowest cost per frame.
 //!
 //! ```text
-//!  driver turn: the router's LocalFrames ─copy─► staging FrameBatch (the driver's, no lock)
+//!  driver turn: the router's LocalFrames ─────► staging FrameBatch (the driver's, no lock;
+//!               swapped whole for a lone reader, else copied)
 //!  end of the turn: one lock ─► pending FrameBatch (swapped whole when the reader took the
 //!                               last one, else appended) ─► one wake-up if the reader waits
 //!  reader: one lock ─► pending swapped whole with its own (emptied) batch
 //! ```
 //!
 //! A batch is the router's [`LocalFrames`]: one byte arena holding the frames back to back
-//! and an index. The three batches (the driver's staging one, the pending one and the
+//! and an index. The batches (the router's, the driver's staging one, the pending one and the
 //! reader's) change hands whole, so once they have grown to the stream's burst size nothing
-//! is allocated, and a frame's bytes are copied once on the way (into the arena). The reader
+//! is allocated, and for a lone reader a frame's bytes are copied once on the way (into the
+//! router's arena; once more into the staging one when other readers share it). The reader
 //! is woken (a condition variable) only when it waits, once per batch.
 //!
 //! [`NodeHandle::subscribe_batched`]: super::NodeHandle::subscribe_batched
@@ -140,6 +142,17 @@ impl BatchSink {
         }
     }
 
+    /// Stages every frame of `frames`, leaving it empty: the whole batch changes hands when
+    /// nothing is staged yet (the usual case: one turn's frames), else each is copied.
+    pub(super) fn stage_all(&mut self, frames: &mut FrameBatch) {
+        if self.staging.is_empty() {
+            core::mem::swap(&mut self.staging, frames);
+        } else {
+            self.lost += self.staging.append(frames);
+            frames.clear();
+        }
+    }
+
     /// Hands what was staged to the reader, waking it if it waits; how many frames were
     /// lost (the reader was more than [`BATCH_DEPTH`] frames behind).
     pub(super) fn publish(&mut self) -> u64 {
@@ -245,6 +258,26 @@ mod tests {
             sub.wait(&mut batch, Duration::from_secs(5)),
             BatchWait::Closed
         );
+    }
+
+    #[test]
+    fn a_turns_frames_staged_whole_keep_their_order_behind_those_already_staged() {
+        let (mut sink, mut sub) = BatchSink::new();
+        let mut turn = FrameBatch::new();
+        for seq in 0..2 {
+            assert!(turn.push(LinkId::new(1), &received(seq)));
+        }
+        sink.stage_all(&mut turn);
+        assert!(turn.is_empty(), "the frames were handed over");
+        // Staged again before a publish: appended behind.
+        assert!(turn.push(LinkId::new(1), &received(2)));
+        sink.stage_all(&mut turn);
+        assert!(turn.is_empty());
+        assert_eq!(sink.publish(), 0);
+        let mut batch = FrameBatch::new();
+        assert_eq!(sub.wait(&mut batch, Duration::ZERO), BatchWait::Frames);
+        assert_eq!(seqs(&batch), [0, 1, 2]);
+        assert_eq!(batch.get(2).map(|f| f.link), Some(LinkId::new(1)));
     }
 
     #[test]

@@ -391,10 +391,16 @@ impl Driver {
 
     /// Hands the frames for the node (the router's local frames) to the traffic log, the
     /// batch subscribers and the subscribers, each frame copied once per batch and once per
-    /// subscriber.
+    /// subscriber (none for a batch subscriber alone).
     fn deliver_local(&mut self) {
         let mut local = core::mem::take(&mut self.local);
         self.router.take_local(&mut local);
+        if self.log.is_none() && self.subscribers.is_empty() && self.batches.len() == 1 {
+            // A batch reader alone (a Python connection): the frames change hands whole.
+            self.batches[0].stage_all(&mut local);
+            self.local = local;
+            return;
+        }
         for frame in local.iter() {
             if let Some(log) = &mut self.log {
                 let slot = self.owners.get(frame.link.index()).copied().flatten();
