@@ -10,7 +10,8 @@ to a UDP port read by a thread of the same process (how many arrive is printed);
 the CPU seconds of the process. `--latency`: instead, a sender writes one SYSTEM_TIME every
 5 ms stamped with its time.monotonic_ns() (in time_unix_usec) just before sendto; the receiver
 subtracts the stamp from time.monotonic_ns() as soon as recv_match returns: p50 and p99 from the
-frame given to the socket to Python holding the message, one at a time, for each receiver. Usage:
+frame given to the socket to Python holding the message, one at a time, for each receiver, and
+the receiving process's CPU time per message at that rate (200 a second). Usage:
     bench_live.py [--seconds 5] [--pack 1] [--latency]
 """
 
@@ -60,15 +61,17 @@ def latency_receive(which, port, seconds):
     conn = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % port)
     conn.recv_match(type="SYSTEM_TIME", blocking=True, timeout=10)
     lat = []
-    t0 = time.time()
+    t0, c0 = time.time(), time.process_time()
     while time.time() - t0 < seconds:
         m = conn.recv_match(type="SYSTEM_TIME", blocking=True, timeout=1)
         now = time.monotonic_ns()
         if m is not None:
             lat.append(now - m.time_unix_usec)
+    cpu = time.process_time() - c0
     conn.close()
     lat.sort()
-    print("%s %d %.1f %.1f" % (which, len(lat), lat[len(lat) // 2] / 1000, lat[int(len(lat) * 0.99)] / 1000))
+    print("%s %d %.1f %.1f %.1f" % (which, len(lat), lat[len(lat) // 2] / 1000, lat[int(len(lat) * 0.99)] / 1000,
+                                    cpu / max(len(lat), 1) * 1e6))
 
 
 def receive(which, port, seconds):
@@ -141,8 +144,9 @@ def latency(seconds):
         out = recv.communicate()[0].split()
         send.kill()
         send.wait()
-        _, n, p50, p99 = out
-        print("latency %-9s %6d messages one at a time: p50 %7.1f us, p99 %7.1f us" % (which, int(n), float(p50), float(p99)))
+        _, n, p50, p99, cpu = out
+        print("latency %-9s %6d messages one at a time: p50 %7.1f us, p99 %7.1f us, CPU %6.1f us per message"
+              % (which, int(n), float(p50), float(p99), float(cpu)))
 
 
 def main():

@@ -76,6 +76,11 @@ impl Waiter {
         Ok(())
     }
 
+    /// The `epoll` itself (readable when the thread has something to wake for).
+    pub(crate) fn poll_fd(&self) -> BorrowedFd<'_> {
+        self.epoll.0.as_fd()
+    }
+
     /// The waker to poll the runtime's side (tasks' queues, the command queue) with.
     pub(crate) const fn waker(&self) -> &core::task::Waker {
         &self.waker

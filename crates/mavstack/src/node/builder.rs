@@ -330,6 +330,8 @@ impl NodeBuilder {
             pending: Vec::new(),
             taps: self.taps,
             moderation: Moderation::new(self.moderation, clock::now()),
+            #[cfg(target_os = "linux")]
+            reader_poll: None,
             heartbeat: self.heartbeat.map(|(payload, period)| Heartbeat {
                 payload,
                 period,

@@ -53,6 +53,13 @@ pub(super) struct Driver {
     pub(super) taps: Vec<mpsc::Sender<Tapped>>,
     pub(super) heartbeat: Option<Heartbeat>,
     pub(super) moderation: Moderation,
+    /// On a thread of its own: that thread's poll and its "waiting, input sparse" flag, for
+    /// the batch readers to wait beside it (see `batch`).
+    #[cfg(target_os = "linux")]
+    pub(super) reader_poll: Option<(
+        std::os::fd::OwnedFd,
+        std::sync::Arc<core::sync::atomic::AtomicBool>,
+    )>,
 }
 
 /// What a driver turn leaves to do.
@@ -273,6 +280,15 @@ impl Driver {
                 let _ = done.send(());
             }
             Some(Some(Command::SubscribeBatched(sink, done))) => {
+                #[cfg(target_os = "linux")]
+                if let Some((poll, idle)) = &self.reader_poll {
+                    use std::os::fd::AsFd as _;
+                    match super::batch::NodeInput::new(poll.as_fd(), idle) {
+                        Ok(input) => sink.watch_node(input),
+                        // It waits as any other reader: woken by this thread.
+                        Err(e) => tracing::debug!("a batch reader cannot watch the poll: {e}"),
+                    }
+                }
                 self.batches.push(sink);
                 let _ = done.send(());
             }

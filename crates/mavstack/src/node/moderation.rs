@@ -27,6 +27,11 @@ pub enum InputModeration {
 /// many frames instead of one each, at the price of at most [`Moderation::PAUSE`] of added
 /// latency while the stream lasts. Below [`Moderation::CALM_BELOW`] a second it reads each
 /// datagram as it comes.
+///
+/// The same measure says when the input is sparse (under [`Moderation::SPARSE_BELOW`] a
+/// second, until it passes [`Moderation::DENSE_ABOVE`]): then a batch reader may wait beside
+/// the node's thread, spending a little processor time per datagram for a faster hand-over
+/// (see `batch`).
 #[derive(Debug)]
 pub(super) struct Moderation {
     pub(super) mode: InputModeration,
@@ -34,6 +39,7 @@ pub(super) struct Moderation {
     pub(super) since: Instant,
     pub(super) inputs: u64,
     pub(super) busy: bool,
+    pub(super) sparse: bool,
 }
 
 impl Moderation {
@@ -41,6 +47,10 @@ impl Moderation {
     pub(super) const BUSY_ABOVE: u64 = 5_000;
     /// Inputs per second under which it stops.
     pub(super) const CALM_BELOW: u64 = 2_500;
+    /// Inputs per second under which the input is sparse.
+    pub(super) const SPARSE_BELOW: u64 = 300;
+    /// Inputs per second from which it is no longer.
+    pub(super) const DENSE_ABOVE: u64 = 600;
     /// How often the rate is measured (a stream that stops is seen within this).
     pub(super) const MEASURE: Duration = Duration::from_millis(10);
     /// The wait (tokio's timers tick in milliseconds).
@@ -55,6 +65,7 @@ impl Moderation {
             since: now,
             inputs: 0,
             busy: false,
+            sparse: true,
         }
     }
 
@@ -77,6 +88,11 @@ impl Moderation {
             } else {
                 per_s > Self::BUSY_ABOVE
             };
+            self.sparse = if self.sparse {
+                per_s <= Self::DENSE_ABOVE
+            } else {
+                per_s < Self::SPARSE_BELOW
+            };
             self.since = now;
             self.inputs = 0;
         }
@@ -87,6 +103,26 @@ impl Moderation {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_input_is_sparse_below_300_a_second_until_it_passes_600() {
+        let t0 = Instant::from_secs(1);
+        let ms = Duration::from_millis;
+        let mut m = Moderation::new(InputModeration::Timer, t0);
+        assert!(m.sparse, "nothing yet");
+        m.inputs = 5; // 500/s: still, by hysteresis
+        m.busy(t0 + ms(10));
+        assert!(m.sparse);
+        m.inputs = 7; // 700/s
+        m.busy(t0 + ms(20));
+        assert!(!m.sparse);
+        m.inputs = 4; // 400/s: not yet
+        m.busy(t0 + ms(30));
+        assert!(!m.sparse);
+        m.inputs = 2; // 200/s
+        m.busy(t0 + ms(40));
+        assert!(m.sparse);
+    }
 
     #[test]
     pub(super) fn moderation_starts_above_5000_inputs_a_second_and_stops_below_2500() {
@@ -106,6 +142,7 @@ mod tests {
         assert!(m.busy(t0 + ms(50)));
         m.inputs = 1;
         assert!(!m.busy(t0 + ms(1050)));
+        assert!(m.sparse, "one input in a second");
         let mut off = Moderation::new(InputModeration::Off, t0);
         off.inputs = 1_000;
         assert!(!off.busy(t0 + ms(10)));
