@@ -496,6 +496,21 @@ mod tests {
         rx
     }
 
+    /// Publishes one frame with sequence number `seq`, as a driver turn does.
+    #[cfg(target_os = "linux")]
+    fn publish_one(sink: &mut BatchSink, seq: u8) {
+        push(sink, LinkId::new(0), &received(seq));
+        assert_eq!(sink.publish(), 0);
+    }
+
+    /// What the waiting reader got, given a minute.
+    #[cfg(target_os = "linux")]
+    fn got(
+        result: &std::sync::mpsc::Receiver<(BatchWait, Vec<u8>)>,
+    ) -> Result<(BatchWait, Vec<u8>), std::sync::mpsc::RecvTimeoutError> {
+        result.recv_timeout(Duration::from_secs(60))
+    }
+
     #[cfg(target_os = "linux")]
     #[test]
     fn looking_beside_the_node_is_held_to_a_twentieth_of_the_time() {
@@ -521,10 +536,8 @@ mod tests {
         // The datagram wakes the node's poll; the node's thread reads it and publishes.
         poll.write(1).expect("readable");
         idle.store(false, Ordering::Release);
-        push(&mut sink, LinkId::new(0), &received(9));
-        assert_eq!(sink.publish(), 0);
-        let got = result.recv_timeout(Duration::from_secs(60));
-        assert_eq!(got, Ok((BatchWait::Frames, vec![9])));
+        publish_one(&mut sink, 9);
+        assert_eq!(got(&result), Ok((BatchWait::Frames, vec![9])));
     }
 
     #[cfg(target_os = "linux")]
@@ -535,10 +548,8 @@ mod tests {
         let (mut sink, sub, _poll, _idle) = beside_an_idle_node();
         let result = waiting(sub);
         std::thread::sleep(Duration::from_millis(20));
-        push(&mut sink, LinkId::new(0), &received(5));
-        assert_eq!(sink.publish(), 0);
-        let got = result.recv_timeout(Duration::from_secs(60));
-        assert_eq!(got, Ok((BatchWait::Frames, vec![5])));
+        publish_one(&mut sink, 5);
+        assert_eq!(got(&result), Ok((BatchWait::Frames, vec![5])));
     }
 
     #[cfg(target_os = "linux")]
@@ -549,8 +560,7 @@ mod tests {
         // Its poll never becomes readable: the stop alone must end the ten minutes' wait.
         std::thread::sleep(Duration::from_millis(20));
         drop(sink);
-        let got = result.recv_timeout(Duration::from_secs(60));
-        assert_eq!(got, Ok((BatchWait::Closed, vec![])));
+        assert_eq!(got(&result), Ok((BatchWait::Closed, vec![])));
     }
 
     #[cfg(target_os = "linux")]
@@ -562,10 +572,8 @@ mod tests {
         poll.write(1).expect("readable");
         let result = waiting(sub);
         std::thread::sleep(NodeInput::SPIN * 4);
-        push(&mut sink, LinkId::new(0), &received(3));
-        assert_eq!(sink.publish(), 0);
-        let got = result.recv_timeout(Duration::from_secs(60));
-        assert_eq!(got, Ok((BatchWait::Frames, vec![3])));
+        publish_one(&mut sink, 3);
+        assert_eq!(got(&result), Ok((BatchWait::Frames, vec![3])));
     }
 
     #[test]
