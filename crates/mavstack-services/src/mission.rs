@@ -17,7 +17,9 @@
 //! Every wait resends its last message on timeout ([`MissionConfig`]: 1.5 s, 250 ms while
 //! items flow, 5 retries, the digest's recommended values) and then gives up. A MISSION_ACK
 //! with an error ends the transfer with [`MissionError::Rejected`]; timeouts are
-//! [`MissionError::TimedOut`].
+//! [`MissionError::TimedOut`]. One exception: an upload the vehicle refuses to start as busy
+//! (ERROR or DENIED to the count, before any request: another transfer is open) is asked for
+//! again every half second for up to [`BUSY_WAIT`].
 //!
 //! **Server** ([`MissionServer`]) stores the three plans. An upload replaces a plan only
 //! when it is complete (atomic); out-of-sequence items are dropped and the expected one is
@@ -271,7 +273,7 @@ pub mod transfer;
 mod client;
 mod server;
 
-pub use client::MissionClient;
+pub use client::{BUSY_WAIT, MissionClient};
 pub use server::{MissionServer, MissionServerEvent};
 
 fn ack(target: Address, mission_type: MavMissionType, result: MavMissionResult) -> MavMessage {

@@ -906,3 +906,91 @@ fn the_read_back_of_an_unconfirmed_upload_starts_where_the_autopilot_allows() {
         0
     );
 }
+
+/// A vehicle busy with another transfer refuses to start the upload (PX4: MISSION_ACK ERROR
+/// to the count while a download is open or another link transfers; ArduPilot: DENIED while
+/// another ground station uploads): the count goes again after a pause, and the upload runs
+/// once the vehicle asks for items. A refusal that lasts past `BUSY_WAIT`, or one that is not
+/// about being busy (NO_SPACE), ends it.
+#[test]
+fn an_upload_the_vehicle_refuses_to_start_as_busy_is_asked_for_again() {
+    use mavstack_services::mission::BUSY_WAIT;
+    let count = |c: &mut MissionClient| {
+        matches!(
+            c.poll_transmit().map(|o| o.message),
+            Some(MavMessage::MissionCount(MissionCount { count: 2, .. }))
+        )
+    };
+    let rejected = |result| {
+        Some(MissionEvent::Uploaded {
+            mission_type: MavMissionType::MISSION,
+            result: Err(MissionError::Rejected { result }),
+        })
+    };
+    for busy in [
+        MavMissionResult::MAV_MISSION_ERROR,
+        MavMissionResult::MAV_MISSION_DENIED,
+    ] {
+        let mut c = MissionClient::new(GCS, MissionConfig::default());
+        c.upload(T0, VEHICLE, MavMissionType::MISSION, items(2))
+            .unwrap();
+        assert!(count(&mut c));
+        let mut t = T0;
+        for _ in 0..3 {
+            c.handle_message(t, VEHICLE, &ack_to_gcs(busy));
+            assert_eq!(c.poll_event(), None, "not the end: {busy:?}");
+            assert!(c.poll_transmit().is_none(), "nothing before the pause");
+            t = c.poll_timeout().unwrap();
+            assert!(t < T0 + BUSY_WAIT);
+            c.handle_timeout(t);
+            assert!(count(&mut c), "the count again");
+        }
+        c.handle_message(t, VEHICLE, &request_to_gcs(0));
+        c.handle_message(t, VEHICLE, &request_to_gcs(1));
+        let sent: Vec<u16> = core::iter::from_fn(|| c.poll_transmit())
+            .filter_map(|o| match o.message {
+                MavMessage::MissionItemInt(i) => Some(i.seq),
+                _ => None,
+            })
+            .collect();
+        assert!(sent.contains(&0) && sent.contains(&1), "{sent:?}");
+        c.handle_message(
+            t,
+            VEHICLE,
+            &ack_to_gcs(MavMissionResult::MAV_MISSION_ACCEPTED),
+        );
+        assert_uploaded(&mut c);
+
+        // Busy for good: asked again until BUSY_WAIT has passed, then the refusal stands.
+        let mut c = MissionClient::new(GCS, MissionConfig::default());
+        c.upload(T0, VEHICLE, MavMissionType::MISSION, items(2))
+            .unwrap();
+        let mut t = T0;
+        let mut counts = 0;
+        while count(&mut c) {
+            counts += 1;
+            c.handle_message(t, VEHICLE, &ack_to_gcs(busy));
+            if let Some(e) = c.poll_event() {
+                assert_eq!(Some(e), rejected(busy));
+                break;
+            }
+            t = c.poll_timeout().unwrap();
+            c.handle_timeout(t);
+        }
+        assert!(t >= T0 + BUSY_WAIT && counts > 10, "{counts} counts");
+    }
+    // Not about being busy: at once.
+    let mut c = MissionClient::new(GCS, MissionConfig::default());
+    c.upload(T0, VEHICLE, MavMissionType::MISSION, items(2))
+        .unwrap();
+    assert!(count(&mut c));
+    c.handle_message(
+        T0,
+        VEHICLE,
+        &ack_to_gcs(MavMissionResult::MAV_MISSION_NO_SPACE),
+    );
+    assert_eq!(
+        c.poll_event(),
+        rejected(MavMissionResult::MAV_MISSION_NO_SPACE)
+    );
+}

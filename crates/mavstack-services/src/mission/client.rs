@@ -21,6 +21,13 @@ use super::{
 use crate::rtt::Rtt;
 use crate::{Address, Outgoing, Service};
 
+/// How long an upload the vehicle refuses to start as busy is asked for again: longer than
+/// PX4 keeps another transfer open without news (5 s) and ArduPilot another ground station's
+/// upload (8 s).
+pub const BUSY_WAIT: Duration = Duration::from_secs(10);
+/// The pause before asking a busy vehicle again.
+const BUSY_PAUSE: Duration = Duration::from_millis(500);
+
 #[derive(Debug)]
 enum Op {
     Upload(Upload),
@@ -355,6 +362,26 @@ impl MissionClient {
                     return self.step(now, r, &wanted);
                 }
                 return (Some(r), true);
+            }
+            if let Op::Upload(Upload::AwaitingRequest(s)) = &mut r.op
+                && s.last.is_none()
+                && s.sent_ever == 0
+                && !s.items.is_empty()
+                && matches!(
+                    a.r#type,
+                    MavMissionResult::MAV_MISSION_ERROR | MavMissionResult::MAV_MISSION_DENIED
+                )
+            {
+                // A refusal to start: PX4 answers ERROR while a transfer is open (a download
+                // on this link, any transfer on another) until it ends or 5 s pass without
+                // news; ArduPilot DENIED while another ground station uploads. The count goes
+                // again after a pause, until BUSY_WAIT has passed since the first refusal.
+                let until = *s.busy_until.get_or_insert(now + BUSY_WAIT);
+                if now < until {
+                    s.attempts = 0;
+                    s.deadline = now + BUSY_PAUSE.min(until.saturating_duration_since(now));
+                    return (Some(r), true);
+                }
             }
             let done_upload = matches!(r.op, Op::Upload(Upload::AwaitingAck(_)))
                 || matches!(&r.op, Op::Upload(Upload::AwaitingRequest(s)) if s.items.is_empty());

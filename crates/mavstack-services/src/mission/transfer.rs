@@ -31,6 +31,9 @@ pub struct AwaitingRequest {
     /// With a window: the item the window last went back to on a sign of loss (a repeated
     /// request or an INVALID_SEQUENCE), so that one loss makes one resend.
     pub(super) went_back: Option<u16>,
+    /// Until when a vehicle that refuses to start the upload as busy is asked again (set at
+    /// its first such refusal).
+    pub(super) busy_until: Option<Instant>,
 }
 
 /// Waiting for the final MISSION_ACK.
@@ -97,6 +100,7 @@ impl AwaitingRequest {
             send_next: next,
             sent_ever: next,
             went_back: None,
+            busy_until: None,
         }
     }
 
