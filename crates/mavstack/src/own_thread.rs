@@ -10,9 +10,10 @@
 //! 3 µs per datagram on a virtual machine (the timer device is emulated), on the way to the
 //! forwarded frames' `sendto` too.
 
+use core::sync::atomic::{AtomicBool, Ordering};
 use core::time::Duration;
 use std::io;
-use std::os::fd::{AsFd, BorrowedFd};
+use std::os::fd::{AsFd, BorrowedFd, OwnedFd};
 use std::sync::Arc;
 
 use mavstack_core::time::Instant;
@@ -37,6 +38,11 @@ pub(crate) struct Waiter {
     armed: Option<Instant>,
     /// The waker was woken since [`Waiter::take_woken`] last looked.
     woken: bool,
+    /// Set while the thread waits in its poll with its input sparse: batch readers may then
+    /// wait beside it (see `node::batch`).
+    beside: Arc<AtomicBool>,
+    /// The input is sparse ([`Waiter::set_sparse`]).
+    sparse: bool,
 }
 
 impl Waiter {
@@ -63,6 +69,8 @@ impl Waiter {
             timer,
             armed: None,
             woken: false,
+            beside: Arc::new(AtomicBool::new(false)),
+            sparse: false,
         })
     }
 
@@ -76,9 +84,19 @@ impl Waiter {
         Ok(())
     }
 
-    /// The `epoll` itself (readable when the thread has something to wake for).
-    pub(crate) fn poll_fd(&self) -> BorrowedFd<'_> {
-        self.epoll.0.as_fd()
+    /// For batch readers to wait beside the thread: a duplicate of the `epoll` (readable
+    /// when the thread has something to wake for) and the flag set while the thread waits
+    /// in it with its input sparse.
+    ///
+    /// # Errors
+    /// The system refused to duplicate the poll.
+    pub(crate) fn beside(&self) -> io::Result<(OwnedFd, Arc<AtomicBool>)> {
+        Ok((self.epoll.0.try_clone()?, Arc::clone(&self.beside)))
+    }
+
+    /// Whether the input is sparse now (batch readers wait beside the thread only then).
+    pub(crate) const fn set_sparse(&mut self, sparse: bool) {
+        self.sparse = sparse;
     }
 
     /// The waker to poll the runtime's side (tasks' queues, the command queue) with.
@@ -108,7 +126,7 @@ impl Waiter {
         readable: impl FnMut(usize),
     ) -> io::Result<()> {
         self.arm(deadline, now)?;
-        self.poll(EpollTimeout::NONE, readable)
+        self.block(readable)
     }
 
     /// The deadline the timer is armed for and has not reported yet.
@@ -121,7 +139,15 @@ impl Waiter {
     /// # Errors
     /// The poll failed (an interruption is not an error: it returns).
     pub(crate) fn wait_armed(&mut self, readable: impl FnMut(usize)) -> io::Result<()> {
-        self.poll(EpollTimeout::NONE, readable)
+        self.block(readable)
+    }
+
+    /// Waits in the poll, the flag for batch readers set meanwhile when the input is sparse.
+    fn block(&mut self, readable: impl FnMut(usize)) -> io::Result<()> {
+        self.beside.store(self.sparse, Ordering::Release);
+        let result = self.poll(EpollTimeout::NONE, readable);
+        self.beside.store(false, Ordering::Release);
+        result
     }
 
     /// Looks without waiting: calls `readable` with the slot index of each socket that has

@@ -29,6 +29,7 @@
 //!
 //! [`NodeHandle::subscribe_batched`]: super::NodeHandle::subscribe_batched
 
+#[cfg(target_os = "linux")]
 use core::sync::atomic::{AtomicU64, Ordering};
 use core::time::Duration;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
@@ -52,7 +53,9 @@ pub type BatchFrame<'a> = LocalFrame<'a>;
 struct Shared {
     state: Mutex<Pending>,
     ready: Condvar,
-    /// Batches published so far (changed with `state` held).
+    /// Batches published so far (changed with `state` held), for a reader looking beside the
+    /// node's thread.
+    #[cfg(target_os = "linux")]
     published: AtomicU64,
     /// The node thread's poll, when the node runs on a thread of its own.
     #[cfg(target_os = "linux")]
@@ -344,12 +347,14 @@ impl BatchSink {
             } else {
                 lost += pending.batch.append(&self.staging);
             }
-            self.shared.published.fetch_add(1, Ordering::Release);
             #[cfg(target_os = "linux")]
-            if pending.polling
-                && let Some(input) = self.shared.input.get()
             {
-                input.wake();
+                self.shared.published.fetch_add(1, Ordering::Release);
+                if pending.polling
+                    && let Some(input) = self.shared.input.get()
+                {
+                    input.wake();
+                }
             }
             pending.waiting
         };

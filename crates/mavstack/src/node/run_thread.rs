@@ -30,15 +30,7 @@ impl Driver {
                 slot.polled = true;
             }
         }
-        let idle = std::sync::Arc::new(core::sync::atomic::AtomicBool::new(false));
-        self.reader_poll = Some((
-            waiter.poll_fd().try_clone_to_owned().map_err(polling)?,
-            std::sync::Arc::clone(&idle),
-        ));
-        // Batch readers may wait beside this thread while it waits with its input sparse.
-        let sparse_wait = |sparse: bool, waiting: bool| {
-            idle.store(waiting && sparse, core::sync::atomic::Ordering::Release);
-        };
+        self.reader_poll = Some(waiter.beside().map_err(polling)?);
         let waker = waiter.waker().clone();
         let mut cx = core::task::Context::from_waker(&waker);
         self.start_links();
@@ -49,6 +41,8 @@ impl Driver {
         // more, and a poll that found something registered no waker).
         let mut runtime = true;
         loop {
+            // Batch readers may wait beside this thread while its input is sparse.
+            waiter.set_sparse(self.moderation.sparse);
             let mut command = None;
             let mut waited = false;
             // Waiting changes none of the node's deadlines: worked out once per turn.
@@ -69,10 +63,7 @@ impl Driver {
                     // Nothing to do, and the timer is set for the deadline (it wakes the
                     // poll once due): wait without reading the clock.
                     waited = true;
-                    sparse_wait(self.moderation.sparse, true);
-                    let result = waiter.wait_armed(mark);
-                    sparse_wait(self.moderation.sparse, false);
-                    result.map_err(polling)?;
+                    waiter.wait_armed(mark).map_err(polling)?;
                     continue;
                 }
                 let now = clock::now();
@@ -91,10 +82,7 @@ impl Driver {
                     break (due, now);
                 }
                 waited = true;
-                sparse_wait(self.moderation.sparse, true);
-                let result = waiter.wait(deadline, now, mark);
-                sparse_wait(self.moderation.sparse, false);
-                result.map_err(polling)?;
+                waiter.wait(deadline, now, mark).map_err(polling)?;
             };
             let input = ready.iter().any(|&r| r);
             let busy = input && self.moderation.busy(now);
