@@ -181,6 +181,114 @@ fn missions_upload_download_clear_in_both_formats() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("bad.waypoints:2: expected 12 fields"));
 }
 
+/// A vehicle busy with another ground station's upload refuses ours (DENIED to the count):
+/// the upload is asked for again, the operator is told why it waits, and it goes through once
+/// the other upload ends (here: the other station clears the plan instead).
+#[test]
+fn an_upload_refused_as_busy_is_asked_again_and_the_operator_told() {
+    use core::time::Duration;
+    use mavstack_core::message::Message;
+    use mavstack_core::wire::{self, Frame, FrameHeader, MAX_FRAME_LEN, Version};
+    use mavstack_dialects::common::{MavMissionType, MissionCount, MissionRequestInt};
+    use std::process::Stdio;
+    use std::time::Instant;
+
+    const OTHER: u8 = 200;
+    let v = Vehicle::start(&[]);
+    let other = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    other
+        .set_read_timeout(Some(Duration::from_millis(200)))
+        .expect("timeout");
+    let send_count = |count: u16, seq: u8| {
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        let header = FrameHeader {
+            version: Version::V2,
+            seq,
+            sysid: OTHER,
+            compid: 190,
+            signed: false,
+        };
+        let m = MissionCount {
+            target_system: 1,
+            target_component: 1,
+            count,
+            mission_type: MavMissionType::MISSION,
+        };
+        let len = wire::emit_message(&header, &m, &mut buf).expect("encode");
+        other
+            .send_to(&buf[..len], ("127.0.0.1", v.port))
+            .expect("send");
+    };
+    // The other station starts an upload and goes quiet: the vehicle waits for its items
+    // (it asks for the first; the deadline is long enough for any machine).
+    send_count(3, 0);
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let mut buf = [0u8; 2048];
+    loop {
+        assert!(
+            Instant::now() < deadline,
+            "the vehicle never asked the other station"
+        );
+        let Ok(n) = other.recv(&mut buf) else {
+            continue;
+        };
+        if let Ok(f) = Frame::new_checked(&buf[..n])
+            && f.msg_id() == MissionRequestInt::ID
+            && MissionRequestInt::decode(f.payload()).target_system == OTHER
+        {
+            break;
+        }
+    }
+    let dir = tempfile::tempdir().expect("tmp");
+    let wpl = dir.path().join("plan.waypoints");
+    std::fs::write(
+        &wpl,
+        "QGC WPL 110\n\
+         0\t1\t0\t16\t0\t0\t0\t0\t-35.36326100\t149.16523000\t584\t1\n\
+         1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t20\t1\n",
+    )
+    .expect("write");
+    let mut upload = Command::new(env!("CARGO_BIN_EXE_mavstack"))
+        .args(["mission", "upload"])
+        .arg(format!("udpout:127.0.0.1:{}", v.port))
+        .arg(&wpl)
+        .args(["--timeout", "30"])
+        .env_remove("RUST_LOG")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("mavstack runs");
+    // The vehicle refuses ours while the other upload is open, and the operator is told
+    // (stderr, read as it comes); then the other station gives up its upload by clearing the
+    // plan.
+    let stderr = upload.stderr.take().expect("stderr");
+    let (told, seen) = std::sync::mpsc::channel();
+    let reader = std::thread::spawn(move || {
+        use std::io::BufRead as _;
+        let mut all = String::new();
+        for line in std::io::BufReader::new(stderr).lines() {
+            let Ok(line) = line else { break };
+            if line.contains("refused to start it as busy") && line.contains("asking again") {
+                let _ = told.send(());
+            }
+            all.push_str(&line);
+            all.push('\n');
+        }
+        all
+    });
+    let warned = seen.recv_timeout(Duration::from_secs(30));
+    send_count(0, 1);
+    let out = upload.wait_with_output().expect("mavstack ends");
+    let err = reader.join().expect("stderr read");
+    assert!(warned.is_ok(), "no warning that the vehicle is busy: {err}");
+    assert!(out.status.success(), "{err}");
+    let up = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        up.starts_with("2 mission items uploaded to 1/1"),
+        "{up}\n{err}"
+    );
+}
+
 #[test]
 fn commands_arm_fly_and_report_refusals() {
     let v = Vehicle::start(&["--autopilot", "ardupilot"]);

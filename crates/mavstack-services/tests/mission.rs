@@ -935,10 +935,13 @@ fn an_upload_the_vehicle_refuses_to_start_as_busy_is_asked_for_again() {
         c.upload(T0, VEHICLE, MavMissionType::MISSION, items(2))
             .unwrap();
         assert!(count(&mut c));
+        let refused = |c: &MissionClient| matches!(c.upload_state(), Some(Upload::AwaitingRequest(u)) if u.refused_as_busy());
+        assert!(!refused(&c), "nothing refused yet");
         let mut t = T0;
         for _ in 0..3 {
             c.handle_message(t, VEHICLE, &ack_to_gcs(busy));
             assert_eq!(c.poll_event(), None, "not the end: {busy:?}");
+            assert!(refused(&c), "told as busy (the caller warns the operator)");
             assert!(c.poll_transmit().is_none(), "nothing before the pause");
             t = c.poll_timeout().unwrap();
             assert!(t < T0 + BUSY_WAIT);

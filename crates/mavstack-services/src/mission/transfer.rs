@@ -115,6 +115,13 @@ impl AwaitingRequest {
     pub fn sent(&self) -> usize {
         self.last.map_or(0, |l| usize::from(l) + 1)
     }
+
+    /// Whether the vehicle refused to start the upload as busy (another transfer open) and
+    /// is being asked again (see [`BUSY_WAIT`](super::BUSY_WAIT)).
+    #[must_use]
+    pub fn refused_as_busy(&self) -> bool {
+        self.busy_until.is_some()
+    }
 }
 
 impl AwaitingAck {

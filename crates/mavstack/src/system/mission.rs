@@ -7,7 +7,9 @@ use core::time::Duration;
 
 use mavstack_dialects::common::{MavCmd, MavFrame, MavMissionType, MissionItemInt};
 use mavstack_services::mission::transfer::{Download, Upload};
-use mavstack_services::mission::{MissionClient, MissionConfig, MissionError, MissionEvent};
+use mavstack_services::mission::{
+    BUSY_WAIT, MissionClient, MissionConfig, MissionError, MissionEvent,
+};
 use mavstack_services::plan::{self, Convention};
 use mavstack_transport::clock;
 
@@ -105,12 +107,24 @@ impl Mission {
                 .upload(clock::now(), self.system.target(), kind, items.clone())
                 .map_err(|e| SystemError::Busy(e.to_string()))?;
             let mut told = (0, 0);
+            let mut warned_busy = false;
             run::drive(
                 &self.system.inner,
                 &mut frames,
                 &mut client,
                 TRANSFER_LIMIT,
                 |c| {
+                    if !warned_busy
+                        && let Some(Upload::AwaitingRequest(u)) = c.upload_state()
+                        && u.refused_as_busy()
+                    {
+                        warned_busy = true;
+                        tracing::warn!(
+                            "mission upload: the vehicle refused to start it as busy (another \
+                             transfer open); asking again every 0.5 s for up to {} s",
+                            BUSY_WAIT.as_secs()
+                        );
+                    }
                     let now = match c.upload_state() {
                         Some(Upload::AwaitingRequest(u)) => (u.sent(), u.count()),
                         Some(Upload::AwaitingAck(u)) => (u.count(), u.count()),
