@@ -14,7 +14,7 @@ use mavstack_dialects::common::{MavProtocolCapability, ProtocolVersion};
 
 use crate::config::{Config, ConfigError, GroundPolicy, Role, VehiclePolicy, VehicleVersion};
 use crate::dialect::{CommandEncoding, common_table};
-use crate::event::{Event, LinkVersion, SwitchCause};
+use crate::event::{Event, EventRef, LinkVersion, SwitchCause};
 use crate::handshake::{
     AwaitingAnswer, Handshake, HandshakeConfig, HandshakeMethod, HandshakeRequest, Target,
 };
@@ -257,6 +257,28 @@ impl Channel {
             self.process_buffered();
         }
         self.events.pop()
+    }
+
+    /// [`poll_event`](Self::poll_event) for a stream of frames: an accepted frame is lent
+    /// where it lies instead of moved out ([`EventRef::Frame`], borrowed until the channel is
+    /// used again; its place is then reused, so a frame costs one copy of its bytes into the
+    /// channel). [`EventRef::Other`]: the next event is of another kind, for `poll_event`.
+    #[must_use]
+    pub fn poll_event_ref(&mut self) -> Option<EventRef<'_>> {
+        if self.signing.as_ref().is_some_and(LinkSigning::has_persist) {
+            return Some(EventRef::Other);
+        }
+        if self.input_pending {
+            self.process_buffered();
+        }
+        match self.events.peek() {
+            None => None,
+            Some(Event::Frame(_)) => match self.events.pop_slot() {
+                Some(Some(Event::Frame(frame))) => Some(EventRef::Frame(frame)),
+                _ => None,
+            },
+            Some(_) => Some(EventRef::Other),
+        }
     }
 
     /// Writes the next frame the channel sends on its own (a COMMAND_ACK, a PROTOCOL_VERSION,

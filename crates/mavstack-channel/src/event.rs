@@ -193,6 +193,16 @@ pub enum SigningSetup {
     Disabled,
 }
 
+/// What [`crate::Channel::poll_event_ref`] found next.
+#[derive(Clone, Copy, Debug)]
+#[non_exhaustive]
+pub enum EventRef<'a> {
+    /// An accepted frame, lent where the channel keeps it.
+    Frame(&'a ReceivedFrame),
+    /// Another event: take it with [`crate::Channel::poll_event`].
+    Other,
+}
+
 /// Everything [`crate::Channel::poll_event`] reports.
 #[derive(Clone, Debug)]
 #[non_exhaustive]

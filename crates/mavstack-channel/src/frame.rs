@@ -23,7 +23,6 @@ use crate::event::ProtocolVersionAnswer;
 /// let hb: mavstack_dialects::common::Heartbeat = frame.decode_as().unwrap();
 /// assert_eq!(hb.mavlink_version, 3);
 /// ```
-#[derive(Clone, PartialEq, Eq)]
 pub struct OwnedFrame {
     buf: [u8; MAX_FRAME_LEN],
     len: u16,
@@ -122,6 +121,32 @@ impl OwnedFrame {
     }
 }
 
+/// `clone_from` copies the frame's bytes only, not the whole buffer: a frame kept for reuse
+/// (the channel's event queue, the router's) is overwritten at the cost of the frame's length.
+impl Clone for OwnedFrame {
+    fn clone(&self) -> Self {
+        Self {
+            buf: self.buf,
+            len: self.len,
+        }
+    }
+
+    fn clone_from(&mut self, source: &Self) {
+        let n = usize::from(source.len);
+        self.buf[..n].copy_from_slice(&source.buf[..n]);
+        self.len = source.len;
+    }
+}
+
+/// Equal frames have the same bytes (what the buffer holds past them does not count).
+impl PartialEq for OwnedFrame {
+    fn eq(&self, other: &Self) -> bool {
+        self.as_bytes() == other.as_bytes()
+    }
+}
+
+impl Eq for OwnedFrame {}
+
 impl core::fmt::Debug for OwnedFrame {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.debug_struct("OwnedFrame")
@@ -174,7 +199,7 @@ impl Authentication {
 }
 
 /// A frame the channel accepted, with what it knows about it.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Debug, PartialEq, Eq)]
 pub struct ReceivedFrame {
     /// The frame, exactly as received.
     pub frame: OwnedFrame,
@@ -194,6 +219,29 @@ pub struct ReceivedFrame {
     /// configured without protocol-version support: the caller's command handling should
     /// stay silent too, as such a target does.
     pub protocol_version_request: Option<ProtocolVersionAnswer>,
+}
+
+/// `clone_from` copies the frame's bytes only (see [`OwnedFrame`]'s `Clone`).
+impl Clone for ReceivedFrame {
+    fn clone(&self) -> Self {
+        Self {
+            frame: self.frame.clone(),
+            received_at: self.received_at,
+            auth: self.auth,
+            crc_checked: self.crc_checked,
+            answered: self.answered,
+            protocol_version_request: self.protocol_version_request,
+        }
+    }
+
+    fn clone_from(&mut self, source: &Self) {
+        self.frame.clone_from(&source.frame);
+        self.received_at = source.received_at;
+        self.auth = source.auth;
+        self.crc_checked = source.crc_checked;
+        self.answered = source.answered;
+        self.protocol_version_request = source.protocol_version_request;
+    }
 }
 
 impl ReceivedFrame {

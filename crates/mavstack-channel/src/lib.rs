@@ -158,7 +158,8 @@ pub use channel::{Channel, HandshakeError, SendError, Transmit};
 pub use config::{Config, ConfigError, GroundPolicy, Role, VehiclePolicy, VehicleVersion};
 pub use dialect::CommandEncoding;
 pub use event::{
-    Event, LinkVersion, ProtocolVersionAnswer, RejectReason, Rejected, SigningSetup, SwitchCause,
+    Event, EventRef, LinkVersion, ProtocolVersionAnswer, RejectReason, Rejected, SigningSetup,
+    SwitchCause,
 };
 pub use frame::{Authentication, OwnedFrame, ReceivedFrame};
 pub use handshake::{
@@ -173,8 +174,10 @@ pub use stats::{LinkStats, RejectionCounts};
 
 /// Fuzzing entry point for channel input: a signing vehicle, an automatic ground station
 /// running a handshake, and a radio each take `data` in pieces the data itself chooses, with
-/// time advancing, and everything they emit is drained. Never panics, unless a state machine
-/// stops taking input after its queues were drained (a bug).
+/// time advancing, and everything they emit is drained. Each channel has a twin drained through
+/// [`Channel::poll_event_ref`]: both must give the same events, frames byte for byte. Never
+/// panics, unless a state machine stops taking input after its queues were drained or a twin
+/// differs (bugs).
 #[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub fn fuzz_channel(data: &[u8]) {
@@ -182,51 +185,90 @@ pub fn fuzz_channel(data: &[u8]) {
     use mavstack_core::time::Instant;
     use mavstack_core::wire::MAX_FRAME_LEN;
 
-    fn feed(ch: &mut Channel, now: Instant, data: &[u8]) {
+    /// The next event of `ch` by value, and of `twin` through `poll_event_ref`: the same
+    /// (frames byte for byte). Whether there was one.
+    fn next_same(ch: &mut Channel, twin: &mut Channel) -> bool {
+        let a = ch.poll_event();
+        let b = match twin.poll_event_ref() {
+            Some(EventRef::Frame(f)) => Some(Event::Frame(f.clone())),
+            Some(EventRef::Other) => {
+                let e = twin.poll_event();
+                assert!(
+                    !matches!(e, None | Some(Event::Frame(_))),
+                    "poll_event_ref announced another event: {e:?}"
+                );
+                e
+            }
+            None => None,
+        };
+        match (&a, &b) {
+            (Some(Event::Frame(x)), Some(Event::Frame(y))) => assert_eq!(x, y),
+            (x, y) => assert_eq!(
+                x.as_ref().map(core::mem::discriminant),
+                y.as_ref().map(core::mem::discriminant),
+                "{x:?} against {y:?}"
+            ),
+        }
+        a.is_some()
+    }
+
+    /// Feeds `data` to `ch` and its twin, drained by value and by reference.
+    fn feed(ch: &mut Channel, twin: &mut Channel, now: Instant, data: &[u8]) {
         let mut buf = [0u8; MAX_FRAME_LEN];
         let mut rest = data;
         while !rest.is_empty() {
             let n = ch.handle_input(now, rest);
+            assert_eq!(n, twin.handle_input(now, rest), "the twin took as much");
             rest = &rest[n..];
             let mut drained = false;
-            while ch.poll_event().is_some() {
+            while next_same(ch, twin) {
                 drained = true;
             }
             while ch.poll_transmit(now, &mut buf).is_some() {}
+            while twin.poll_transmit(now, &mut buf).is_some() {}
             assert!(
                 n > 0 || drained,
                 "channel took no input with its queues empty"
             );
         }
-        while ch.poll_event().is_some() {}
+        while next_same(ch, twin) {}
         while ch.poll_transmit(now, &mut buf).is_some() {}
+        while twin.poll_transmit(now, &mut buf).is_some() {}
     }
 
     let mut vehicle_config = Config::vehicle(1, 1);
     vehicle_config.secure = true;
     vehicle_config.signing = Some(SigningConfig::new(SecretKey::new([0x42; 32]), 1));
-    let Ok(mut vehicle) = Channel::new(vehicle_config) else {
+    let (Ok(mut vehicle), Ok(mut vehicle_twin)) = (
+        Channel::new(vehicle_config.clone()),
+        Channel::new(vehicle_config),
+    ) else {
         return;
     };
-    let Ok(mut gcs) = Channel::new(Config::ground_station(255, 190)) else {
+    let gcs_config = Config::ground_station(255, 190);
+    let (Ok(mut gcs), Ok(mut gcs_twin)) =
+        (Channel::new(gcs_config.clone()), Channel::new(gcs_config))
+    else {
         return;
     };
     let mut radio = Radio::new(RadioConfig::default());
     let mut now = Instant::from_secs(1_767_225_600);
-    let _ = gcs.start_handshake(
-        now,
-        Target::new(0, 0),
-        HandshakeMethod::RequestMessage300,
-        CommandEncoding::Int,
-    );
+    for g in [&mut gcs, &mut gcs_twin] {
+        let _ = g.start_handshake(
+            now,
+            Target::new(0, 0),
+            HandshakeMethod::RequestMessage300,
+            CommandEncoding::Int,
+        );
+    }
     let mut buf = [0u8; MAX_FRAME_LEN];
     let mut rest = data;
     while let Some((&control, tail)) = rest.split_first() {
         let (piece, after) = tail.split_at(usize::from(control & 0x3f).min(tail.len()));
         rest = after;
         now += core::time::Duration::from_millis(u64::from(control >> 6) * 300);
-        feed(&mut vehicle, now, piece);
-        feed(&mut gcs, now, piece);
+        feed(&mut vehicle, &mut vehicle_twin, now, piece);
+        feed(&mut gcs, &mut gcs_twin, now, piece);
         let side = if control & 1 == 0 { Side::A } else { Side::B };
         let mut left = piece;
         while !left.is_empty() {
@@ -241,13 +283,15 @@ pub fn fuzz_channel(data: &[u8]) {
                 "radio took no input with its queues empty"
             );
         }
-        vehicle.handle_timeout(now);
-        gcs.handle_timeout(now);
+        for ch in [&mut vehicle, &mut vehicle_twin, &mut gcs, &mut gcs_twin] {
+            ch.handle_timeout(now);
+        }
         radio.handle_timeout(now);
-        feed(&mut vehicle, now, &[]);
-        feed(&mut gcs, now, &[]);
-        while vehicle.poll_transmit(now, &mut buf).is_some() {}
-        while gcs.poll_transmit(now, &mut buf).is_some() {}
+        feed(&mut vehicle, &mut vehicle_twin, now, &[]);
+        feed(&mut gcs, &mut gcs_twin, now, &[]);
+        for ch in [&mut vehicle, &mut vehicle_twin, &mut gcs, &mut gcs_twin] {
+            while ch.poll_transmit(now, &mut buf).is_some() {}
+        }
         while radio.poll_transmit(now, &mut buf).is_some() {}
         while radio.poll_event().is_some() {}
         let _ = (

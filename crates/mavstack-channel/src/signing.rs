@@ -336,6 +336,11 @@ impl LinkSigning {
         self.timestamp
     }
 
+    /// Whether a value for the caller to store is due.
+    pub(crate) const fn has_persist(&self) -> bool {
+        self.pending_persist.is_some()
+    }
+
     /// A value for the caller to store, if one is due.
     pub(crate) fn take_persist(&mut self) -> Option<u64> {
         self.pending_persist.take()

@@ -1,12 +1,14 @@
 //! The [`Router`]: many links, learned routes, forwarding with conversion.
 
+use alloc::boxed::Box;
 use alloc::collections::VecDeque;
 use alloc::vec::Vec;
 use core::time::Duration;
 
 use mavstack_channel::{
     Channel, CommandEncoding, ConfigError, HandshakeError, HandshakeMethod, HandshakeOutcome,
-    LinkVersion, ProtocolVersionAnswer, Rejected, SigningConfig, SigningSetup, SwitchCause, Target,
+    LinkVersion, ProtocolVersionAnswer, ReceivedFrame, Rejected, SigningConfig, SigningSetup,
+    SwitchCause, Target,
 };
 use mavstack_core::MessageTable;
 use mavstack_core::message::Message as _;
@@ -236,6 +238,8 @@ pub struct Router {
     events_dropped: u64,
     ready: VecDeque<LinkId>,
     scratch: Vec<LinkId>,
+    /// The frame being routed, copied out of its channel (kept for the next one).
+    received: Option<Box<ReceivedFrame>>,
     next_sweep: Option<Instant>,
     /// SETUP_SIGNING held on every link ([`Router::hold_setup_signing`]).
     setup_signing_held: bool,
@@ -263,6 +267,7 @@ impl Router {
             events_dropped: 0,
             ready: VecDeque::new(),
             scratch: Vec::new(),
+            received: None,
             next_sweep: None,
             setup_signing_held: false,
         }

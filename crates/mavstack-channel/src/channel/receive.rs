@@ -48,19 +48,19 @@ impl Channel {
             };
             // The parser only yields complete frames, which always copy.
             if let Ok(frame) = OwnedFrame::new(view.as_bytes()) {
-                self.process(frame, known);
+                self.process(&frame, known);
             }
         }
     }
 
-    fn process(&mut self, frame: OwnedFrame, known: bool) {
+    fn process(&mut self, frame: &OwnedFrame, known: bool) {
         let now = self.last_input_at;
-        let auth = match self.authenticate(now, &frame) {
+        let auth = match self.authenticate(now, frame) {
             Ok(auth) => auth,
-            Err(reason) => return self.reject(now, &frame, reason),
+            Err(reason) => return self.reject(now, frame, reason),
         };
         if known && frame.msg_id() == SetupSigning::ID && !matches!(self.role, Role::Relay(_)) {
-            return self.handle_setup_signing(now, &frame);
+            return self.handle_setup_signing(now, frame);
         }
         self.stats.accepted += 1;
         // A frame whose checksum or signature was checked can drive the link's state; an
@@ -70,26 +70,40 @@ impl Channel {
         let mut request = None;
         if trusted {
             self.seqs.record(frame.sysid(), frame.compid(), frame.seq());
-            after[0] = self.switch_on_receive(&frame);
+            after[0] = self.switch_on_receive(frame);
         }
         if known {
-            if let Some((answer, event)) = self.answer_protocol_version_request(&frame) {
+            if let Some((answer, event)) = self.answer_protocol_version_request(frame) {
                 request = Some(answer);
                 after[1] = Some(event);
             }
             if let Some(state) = self.handshake.take() {
-                let step = state.handle_frame(now, &self.handshake_config, &frame, self.sysid);
+                let step = state.handle_frame(now, &self.handshake_config, frame, self.sysid);
                 (after[2], after[3]) = self.apply_step(step);
             }
         }
-        self.push_event(Event::Frame(ReceivedFrame {
-            frame,
-            received_at: now,
-            auth,
-            crc_checked: known,
-            answered: request.is_some_and(|a| a != ProtocolVersionAnswer::Ignored),
-            protocol_version_request: request,
-        }));
+        let answered = request.is_some_and(|a| a != ProtocolVersionAnswer::Ignored);
+        // Written in place: where a frame lent by `poll_event_ref` was, over its bytes.
+        let _ = self.events.push_with(|slot| match slot {
+            Some(Event::Frame(r)) => {
+                r.frame.clone_from(frame);
+                r.received_at = now;
+                r.auth = auth;
+                r.crc_checked = known;
+                r.answered = answered;
+                r.protocol_version_request = request;
+            }
+            _ => {
+                *slot = Some(Event::Frame(ReceivedFrame {
+                    frame: frame.clone(),
+                    received_at: now,
+                    auth,
+                    crc_checked: known,
+                    answered,
+                    protocol_version_request: request,
+                }));
+            }
+        });
         // Taken one by one (moving the whole array would copy four events' room).
         for event in &mut after {
             if let Some(event) = event.take() {

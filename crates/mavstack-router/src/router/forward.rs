@@ -1,9 +1,10 @@
 //! The receive side of the [`Router`]: a link's channel events, routing an accepted frame,
 //! and putting it onto each destination link, converted as that link needs.
 
+use alloc::boxed::Box;
 use alloc::vec::Vec;
 
-use mavstack_channel::{Event as ChannelEvent, ReceivedFrame};
+use mavstack_channel::{Event as ChannelEvent, EventRef, ReceivedFrame};
 use mavstack_core::message::Message as _;
 use mavstack_core::signing;
 use mavstack_core::time::Instant;
@@ -21,11 +22,25 @@ impl Router {
     /// Handles every event of `id`'s channel; returns whether there was any.
     pub(super) fn drain_channel(&mut self, now: Instant, id: LinkId) -> bool {
         let mut any = false;
-        loop {
-            let Some(event) = self.link_mut(id).and_then(|l| l.channel.poll_event()) else {
-                return any;
-            };
+        // An accepted frame is copied out of the channel (its bytes only) into this one, kept
+        // from call to call, and routed from there.
+        let mut received = self.received.take();
+        while let Some(next) = self.link_mut(id).and_then(|l| l.channel.poll_event_ref()) {
             any = true;
+            if let EventRef::Frame(frame) = next {
+                let held = match &mut received {
+                    Some(held) => {
+                        held.as_mut().clone_from(frame);
+                        held
+                    }
+                    None => received.insert(Box::new(frame.clone())),
+                };
+                self.route(now, id, held);
+                continue;
+            }
+            let Some(event) = self.link_mut(id).and_then(|l| l.channel.poll_event()) else {
+                break;
+            };
             match event {
                 ChannelEvent::Frame(frame) => self.route(now, id, &frame),
                 ChannelEvent::Rejected(rejected) => {
@@ -70,6 +85,8 @@ impl Router {
                 _ => {}
             }
         }
+        self.received = received;
+        any
     }
 
     /// Queues what `id`'s channel sends on its own (a vehicle link's handshake answers) as
