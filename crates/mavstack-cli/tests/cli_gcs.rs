@@ -110,19 +110,26 @@ fn params_list_get_set_and_save_round_trip() {
     assert_eq!(got, "P_009 = -2.25 (REAL32)\n");
 }
 
+/// `plan.waypoints` in `dir`: home and a takeoff to 20 m, then the items `more` (QGC WPL 110).
+fn plan_file(dir: &tempfile::TempDir, more: &str) -> std::path::PathBuf {
+    let wpl = dir.path().join("plan.waypoints");
+    let plan = format!(
+        "QGC WPL 110\n\
+         0\t1\t0\t16\t0\t0\t0\t0\t-35.36326100\t149.16523000\t584\t1\n\
+         1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t20\t1\n{more}"
+    );
+    std::fs::write(&wpl, plan).expect("write");
+    wpl
+}
+
 #[test]
 fn missions_upload_download_clear_in_both_formats() {
     let dir = tempfile::tempdir().expect("tmp");
-    let wpl = dir.path().join("plan.waypoints");
-    std::fs::write(
-        &wpl,
-        "QGC WPL 110\n\
-         0\t1\t0\t16\t0\t0\t0\t0\t-35.36326100\t149.16523000\t584\t1\n\
-         1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t20\t1\n\
-         2\t0\t3\t16\t5\t0\t0\tnan\t-35.36200000\t149.16400000\t30\t1\n\
+    let wpl = plan_file(
+        &dir,
+        "2\t0\t3\t16\t5\t0\t0\tnan\t-35.36200000\t149.16400000\t30\t1\n\
          3\t0\t3\t20\t0\t0\t0\t0\t0\t0\t0\t1\n",
-    )
-    .expect("write");
+    );
     let v = Vehicle::start(&[]);
     let port = v.port;
     let up = ok(&gcs(
@@ -240,14 +247,7 @@ fn an_upload_refused_as_busy_is_asked_again_and_the_operator_told() {
         }
     }
     let dir = tempfile::tempdir().expect("tmp");
-    let wpl = dir.path().join("plan.waypoints");
-    std::fs::write(
-        &wpl,
-        "QGC WPL 110\n\
-         0\t1\t0\t16\t0\t0\t0\t0\t-35.36326100\t149.16523000\t584\t1\n\
-         1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t20\t1\n",
-    )
-    .expect("write");
+    let wpl = plan_file(&dir, "");
     let mut upload = Command::new(env!("CARGO_BIN_EXE_mavstack"))
         .args(["mission", "upload"])
         .arg(format!("udpout:127.0.0.1:{}", v.port))
