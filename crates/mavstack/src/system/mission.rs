@@ -114,19 +114,18 @@ impl Mission {
                 &mut client,
                 TRANSFER_LIMIT,
                 |c| {
-                    if !warned_busy
-                        && let Some(Upload::AwaitingRequest(u)) = c.upload_state()
-                        && u.refused_as_busy()
-                    {
-                        warned_busy = true;
-                        tracing::warn!(
-                            "mission upload: the vehicle refused to start it as busy (another \
-                             transfer open); asking again every 0.5 s for up to {} s",
-                            BUSY_WAIT.as_secs()
-                        );
-                    }
                     let now = match c.upload_state() {
-                        Some(Upload::AwaitingRequest(u)) => (u.sent(), u.count()),
+                        Some(Upload::AwaitingRequest(u)) => {
+                            if u.refused_as_busy() && !warned_busy {
+                                warned_busy = true;
+                                tracing::warn!(
+                                    "mission upload: the vehicle refused to start it as busy \
+                                     (another transfer open); asking again for up to {} s",
+                                    BUSY_WAIT.as_secs()
+                                );
+                            }
+                            (u.sent(), u.count())
+                        }
                         Some(Upload::AwaitingAck(u)) => (u.count(), u.count()),
                         None => told,
                     };

@@ -2,7 +2,7 @@
 //! node thread's poll as the reader sees it ([`NodeInput`]) and the processor time the reader
 //! may spend looking for that thread's batch ([`SpinBudget`]). See the parent module's docs.
 
-use core::sync::atomic::{AtomicU64, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use core::time::Duration;
 use std::sync::Arc;
 
@@ -14,7 +14,7 @@ pub(in crate::node) struct NodeInput {
     /// thread's waker or timer fired.
     poll: std::os::fd::OwnedFd,
     /// Set while the thread waits in that poll with its input sparse.
-    idle: Arc<core::sync::atomic::AtomicBool>,
+    idle: Arc<AtomicBool>,
     /// Written when a batch is published while the reader is in `poll` (it may have gone
     /// there after the node's thread had read the datagram), and when the node stops.
     wake: nix::sys::eventfd::EventFd,
@@ -30,7 +30,7 @@ impl NodeInput {
     /// The system refused to duplicate the poll or make an eventfd.
     pub(in crate::node) fn new(
         poll: std::os::fd::BorrowedFd<'_>,
-        idle: &Arc<core::sync::atomic::AtomicBool>,
+        idle: &Arc<AtomicBool>,
     ) -> std::io::Result<Self> {
         use nix::sys::eventfd::{EfdFlags, EventFd};
         Ok(Self {
