@@ -15,7 +15,8 @@
 #
 # Environment: FUZZ_JOBS (targets run at once; default: the number of cores),
 # FUZZ_SANITIZER (address, the default, or none: faster to build and run, for CI),
-# FUZZ_WORK (default fuzz/work).
+# FUZZ_WORK (default fuzz/work), FUZZ_BUILD_ONLY=1 (build the targets, run none: CI builds
+# them while the tests run; SECONDS is then still required but unused).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root/fuzz"
@@ -65,6 +66,9 @@ started=$(date +%s)
 # shellcheck disable=SC2086
 cargo +nightly fuzz build $flags $([ ${#targets[@]} -eq 1 ] && echo "${targets[0]}")
 echo "fuzz.sh: built in $(($(date +%s) - started)) s"
+if [ "${FUZZ_BUILD_ONLY:-}" = "1" ]; then
+    exit 0
+fi
 
 # One target: run it, and on a crash keep the minimised input as a regression seed.
 # shellcheck disable=SC2086

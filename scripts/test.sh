@@ -29,29 +29,58 @@ cargo fmt --all -- --check
 step "cargo clippy (all targets, all features, -D warnings)"
 cargo clippy --workspace --all-targets --all-features --locked -- -D warnings
 
-# The Python package's wheel (a release build) is built meanwhile, in a target directory of its
-# own (no lock shared with the tests' build): the tests mostly wait on simulated vehicles and
-# peers, and the compiler takes the idle cores. Its result is awaited before the Python tests.
+# Builds started here run in the background, each in a target directory of its own (cargo
+# locks a target directory for a whole `cargo test`, running included): the tests mostly wait
+# on simulated vehicles flying in real time and on the peers, and the compiler takes the idle
+# processor. Each writes its log under target/; its step awaits it and shows the log on a failure.
+# A run that stops early stops them too.
+trap 'kill $(jobs -p) 2>/dev/null || true' EXIT
+# await NAME PID LOG: waits for a background build; on a failure shows its log and stops.
+await() {
+    if ! wait "$2"; then
+        cat "$3" >&2
+        echo "$1 failed ($3 above)" >&2
+        exit 1
+    fi
+}
+
+# The Python package's wheel (a release build), awaited before the Python tests.
 rm -f target/wheels/mavstack-*.whl
 CARGO_TARGET_DIR="$root/target/wheel-build" "$(dirname "$MAVSTACK_PYTHON")/maturin" build \
     --release --locked -q -m crates/mavstack-python/Cargo.toml -o target/wheels \
     >target/wheel-build.log 2>&1 &
 wheel_build=$!
 
-step "cargo test (workspace, all features)"
-# Three test threads on two cores: most tests wait on processes and sockets (simulated vehicles
-# flying in real time, the peers), so a third keeps the cores busy; counts, never timings, are
-# what the tests check, so a busier machine only makes them slower.
-cargo test --workspace --all-features --locked --no-fail-fast -- --test-threads=3
+step "cargo test: build (workspace, all features)"
+cargo test --workspace --all-features --locked --no-run
+
+# The fuzz targets (nightly, fuzz/target) and the feature matrix (type-checked without codegen,
+# in target/matrix: what a feature combination can break is whether it compiles) are built
+# while the tests run.
+FUZZ_SANITIZER=none FUZZ_BUILD_ONLY=1 bash scripts/fuzz.sh 1 >target/fuzz-build.log 2>&1 &
+fuzz_build=$!
+(
+    export CARGO_TARGET_DIR="$root/target/matrix"
+    cargo check -p mavstack --locked
+    cargo check -p mavstack-core --no-default-features --locked
+    cargo check -p mavstack-dialects --no-default-features --features minimal --locked
+    cargo check -p mavstack-bridge --no-default-features --features zenoh --locked
+    cargo check -p mavstack-bridge --locked
+    cargo test -p mavstack-dialects --no-default-features --features common --locked --doc
+) >target/feature-matrix.log 2>&1 &
+matrix=$!
+
+step "cargo test: run (workspace, all features)"
+# Six test threads on two cores: most tests wait on processes and sockets (simulated vehicles
+# flying in real time, the peers), not on the processor (the command's test binary, with the
+# MAVSDK sessions: 320 s with three threads, 188 s with six, one core busy on average); counts,
+# never timings, are what the tests check, so a busier machine only makes them slower.
+cargo test --workspace --all-features --locked --no-fail-fast -- --test-threads=6
 
 step "Python package: maturin builds the wheel, installed in .venv, pytest"
 # The same build as `pip install crates/mavstack-python` (release, abi3), then the package's
 # tests against pymavlink, pyarrow, polars and pandas in the test venv.
-if ! wait "$wheel_build"; then
-    cat target/wheel-build.log >&2
-    echo "the Python wheel did not build (target/wheel-build.log above)" >&2
-    exit 1
-fi
+await "the Python wheel's build" "$wheel_build" target/wheel-build.log
 "$MAVSTACK_PYTHON" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps \
     target/wheels/mavstack-*-abi3-*.whl
 # Four pytest workers (pytest-xdist): the tests wait on simulated vehicles and sockets far more
@@ -112,16 +141,14 @@ CARGO_TARGET_DIR="$root/target/wheel-build" cargo build --release --locked -q -p
 step "fuzz: every target for ${FUZZ_SECONDS:-3} s on nightly (a crash fails, kept as a regression seed)"
 # Without the address sanitizer: quicker to build and to run, and the code under test is safe
 # Rust (long campaigns by hand use it: scripts/fuzz.sh 480).
+# Built while the tests ran; `cargo fuzz build` again here finds nothing to do.
+await "the fuzz targets' build" "$fuzz_build" target/fuzz-build.log
+grep '^fuzz.sh:' target/fuzz-build.log
 FUZZ_SANITIZER=none FUZZ_JOBS=2 bash scripts/fuzz.sh "${FUZZ_SECONDS:-3}"
 
-step "feature matrix"
-# Type-checked without codegen (what a feature combination can break is whether it compiles).
-cargo check -p mavstack --locked
-cargo check -p mavstack-core --no-default-features --locked
-cargo check -p mavstack-dialects --no-default-features --features minimal --locked
-cargo check -p mavstack-bridge --no-default-features --features zenoh --locked
-cargo check -p mavstack-bridge --locked
-cargo test -p mavstack-dialects --no-default-features --features common --locked --doc
+step "feature matrix (checked while the tests ran)"
+await "the feature matrix" "$matrix" target/feature-matrix.log
+grep -v '^ *\(Checking\|Compiling\)' target/feature-matrix.log
 
 step "cargo doc (-D warnings)"
 # The generated dialects are documented with their default set (ardupilotmega and what it
