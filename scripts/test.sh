@@ -29,11 +29,12 @@ cargo fmt --all -- --check
 step "cargo clippy (all targets, all features, -D warnings)"
 cargo clippy --workspace --all-targets --all-features --locked -- -D warnings
 
-# Builds started here run in the background, each in a target directory of its own (cargo
-# locks a target directory for a whole `cargo test`, running included): the tests mostly wait
-# on simulated vehicles flying in real time and on the peers, and the compiler takes the idle
-# processor. Each writes its log under target/; its step awaits it and shows the log on a failure.
-# A run that stops early stops them too.
+# Some builds run in the background while steps that mostly wait (on simulated vehicles flying
+# in real time, on the peers) run, so the compiler takes the idle processor: the wheel and the
+# fuzz targets in target directories of their own (cargo locks a target directory for a whole
+# `cargo test`, running included), the feature matrix in target/debug once the tests are done.
+# Each writes its log under target/; its step awaits it and shows the log on a failure. A run
+# that stops early stops them too.
 trap 'kill $(jobs -p) 2>/dev/null || true' EXIT
 # await NAME PID LOG: waits for a background build; on a failure shows its log and stops.
 await() {
@@ -54,13 +55,21 @@ wheel_build=$!
 step "cargo test: build (workspace, all features)"
 cargo test --workspace --all-features --locked --no-run
 
-# The fuzz targets (nightly, fuzz/target) and the feature matrix (type-checked without codegen,
-# in target/matrix: what a feature combination can break is whether it compiles) are built
-# while the tests run.
+# The fuzz targets (nightly, in fuzz/target) are built while the tests run.
 FUZZ_SANITIZER=none FUZZ_BUILD_ONLY=1 bash scripts/fuzz.sh 1 >target/fuzz-build.log 2>&1 &
 fuzz_build=$!
+
+step "cargo test: run (workspace, all features)"
+# Six test threads on two cores: most tests wait on processes and sockets (simulated vehicles
+# flying in real time, the peers), not on the processor (the command's test binary, with the
+# MAVSDK sessions: 320 s with three threads, 188 s with six, one core busy on average); counts,
+# never timings, are what the tests check, so a busier machine only makes them slower.
+cargo test --workspace --all-features --locked --no-fail-fast -- --test-threads=6
+
+# The feature matrix is type-checked (no codegen: what a feature combination can break is
+# whether it compiles) while the Python package is tested, in target/debug, where clippy has
+# already checked the dependencies (the examples' builds after it wait for its lock).
 (
-    export CARGO_TARGET_DIR="$root/target/matrix"
     cargo check -p mavstack --locked
     cargo check -p mavstack-core --no-default-features --locked
     cargo check -p mavstack-dialects --no-default-features --features minimal --locked
@@ -69,13 +78,6 @@ fuzz_build=$!
     cargo test -p mavstack-dialects --no-default-features --features common --locked --doc
 ) >target/feature-matrix.log 2>&1 &
 matrix=$!
-
-step "cargo test: run (workspace, all features)"
-# Six test threads on two cores: most tests wait on processes and sockets (simulated vehicles
-# flying in real time, the peers), not on the processor (the command's test binary, with the
-# MAVSDK sessions: 320 s with three threads, 188 s with six, one core busy on average); counts,
-# never timings, are what the tests check, so a busier machine only makes them slower.
-cargo test --workspace --all-features --locked --no-fail-fast -- --test-threads=6
 
 step "Python package: maturin builds the wheel, installed in .venv, pytest"
 # The same build as `pip install crates/mavstack-python` (release, abi3), then the package's
@@ -146,7 +148,7 @@ await "the fuzz targets' build" "$fuzz_build" target/fuzz-build.log
 grep '^fuzz.sh:' target/fuzz-build.log
 FUZZ_SANITIZER=none FUZZ_JOBS=2 bash scripts/fuzz.sh "${FUZZ_SECONDS:-3}"
 
-step "feature matrix (checked while the tests ran)"
+step "feature matrix (checked while the Python package was tested)"
 await "the feature matrix" "$matrix" target/feature-matrix.log
 grep -v '^ *\(Checking\|Compiling\)' target/feature-matrix.log
 

@@ -89,7 +89,7 @@ impl Mission {
     }
 
     /// Like [`upload`](Self::upload), telling `progress` (items sent, count) each time the
-    /// system has asked for more.
+    /// system has asked for more, and (count, count) once it has taken the plan.
     ///
     /// # Errors
     /// As [`upload`](Self::upload).
@@ -99,6 +99,8 @@ impl Mission {
         items: Vec<MissionItemInt>,
         mut progress: impl FnMut(usize, usize),
     ) -> Result<(), SystemError> {
+        let count = items.len();
+        let mut told = (0, 0);
         let event = {
             let _one = self.system.inner.locks.mission.lock().await;
             let mut frames = self.system.frames().await;
@@ -106,7 +108,6 @@ impl Mission {
             client
                 .upload(clock::now(), self.system.target(), kind, items.clone())
                 .map_err(|e| SystemError::Busy(e.to_string()))?;
-            let mut told = (0, 0);
             let mut warned_busy = false;
             run::drive(
                 &self.system.inner,
@@ -153,6 +154,9 @@ impl Mission {
                 );
                 let back = self.download_items(kind, first, |_, _| {}).await?;
                 if plan::same_from(&items, usize::from(first), &back) {
+                    if told != (count, count) {
+                        progress(count, count);
+                    }
                     Ok(())
                 } else {
                     Err(SystemError::Mission {
@@ -162,6 +166,11 @@ impl Mission {
                 }
             }
             MissionEvent::Uploaded { result, .. } => {
+                // The last request and the ACK may come in one turn, the states between
+                // them never seen: a finished upload still ends its progress at the count.
+                if result.is_ok() && told != (count, count) {
+                    progress(count, count);
+                }
                 result.map_err(|source| SystemError::Mission {
                     what: "upload",
                     source,
