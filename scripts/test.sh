@@ -32,7 +32,8 @@ cargo clippy --workspace --all-targets --all-features --locked -- -D warnings
 # Some builds run in the background while steps that mostly wait (on simulated vehicles flying
 # in real time, on the peers) run, so the compiler takes the idle processor: the wheel and the
 # fuzz targets in target directories of their own (cargo locks a target directory for a whole
-# `cargo test`, running included), the feature matrix in target/debug once the tests are done.
+# `cargo test`, running included), the feature matrix in target/debug once the tests are done,
+# the fleet test's program once the wheel is built.
 # Each writes its log under target/; its step awaits it and shows the log on a failure. A run
 # that stops early stops them too.
 trap 'kill $(jobs -p) 2>/dev/null || true' EXIT
@@ -85,6 +86,11 @@ step "Python package: maturin builds the wheel, installed in .venv, pytest"
 await "the Python wheel's build" "$wheel_build" target/wheel-build.log
 "$MAVSTACK_PYTHON" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps \
     target/wheels/mavstack-*-abi3-*.whl
+# The fleet test's program is built meanwhile, in the wheel's target directory: the release
+# builds of the dependencies they share are reused.
+CARGO_TARGET_DIR="$root/target/wheel-build" cargo build --release --locked -q -p mavstack-bridge \
+    --example fleet >target/fleet-build.log 2>&1 &
+fleet_build=$!
 # Four pytest workers (pytest-xdist): the tests wait on simulated vehicles and sockets far more
 # than they compute (about 6 minutes one at a time, 2 with four workers).
 (cd crates/mavstack-python && "$MAVSTACK_PYTHON" -m pytest -q -p no:cacheprovider -n 4 tests)
@@ -135,8 +141,7 @@ step "fleet test: 1,000 vehicles through their bridges and mosquitto (about 60 s
 # tests-interop/fleet_test.py --check: every command answered (with telemetry and without),
 # nothing lost on the control lane and under 1 % of telemetry while the broker is up, traffic
 # again after the broker is killed and restarted. Counts are checked, never timings.
-# In the wheel's target directory: the release builds of the dependencies they share are reused.
-CARGO_TARGET_DIR="$root/target/wheel-build" cargo build --release --locked -q -p mavstack-bridge --example fleet
+await "the fleet program's build" "$fleet_build" target/fleet-build.log
 "$MAVSTACK_PYTHON" tests-interop/fleet_test.py --fleet target/wheel-build/release/examples/fleet --count 1000 \
     --out target/fleet-results.json --check | tail -12
 
