@@ -121,10 +121,13 @@ class Client:
         with self.lock:
             return [g for g in self.got if pred(g[0], g[1])]
 
-    def wait(self, pred, timeout=5.0):
+    def wait(self, pred, timeout=5.0, after=0):
+        """The first message (of all, or of those after the first `after`) for which `pred`
+        holds, waiting up to `timeout` seconds; None if none came."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
-            m = self.messages(pred)
+            with self.lock:
+                m = [g for g in self.got[after:] if pred(g[0], g[1])]
             if m:
                 return m[0]
             time.sleep(0.02)
@@ -370,29 +373,26 @@ def alive(bin_):
             return None
         time.sleep(0.5)
         watch = Client(broker, ["%s/@alive" % PREFIX], "watch")
-        first = watch.wait(lambda t, p: True, 3)
+        first = watch.wait(lambda t, p: True, DEADLINE)
         check(first is not None and first[1] == b"online" and first[3], "retained @alive while running: %r" % (first,))
         router.stop()
-        off = watch.wait(lambda t, p: p == b"offline", 3)
+        off = watch.wait(lambda t, p: p == b"offline", DEADLINE)
         check(off is not None, "no offline on @alive after SIGTERM")
         late = Client(broker, ["%s/@alive" % PREFIX], "late")
-        r = late.wait(lambda t, p: True, 3)
+        r = late.wait(lambda t, p: True, DEADLINE)
         check(r is not None and r[1] == b"offline" and r[3], "retained @alive after exit: %r" % (r,))
         late.close()
-        # SIGKILL: the broker's last will says offline.
+        # SIGKILL: the broker's last will says offline. The second router's own "online"
+        # (not the first's, still in the list) says it is connected, its will with the broker.
+        before = len(watch.messages())
         router2 = with_router(bin_, broker, lambda: "udpin:127.0.0.1:%d" % free_port())
         if router2 is None:
             return None
-        t_on = watch.wait(lambda t, p: p == b"online" and t == "%s/@alive" % PREFIX, 3)
+        t_on = watch.wait(lambda t, p: p == b"online" and t == "%s/@alive" % PREFIX, DEADLINE, after=before)
         online_at = len(watch.messages())
         router2.kill()
-        deadline = time.monotonic() + 10
-        will = None
-        while time.monotonic() < deadline and will is None:
-            later = watch.messages()[online_at:]
-            will = next((m for m in later if m[1] == b"offline"), None)
-            time.sleep(0.05)
-        check(t_on is not None, "second router never said online")
+        will = watch.wait(lambda t, p: p == b"offline", 10, after=online_at)
+        check(t_on is not None, "second router never said online within %d s" % DEADLINE)
         check(will is not None, "no last will (offline) within 10 s of SIGKILL")
         watch.close()
         return "online (retained) -> offline on SIGTERM -> online -> offline by the last will on SIGKILL"
@@ -435,8 +435,8 @@ def ground_through(bin_, url):
         time.sleep(0.5)
         fa = a.send(M.MAVLink_attitude_message(111, 0.1, 0, 0, 0, 0, 0))
         fb = b.send(M.MAVLink_attitude_message(222, 0.2, 0, 0, 0, 0, 0))
-        got_a = gcs.wait_for(lambda f: f.type == "ATTITUDE" and f.msg.time_boot_ms == 111, 3)
-        got_b = gcs.wait_for(lambda f: f.type == "ATTITUDE" and f.msg.time_boot_ms == 222, 3)
+        got_a = gcs.wait_for(lambda f: f.type == "ATTITUDE" and f.msg.time_boot_ms == 111, DEADLINE)
+        got_b = gcs.wait_for(lambda f: f.type == "ATTITUDE" and f.msg.time_boot_ms == 222, DEADLINE)
         check(got_a is not None and got_a.raw == fa.raw,
               "truck-1's ATTITUDE at the ground station byte for byte as system 1: %r" % got_a)
         # The expectation is pymavlink's packing of truck-2's message as system 2, same seq.
@@ -447,7 +447,7 @@ def ground_through(bin_, url):
         # A command to system 2 reaches truck-2 as a command to its own system 1, and not truck-1.
         t = time.monotonic()
         cmd = gcs.send(M.MAVLink_command_long_message(2, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0))
-        arrived = b.wait_for(lambda f: f.type == "COMMAND_LONG", 3, since=t)
+        arrived = b.wait_for(lambda f: f.type == "COMMAND_LONG", DEADLINE, since=t)
         want = ri.repack(M, M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0),
                          (255, 190, cmd.seq))
         check(arrived is not None and arrived.raw == want,
@@ -480,13 +480,13 @@ def tls(bin_):
         veh.send(heartbeat(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA))
         time.sleep(0.5)
         f = veh.send(M.MAVLink_attitude_message(1000, 0.1, -0.2, 0.3, 0.01, 0.02, 0.03))
-        got = sub.wait(lambda t, p: p == f.raw, 3)
+        got = sub.wait(lambda t, p: p == f.raw, DEADLINE)
         check(got is not None and got[0] == "%s/1/1/ATTITUDE" % PREFIX,
               "ATTITUDE over TLS on its key byte for byte: %r" % (got and got[:2],))
         gcs = M.MAVLink(None, srcSystem=255, srcComponent=190)
         raw = bytes(M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0).pack(gcs))
         pub.publish("%s/in" % PREFIX, raw)
-        arrived = veh.wait_for(lambda fr: fr.raw == raw, 3)
+        arrived = veh.wait_for(lambda fr: fr.raw == raw, DEADLINE)
         check(arrived is not None, "a frame published on in over TLS never reached the vehicle")
         stats = router.stop()
         bridges = (stats or {}).get("bridges") or [{}]
@@ -549,19 +549,19 @@ def corrupt(bin_):
         check(pymavlink_refuses(bad_in), "pymavlink takes the flipped frame for a good one")
         pub.publish("%s/in" % PREFIX, bad_in)
         pub.publish("%s/in" % PREFIX, good_in)
-        check(veh.wait_for(lambda f: f.raw == good_in, 3) is not None,
+        check(veh.wait_for(lambda f: f.raw == good_in, DEADLINE) is not None,
               "the valid frame published on in after the corrupt one never reached the vehicle")
         # On @cmd: a corrupt request is refused at once ...
         bad_cmd = corrupt_copy(command_long(M.MAV_CMD_COMPONENT_ARM_DISARM, 1), at=16)
         topic = request(cli, "%s/1/1/@cmd" % PREFIX, bad_cmd, "bad-crc")
-        got = cli.wait(lambda t, p: t == topic, 3)
+        got = cli.wait(lambda t, p: t == topic, DEADLINE)
         check(got is not None and user_props(got[4]).get("error") == "bad_crc",
               "a corrupt request on @cmd: %r, expected error=bad_crc" % ((got and (got[1], user_props(got[4]))),))
         # ... and never resent: a valid request after it is resent until its timeout reply
         # (pymavlink's vehicle answers nothing), time in which the corrupt one would have been.
         good_cmd = command_long(M.MAV_CMD_DO_SET_MODE, 4)
         topic = request(cli, "%s/1/1/@cmd" % PREFIX, good_cmd, "good")
-        got = cli.wait(lambda t, p: t == topic, 6)
+        got = cli.wait(lambda t, p: t == topic, DEADLINE)
         check(got is not None and user_props(got[4]).get("error") == "timeout",
               "the valid request's reply: %r, expected its timeout" % ((got and (got[1], user_props(got[4]))),))
         longs = [f for f in veh.frames() if f.type == "COMMAND_LONG"]
@@ -611,7 +611,7 @@ def vehicles(bin_):
         routers.append(g)
         gcs.send(heartbeat())
         # truck-1 is a link first: its retained online is there when the ground subscribes.
-        first = gcs.wait_for(lambda f: f.type == "HEARTBEAT" and f.sysid == 1, 5)
+        first = gcs.wait_for(lambda f: f.type == "HEARTBEAT" and f.sysid == 1, DEADLINE)
         check(first is not None, "truck-1's HEARTBEAT never reached the ground station")
         t = time.monotonic()
         for n in range(20):
@@ -623,7 +623,7 @@ def vehicles(bin_):
         # The fleet's last message has been handled when its HEARTBEAT (or nothing) came.
         time.sleep(1.5)
         links = []
-        deadline = time.monotonic() + 3
+        deadline = time.monotonic() + DEADLINE
         while time.monotonic() < deadline:
             seen = g.stats(t)
             links = vehicle_links(seen[-1][1]) if seen else []
@@ -635,11 +635,11 @@ def vehicles(bin_):
         check(any(l.endswith("/truck-1") for l in links), "truck-1 lost its link: %r" % links)
         # truck-1 works both ways.
         f = truck.send(M.MAVLink_attitude_message(4242, 0.1, 0, 0, 0, 0, 0))
-        got = gcs.wait_for(lambda fr: fr.type == "ATTITUDE" and fr.msg.time_boot_ms == 4242, 3)
+        got = gcs.wait_for(lambda fr: fr.type == "ATTITUDE" and fr.msg.time_boot_ms == 4242, DEADLINE)
         check(got is not None and got.raw == f.raw, "truck-1's ATTITUDE at the ground station: %r" % got)
         t2 = time.monotonic()
         gcs.send(M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0))
-        check(truck.wait_for(lambda fr: fr.type == "COMMAND_LONG", 3, since=t2) is not None,
+        check(truck.wait_for(lambda fr: fr.type == "COMMAND_LONG", DEADLINE, since=t2) is not None,
               "the ground station's command never reached truck-1")
         # A placed fake vehicle goes offline: a new one takes its place.
         placed = [l.rsplit("/", 1)[-1] for l in links if not l.endswith("/truck-1")]
@@ -648,7 +648,7 @@ def vehicles(bin_):
             fake.publish("mav/%s/%s/@alive" % (FLEET, placed[0]), b"offline")
             time.sleep(0.3)
             fake.publish("mav/%s/fake-new/@alive" % FLEET, b"online")
-        deadline = time.monotonic() + 4
+        deadline = time.monotonic() + DEADLINE
         now_links = []
         while time.monotonic() < deadline:
             seen = g.stats(t3)
