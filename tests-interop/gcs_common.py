@@ -108,10 +108,12 @@ class Router:
             return ""
 
     def stats(self):
-        """Every stats object printed so far (a line that is not a JSON object fails)."""
+        """Every stats object printed so far (a line that is not a JSON object fails; a last
+        line without its newline is still being written and waits for the next look)."""
         out = []
         with open(self.stats_path, "rb") as f:
-            for line in f.read().decode("utf-8", "replace").splitlines():
+            text = f.read().decode("utf-8", "replace")
+            for line in text[:text.rfind("\n") + 1].splitlines():
                 if not line.strip():
                     continue
                 try:
