@@ -1,10 +1,9 @@
 //! A `mavstack vehicle` process for the CLI tests: on a free loopback UDP port, killed when
 //! dropped.
 
-use core::time::Duration;
+use std::io::{BufRead as _, BufReader};
 use std::net::UdpSocket;
 use std::process::{Child, Command, Stdio};
-use std::time::Instant;
 
 /// A running `mavstack vehicle udpin:127.0.0.1:PORT ...`.
 pub(crate) struct Vehicle {
@@ -24,33 +23,37 @@ impl Vehicle {
     /// Starts a vehicle waiting on a free port, with `extra` options, and returns once it
     /// holds the port. A port picked free can be taken by another test's socket before the
     /// vehicle binds it (the vehicle then exits): it is tried again on another port.
+    ///
+    /// The vehicle runs with `--verbose`, whose first line it writes only after its link is
+    /// open: that line, not the port looking busy, proves the port is this vehicle's (under
+    /// load another test's process can hold the port while this one is still starting).
     pub(crate) fn start(extra: &[&str]) -> Self {
         for _ in 0..5 {
             let port = free_port();
             let mut child = Command::new(env!("CARGO_BIN_EXE_mavstack"))
-                .args(["vehicle", &format!("udpin:127.0.0.1:{port}")])
+                .args(["vehicle", &format!("udpin:127.0.0.1:{port}"), "--verbose"])
                 .args(extra)
                 .stdout(Stdio::null())
-                .stderr(Stdio::null())
+                .stderr(Stdio::piped())
                 .spawn()
                 .expect("vehicle starts");
-            let deadline = Instant::now() + Duration::from_secs(10);
-            let mut bound_since = None;
-            while Instant::now() < deadline {
-                if child.try_wait().ok().flatten().is_some() {
-                    break;
+            let mut err = BufReader::new(child.stderr.take().expect("piped"));
+            let mut line = String::new();
+            let listening = loop {
+                line.clear();
+                match err.read_line(&mut line) {
+                    Ok(0) | Err(_) => break false,
+                    Ok(_) if line.starts_with("vehicle: ") => break true,
+                    Ok(_) => {}
                 }
-                let taken = UdpSocket::bind(("127.0.0.1", port)).is_err();
-                match (taken, bound_since) {
-                    (true, None) => bound_since = Some(Instant::now()),
-                    // Still running a while after the port was taken: it is the vehicle's.
-                    (true, Some(t)) if t.elapsed() > Duration::from_millis(100) => {
-                        return Self { child, port };
-                    }
-                    (false, _) => bound_since = None,
-                    _ => {}
-                }
-                std::thread::sleep(Duration::from_millis(10));
+            };
+            if listening {
+                // The rest of the narration is read and dropped, so the vehicle never
+                // blocks on a full pipe.
+                std::thread::spawn(move || {
+                    let _ = std::io::copy(&mut err, &mut std::io::sink());
+                });
+                return Self { child, port };
             }
             let _ = child.kill();
             let _ = child.wait();
