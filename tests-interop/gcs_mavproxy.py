@@ -200,7 +200,10 @@ def fetch_all(mp, timeout, what):
 
 def param_read_back(mp, name, want, what):
     mp.cmd(f"param fetch {name}")
-    pat = rf"\n{name} = (-?[0-9.e+-]+)\r?\n"
+    # Not anchored at a line's start: MAVProxy's input thread writes its prompt ("MANUAL> ")
+    # without a newline whenever it is ready for the next line, and a value that arrives after
+    # it is printed on the prompt's line.
+    pat = rf"(?<![A-Za-z0-9_]){name} = (-?[0-9.e+-]+)\r?\n"
     _, m = mp.expect(pat, 15, what)
     got = float(m.group(1))
     if abs(got - want) > 1e-6 * max(1.0, abs(want)):
