@@ -139,7 +139,7 @@ impl Mission {
             )
             .await?
         };
-        match event {
+        let result = match event {
             MissionEvent::Uploaded {
                 result: Err(MissionError::Unconfirmed { result }),
                 ..
@@ -154,30 +154,23 @@ impl Mission {
                 );
                 let back = self.download_items(kind, first, |_, _| {}).await?;
                 if plan::same_from(&items, usize::from(first), &back) {
-                    if told != (count, count) {
-                        progress(count, count);
-                    }
                     Ok(())
                 } else {
-                    Err(SystemError::Mission {
-                        what: "upload",
-                        source: MissionError::Rejected { result },
-                    })
+                    Err(MissionError::Rejected { result })
                 }
             }
-            MissionEvent::Uploaded { result, .. } => {
-                // The last request and the ACK may come in one turn, the states between
-                // them never seen: a finished upload still ends its progress at the count.
-                if result.is_ok() && told != (count, count) {
-                    progress(count, count);
-                }
-                result.map_err(|source| SystemError::Mission {
-                    what: "upload",
-                    source,
-                })
-            }
-            _ => Err(unexpected("upload")),
+            MissionEvent::Uploaded { result, .. } => result,
+            _ => return Err(unexpected("upload")),
+        };
+        // The last request and the ACK may come in one turn, the states between them never
+        // seen: a finished upload always ends its progress at the count.
+        if result.is_ok() && told != (count, count) {
+            progress(count, count);
         }
+        result.map_err(|source| SystemError::Mission {
+            what: "upload",
+            source,
+        })
     }
 
     /// Downloads the system's plan of `kind`, as it is.
