@@ -153,9 +153,9 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
             parse,
             bad_signature,
         };
-        println!("{}", counts.json());
+        crate::json_line::to_stdout(&counts.json()).context("writing output")?;
         if args.stats {
-            eprintln!("{}", counts.json());
+            crate::json_line::to_stderr(&counts.json());
         }
         return Ok(());
     }
@@ -254,7 +254,7 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
     }
     sink.flush().context("writing output")?;
     if args.stats {
-        eprintln!("{}", counts.json());
+        crate::json_line::to_stderr(&counts.json());
     }
     Ok(())
 }

@@ -100,7 +100,7 @@ pub(crate) fn conform(args: &ConformArgs) -> Result<(), Failure> {
         }
     })?;
     if args.json {
-        println!("{}", report_json(&report));
+        crate::json_line::to_stdout(&report_json(&report)).map_err(fail)?;
     } else {
         print_table(&report, &mavstack::redacted(&args.conn));
     }

@@ -557,7 +557,7 @@ pub(crate) fn listen(args: &ListenArgs) -> Result<(), Failure> {
         let stats = conn.stats();
         if args.stats {
             let counts = counts_of(&stats.protocol, printer.counts.bad_signature);
-            eprintln!("{}", counts.json());
+            crate::json_line::to_stderr(&counts.json());
         }
         conn.close().await.map_err(fail)?;
         Ok(())

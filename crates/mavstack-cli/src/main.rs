@@ -16,6 +16,7 @@ mod fast_count;
 mod fly_cmd;
 mod ftp_cmd;
 mod gimbal_cmd;
+mod json_line;
 mod link_cmd;
 mod listen_rates;
 mod log_cmd;

@@ -358,18 +358,12 @@ fn print_stats(report: &NodeReport, bridges: &[(String, Arc<BridgeStats>)]) {
     write_line(&line);
 }
 
-/// Writes `line` and its newline to stdout in one write: stdout's buffer holds 1,024 bytes, so
-/// a longer line printed piece by piece went out in several, and a reader of the file it goes
-/// to could find half a line. The first line that cannot be written is said (the router goes
-/// on routing).
+/// Writes a stats line to stdout whole (a reader of the file it goes to never finds half a
+/// line). The first line that cannot be written is said; the router goes on routing.
 fn write_line(line: &serde_json::Value) {
     use core::sync::atomic::{AtomicBool, Ordering};
-    use std::io::Write as _;
     static WARNED: AtomicBool = AtomicBool::new(false);
-    let mut text = line.to_string();
-    text.push('\n');
-    let mut out = std::io::stdout().lock();
-    if let Err(e) = out.write_all(text.as_bytes()).and_then(|()| out.flush())
+    if let Err(e) = crate::json_line::to_stdout(line)
         && !WARNED.swap(true, Ordering::Relaxed)
     {
         tracing::warn!(
