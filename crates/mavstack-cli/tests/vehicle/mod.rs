@@ -1,9 +1,14 @@
 //! A `mavstack vehicle` process for the CLI tests: on a free loopback UDP port, killed when
 //! dropped.
 
+use core::time::Duration;
 use std::io::{BufRead as _, BufReader};
 use std::net::UdpSocket;
 use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+
+/// How long a vehicle may take to open its link, on a machine as busy as CI's.
+const START_LIMIT: Duration = Duration::from_secs(60);
 
 /// A running `mavstack vehicle udpin:127.0.0.1:PORT ...`.
 pub(crate) struct Vehicle {
@@ -38,22 +43,30 @@ impl Vehicle {
                 .spawn()
                 .expect("vehicle starts");
             let mut err = BufReader::new(child.stderr.take().expect("piped"));
-            let mut line = String::new();
-            let listening = loop {
-                line.clear();
-                match err.read_line(&mut line) {
-                    Ok(0) | Err(_) => break false,
-                    Ok(_) if line.starts_with("vehicle: ") => break true,
-                    Ok(_) => {}
+            let (said, listening) = mpsc::channel();
+            // Reads up to the first line, then on to the end and drops it, so the vehicle
+            // never blocks on a full pipe. An end (the vehicle exited) before that line
+            // drops `said`.
+            std::thread::spawn(move || {
+                let mut line = Vec::new();
+                loop {
+                    line.clear();
+                    match err.read_until(b'\n', &mut line) {
+                        Ok(0) | Err(_) => return,
+                        Ok(_) if line.starts_with(b"vehicle: ") => break,
+                        Ok(_) => {}
+                    }
                 }
-            };
-            if listening {
-                // The rest of the narration is read and dropped, so the vehicle never
-                // blocks on a full pipe.
-                std::thread::spawn(move || {
-                    let _ = std::io::copy(&mut err, &mut std::io::sink());
-                });
-                return Self { child, port };
+                let _ = said.send(());
+                let _ = std::io::copy(&mut err, &mut std::io::sink());
+            });
+            match listening.recv_timeout(START_LIMIT) {
+                Ok(()) => return Self { child, port },
+                Err(mpsc::RecvTimeoutError::Disconnected) => {}
+                Err(mpsc::RecvTimeoutError::Timeout) => {
+                    let _ = child.kill();
+                    panic!("mavstack vehicle did not say it listens within {START_LIMIT:?}");
+                }
             }
             let _ = child.kill();
             let _ = child.wait();
