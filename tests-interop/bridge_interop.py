@@ -117,17 +117,17 @@ class Client:
         with self.lock:
             self.got.append((m.topic, bytes(m.payload), m.qos, m.retain, m.properties, time.monotonic()))
 
-    def messages(self, pred=lambda t, p: True):
+    def messages(self, pred=lambda t, p: True, after=0):
+        """The messages (of all, or of those after the first `after`) for which `pred` holds."""
         with self.lock:
-            return [g for g in self.got if pred(g[0], g[1])]
+            return [g for g in self.got[after:] if pred(g[0], g[1])]
 
     def wait(self, pred, timeout=5.0, after=0):
         """The first message (of all, or of those after the first `after`) for which `pred`
         holds, waiting up to `timeout` seconds; None if none came."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
-            with self.lock:
-                m = [g for g in self.got[after:] if pred(g[0], g[1])]
+            m = self.messages(pred, after)
             if m:
                 return m[0]
             time.sleep(0.02)
