@@ -40,11 +40,13 @@ best() { # best (lowest) seconds of $runs runs of a command printing "... second
     echo "$b"
 }
 frames=$("$ours" decode --count --dialect ardupilotmega "$corpus.bin" | sed 's/.*"frames":\([0-9]*\).*/\1/')
-t_ours=$(best "$ours" decode --count --time --dialect ardupilotmega "$corpus.bin")
+# The peers parse on one thread: so does mavstack here (--threads 1); the whole-process
+# figures below add mavstack on every processor.
+t_ours=$(best "$ours" decode --count --time --threads 1 --dialect ardupilotmega "$corpus.bin")
 t_c=$(best "$PEERS_C_BENCH" "$corpus.bin" --decode)
 t_rust=$(best "$PEERS_RUST_BENCH" "$corpus.bin")
 key=000102030405060708090a0b0c0d0e0f101112131415161718191a1b1c1d1e1f
-t_ours_key=$(best "$ours" decode --count --time --key "$key" --dialect ardupilotmega "$corpus.bin")
+t_ours_key=$(best "$ours" decode --count --time --threads 1 --key "$key" --dialect ardupilotmega "$corpus.bin")
 t_c_key=$(best "$PEERS_C_BENCH" "$corpus.bin" --decode --key "$key" --accept-unsigned)
 n_enc="${ENCODE_FRAMES:-10000000}"
 n_sig=$((n_enc / 4))
@@ -85,13 +87,15 @@ whole() { # median wall-clock seconds of $runs runs of a command (after one warm
     done
     printf '%s\n' "${all[@]}" | sort -n | awk '{v[NR]=$1} END{print v[int((NR+1)/2)]}'
 }
-w_ours=$(whole "$ours" decode --count --dialect ardupilotmega "$corpus.bin")
+w_ours=$(whole "$ours" decode --count --threads 1 --dialect ardupilotmega "$corpus.bin")
+w_all=$(whole "$ours" decode --count --dialect ardupilotmega "$corpus.bin")
 w_c=$(whole "$PEERS_C_BENCH" "$corpus.bin" --decode)
 w_rust=$(whole "$PEERS_RUST_BENCH" "$corpus.bin")
-awk -v o="$w_ours" -v c="$w_c" -v r="$w_rust" -v mb="$(stat -c %s "$corpus.bin")" 'BEGIN {
+awk -v o="$w_ours" -v a="$w_all" -v c="$w_c" -v r="$w_rust" -v mb="$(stat -c %s "$corpus.bin")" -v n="$(nproc)" 'BEGIN {
     printf "whole process, %.1f MB (median of '"$runs"' after a warm-up, wall clock)\n", mb/1e6
-    printf "%-44s %8.4f s\n", "mavstack decode --count", o
+    printf "%-44s %8.4f s %6.0f MB/s\n", "mavstack decode --count --threads 1", o, mb/o/1e6
+    printf "%-44s %8.4f s %6.0f MB/s\n", "mavstack decode --count (" n " threads)", a, mb/a/1e6
     printf "%-44s %8.4f s\n", "C library bench (parse + decode)", c
     printf "%-44s %8.4f s\n", "rust-mavlink 0.21 bench", r
-    printf "whole-process ratios: mavstack/C %.2fx, mavstack/rust-mavlink %.2fx\n", c/o, r/o
+    printf "whole-process ratios (one thread): mavstack/C %.2fx, mavstack/rust-mavlink %.2fx\n", c/o, r/o
 }'

@@ -42,11 +42,16 @@ pub(crate) struct DecodeArgs {
     /// Read the input as a raw stream even if its name ends in `.tlog`.
     #[arg(long)]
     raw: bool,
-    /// With `--count`: also print `frames=N bytes=B seconds=S` for the parse loop alone to
-    /// stderr (file reading excluded), the line the peers' benchmarks print: what
-    /// `scripts/bench-peers.sh` compares (`docs/contracts/json-lines.md`).
+    /// With `--count`: also print `frames=N bytes=B seconds=S` for the parse loop to stderr
+    /// (the file's reading included, its opening and the dialect's loading not), the line
+    /// the peers' benchmarks print: what `scripts/bench-peers.sh` compares
+    /// (`docs/contracts/json-lines.md`).
     #[arg(long, requires = "count")]
     time: bool,
+    /// With `--count` on a file: the threads that parse it, each a part of the file
+    /// (default: one per processor). The counts are the same for any number.
+    #[arg(long, requires = "count", value_parser = clap::value_parser!(u16).range(1..))]
+    threads: Option<u16>,
 }
 
 #[derive(Debug, Args)]
@@ -136,10 +141,13 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
         args.tlog || (!args.raw && args.file.as_deref().is_some_and(crate::log_reader::is_tlog));
     // Counting a raw stream of a built-in dialect goes through the generated, typed code.
     let started = std::time::Instant::now();
+    let source = match args.file.as_deref() {
+        Some(path) => crate::fast_count::Source::File(path, args.threads.map(usize::from)),
+        None => crate::fast_count::Source::Stream(&mut input),
+    };
     if args.count
         && !is_tlog
-        && let Some(counted) =
-            crate::fast_count::count_builtin(&args.dialect, &mut input, key.as_ref())
+        && let Some(counted) = crate::fast_count::count_builtin(&args.dialect, source, key.as_ref())
     {
         let (parse, bad_signature) = counted.map_err(cannot)?;
         let seconds = started.elapsed().as_secs_f64();

@@ -295,3 +295,46 @@ fn encode_signed_all_reproduces_pymavlink_bytes() {
     c.check_encode(false);
     c.check_encode(true);
 }
+
+/// The counts line of `mavstack decode --count ARGS FILE`.
+fn counted(args: &[&str], file: &Path) -> serde_json::Value {
+    let mut all: Vec<&OsStr> = ["decode", "--count"].iter().map(OsStr::new).collect();
+    all.extend(args.iter().map(OsStr::new));
+    all.push(file.as_os_str());
+    let out = mavstack(&all, None);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    serde_json::from_slice(&out.stdout).expect("one JSON object")
+}
+
+#[test]
+fn count_of_a_file_in_parts_matches_pymavlink() {
+    // A signed corpus copied end to end past 8 MiB: parsed in parts, one thread each.
+    let c = Corpus::new("ardupilotmega", 105, Some(KEY));
+    let one = std::fs::read(c.bin()).expect("the corpus");
+    let copies = (9 << 20) / one.len() + 1;
+    let big = c.file("big.bin");
+    std::fs::write(&big, one.repeat(copies)).expect("the large file");
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(c.file("corpus.summary.json")).expect("summary"))
+            .expect("JSON");
+    let want = &summary["expected_decode_counts"];
+    let times = |field: &str| want[field].as_u64().expect(field) * copies as u64;
+    let keyed = ["--dialect", "ardupilotmega", "--key", KEY];
+    let in_order = counted(&[&keyed[..], &["--threads", "1"]].concat(), &big);
+    for (field, got) in [
+        ("frames", "frames"),
+        ("bytes", "bytes"),
+        ("bad_crc", "bad_crc"),
+        ("unknown_id", "unknown_id"),
+        ("bad_signature_with_key", "bad_signature"),
+    ] {
+        assert_eq!(in_order[got], times(field), "{got}: {in_order}");
+    }
+    for threads in [None, Some("2"), Some("5")] {
+        let mut args = keyed.to_vec();
+        if let Some(n) = threads {
+            args.extend(["--threads", n]);
+        }
+        assert_eq!(counted(&args, &big), in_order, "--threads {threads:?}");
+    }
+}

@@ -32,7 +32,8 @@
 //! - [`Connection`] (async) and [`blocking::Connection`]: open a link, drive a protocol on
 //!   it, talk to it.
 //! - [`tlog`]: tlog [`tlog::Reader`] and [`tlog::Writer`] for recording and replaying;
-//!   [`raw`]: [`raw::read_items`], the reading of a raw capture to its end.
+//!   [`raw`]: [`raw::read_items`], the reading of a raw capture to its end, and
+//!   [`raw::count_items_split`], a capture file counted in parts on several threads.
 //! - [`clock`]: the time the driver gives protocols: monotonic, in microseconds since the
 //!   Unix epoch.
 //!

@@ -35,6 +35,10 @@ use std::io::{self, Read};
 use mavstack_core::parse::{CrcExtra, Item, SliceParser, Stats};
 use mavstack_core::wire::MAX_FRAME_LEN;
 
+mod split;
+
+pub use split::count_items_split;
+
 /// Bytes [`read_items`] reads at a time.
 pub const CHUNK_LEN: usize = 1 << 20;
 
