@@ -38,6 +38,9 @@ use mavstack_core::wire::MAX_FRAME_LEN;
 mod split;
 
 pub use split::count_items_split;
+#[cfg(feature = "fuzzing")]
+#[doc(hidden)]
+pub use split::fuzz_raw_split;
 
 /// Bytes [`read_items`] reads at a time.
 pub const CHUNK_LEN: usize = 1 << 20;

@@ -279,3 +279,44 @@ fn sum(mut a: Stats, b: Stats) -> Stats {
 
 #[cfg(test)]
 mod tests;
+
+/// Fuzz body (`fuzz/fuzz_targets/raw_split.rs`). The first three bytes choose the parts (1
+/// to 8), the window (0 to 1,020 bytes) and the chunk length; the rest is written to a file
+/// and counted in parts. Property: the counts and the tally are those of one parse in order.
+///
+/// # Panics
+/// When the property fails, or the temporary file cannot be written.
+#[cfg(feature = "fuzzing")]
+#[doc(hidden)]
+pub fn fuzz_raw_split(data: &[u8]) {
+    let [parts, window, chunk, stream @ ..] = data else {
+        return;
+    };
+    let lookup = |id: u32| match id {
+        0 => Some(50u8),
+        30 => Some(39),
+        33 => Some(104),
+        76 => Some(152),
+        _ => None,
+    };
+    let tally = |item: Item<'_>| match item {
+        Item::Frame(f) => 1 + u64::from(f.is_signed()) * 1_000,
+        Item::Unknown(_) => 1_000_000,
+    };
+    let mut want = 0;
+    let in_order = super::read_items(stream, lookup, |item| want += tally(item), |_| {})
+        .unwrap_or_else(|e| panic!("reading a slice: {e}"));
+    let path = std::env::temp_dir().join(format!("mavstack-fuzz-split-{}", std::process::id()));
+    std::fs::write(&path, stream).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let got = split_in(
+        &path,
+        stream.len() as u64,
+        usize::from(parts % 8) + 1,
+        2 * MAX_FRAME_LEN + usize::from(*chunk) * 37,
+        u64::from(*window) * 4,
+        lookup,
+        &tally,
+    );
+    let _ = std::fs::remove_file(&path);
+    assert_eq!(got.ok(), Some((in_order, want)));
+}
