@@ -69,38 +69,71 @@ fn read_items_in<L: CrcExtra + Copy>(
     mut each: impl FnMut(Item<'_>),
     mut consumed: impl FnMut(u64),
 ) -> io::Result<Stats> {
-    // The bytes kept for the next chunk are at most one frame's: a full buffer always has
-    // room for more.
-    let mut buf = vec![0u8; chunk_len.max(2 * MAX_FRAME_LEN)];
-    let mut filled = 0;
-    let mut eof = false;
+    let mut pieces = Pieces::new(chunk_len);
     let mut total = Stats::default();
     loop {
-        while !eof && filled < buf.len() {
-            match input.read(&mut buf[filled..]) {
-                Ok(0) => eof = true,
-                Ok(n) => filled += n,
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(e),
-            }
-        }
-        let piece = &buf[..filled];
-        let mut parser = if eof {
-            SliceParser::new(piece, lookup)
-        } else {
-            SliceParser::partial(piece, lookup)
-        };
+        pieces.fill(&mut input)?;
+        let mut parser = pieces.parser(lookup);
         for item in parser.by_ref() {
             each(item);
         }
         total += *parser.stats();
         consumed(total.bytes);
-        if eof {
+        if pieces.eof {
             return Ok(total);
         }
         let keep = parser.position();
-        buf.copy_within(keep..filled, 0);
-        filled -= keep;
+        pieces.keep_from(keep);
+    }
+}
+
+/// The buffer a stream is read into and parsed in, piece by piece.
+struct Pieces {
+    buf: Vec<u8>,
+    /// Bytes of `buf` read and not yet parsed.
+    filled: usize,
+    /// The input has ended.
+    eof: bool,
+}
+
+impl Pieces {
+    /// A buffer of `chunk_len` bytes, at least two of the longest frame (the bytes kept for
+    /// the next piece are at most one frame's: a full buffer always has room for more).
+    fn new(chunk_len: usize) -> Self {
+        Self {
+            buf: vec![0; chunk_len.max(2 * MAX_FRAME_LEN)],
+            filled: 0,
+            eof: false,
+        }
+    }
+
+    /// Reads until the buffer is full or the input ends (an interrupted read is retried).
+    fn fill(&mut self, input: &mut impl Read) -> io::Result<()> {
+        while !self.eof && self.filled < self.buf.len() {
+            match input.read(&mut self.buf[self.filled..]) {
+                Ok(0) => self.eof = true,
+                Ok(n) => self.filled += n,
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+
+    /// The parser of the bytes read: of a piece, or of the input's last bytes.
+    fn parser<L: CrcExtra>(&self, lookup: L) -> SliceParser<'_, L> {
+        let piece = &self.buf[..self.filled];
+        if self.eof {
+            SliceParser::new(piece, lookup)
+        } else {
+            SliceParser::partial(piece, lookup)
+        }
+    }
+
+    /// Keeps the bytes from `at` (where the parser stopped) for the next piece.
+    fn keep_from(&mut self, at: usize) {
+        self.buf.copy_within(at..self.filled, 0);
+        self.filled -= at;
     }
 }
 

@@ -14,14 +14,13 @@
 
 use core::ops::Sub;
 use std::fs::File;
-use std::io::{self, Read, Seek, SeekFrom};
+use std::io::{self, Seek, SeekFrom};
 use std::path::Path;
 use std::sync::mpsc;
 
-use mavstack_core::parse::{CrcExtra, Item, SliceParser, Stats};
-use mavstack_core::wire::MAX_FRAME_LEN;
+use mavstack_core::parse::{CrcExtra, Item, Stats};
 
-use super::CHUNK_LEN;
+use super::{CHUNK_LEN, Pieces};
 
 /// The bytes after a part's start in which it notes where its items end.
 const WINDOW: u64 = 64 * 1024;
@@ -184,10 +183,9 @@ impl Job {
     ) -> io::Result<Part> {
         let mut input = File::open(path)?;
         input.seek(SeekFrom::Start(self.start))?;
-        let mut buf = vec![0u8; self.chunk_len.max(2 * MAX_FRAME_LEN)];
-        // The file offset of `buf[0]`.
+        let mut pieces = Pieces::new(self.chunk_len);
+        // The file offset of the first byte in `pieces`.
         let mut base = self.start;
-        let (mut filled, mut eof) = (0, false);
         let mut done = Mark {
             at: self.start,
             ..Mark::default()
@@ -200,20 +198,8 @@ impl Job {
         let give_up = watch.saturating_add(self.window);
         let mut next_starts: Option<Vec<Mark>> = None;
         loop {
-            while !eof && filled < buf.len() {
-                match input.read(&mut buf[filled..]) {
-                    Ok(0) => eof = true,
-                    Ok(n) => filled += n,
-                    Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                    Err(e) => return Err(e),
-                }
-            }
-            let piece = &buf[..filled];
-            let mut parser = if eof {
-                SliceParser::new(piece, lookup)
-            } else {
-                SliceParser::partial(piece, lookup)
-            };
+            pieces.fill(&mut input)?;
+            let mut parser = pieces.parser(lookup);
             while let Some(item) = parser.next() {
                 done.tally += tally(item);
                 let at = base + parser.position() as u64;
@@ -251,11 +237,11 @@ impl Job {
                 }
             }
             done.stats = sum(done.stats, *parser.stats());
-            if eof {
+            if pieces.eof {
                 if let Some(to) = self.publish.take() {
                     let _ = to.send(starts.clone());
                 }
-                done.at = base + filled as u64;
+                done.at = base + pieces.filled as u64;
                 return Ok(Part {
                     starts,
                     end: done,
@@ -263,8 +249,7 @@ impl Job {
                 });
             }
             let keep = parser.position();
-            buf.copy_within(keep..filled, 0);
-            filled -= keep;
+            pieces.keep_from(keep);
             base += keep as u64;
         }
     }
@@ -312,7 +297,7 @@ pub fn fuzz_raw_split(data: &[u8]) {
         &path,
         stream.len() as u64,
         usize::from(parts % 8) + 1,
-        2 * MAX_FRAME_LEN + usize::from(*chunk) * 37,
+        2 * mavstack_core::wire::MAX_FRAME_LEN + usize::from(*chunk) * 37,
         u64::from(*window) * 4,
         lookup,
         &tally,

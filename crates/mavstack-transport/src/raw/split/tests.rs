@@ -1,5 +1,7 @@
 use mavstack_core::Crc16;
 use mavstack_core::parse::Item;
+use mavstack_core::testing::Rng;
+use mavstack_core::wire::MAX_FRAME_LEN;
 
 use super::*;
 use crate::raw::read_items;
@@ -9,24 +11,9 @@ fn lookup(id: u32) -> Option<u8> {
     (id < 10).then(|| (id as u8).wrapping_mul(37).wrapping_add(11))
 }
 
-/// xorshift64*: the same streams on every run.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-
-    fn bytes(&mut self, n: usize) -> Vec<u8> {
-        (0..n).map(|_| self.next() as u8).collect()
-    }
+/// `n` random bytes.
+fn bytes(rng: &mut Rng, n: usize) -> Vec<u8> {
+    (0..n).map(|_| rng.next_u64() as u8).collect()
 }
 
 /// A MAVLink 2 frame of `id` with `payload`, its checksum right for `lookup` (for a known
@@ -64,7 +51,7 @@ fn stream(rng: &mut Rng, items: usize) -> Vec<u8> {
     for _ in 0..items {
         let id = rng.below(10) as u32;
         let len = rng.below(256) as usize;
-        let payload = rng.bytes(len);
+        let payload = bytes(rng, len);
         match rng.below(12) {
             0..=3 => out.extend(v2(id, &payload, false)),
             4 => out.extend(v2(id, &payload, true)),
@@ -78,7 +65,7 @@ fn stream(rng: &mut Rng, items: usize) -> Vec<u8> {
             7 => out.extend(v2(200 + id, &payload, false)),
             8 => {
                 let n = rng.below(40) as usize;
-                let mut noise = rng.bytes(n);
+                let mut noise = bytes(rng, n);
                 for b in noise.iter_mut() {
                     if rng.below(4) == 0 {
                         *b = if rng.below(2) == 0 { 0xfd } else { 0xfe };
@@ -98,9 +85,9 @@ fn stream(rng: &mut Rng, items: usize) -> Vec<u8> {
             _ => {
                 // A frame inside another's payload.
                 let n = rng.below(120) as usize;
-                let inner_payload = rng.bytes(n);
+                let inner_payload = bytes(rng, n);
                 let inner = v2(id, &inner_payload, rng.below(2) == 0);
-                let mut payload = rng.bytes(255);
+                let mut payload = bytes(rng, 255);
                 let at = rng.below((255 - inner.len()) as u64) as usize;
                 payload[at..at + inner.len()].copy_from_slice(&inner);
                 out.extend(v2(rng.below(10) as u32, &payload, false));
@@ -132,7 +119,7 @@ fn parts_give_what_one_parse_in_order_gives() {
     let path = dir.path().join("capture.bin");
     let mut fallbacks = 0;
     for seed in 1..=30u64 {
-        let mut rng = Rng(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1);
+        let mut rng = Rng::new(seed);
         let data = stream(&mut rng, 200 + 20 * seed as usize);
         std::fs::write(&path, &data).unwrap();
         let want = in_order(&data);
@@ -185,7 +172,7 @@ fn tiny_and_empty_files_count_as_in_order() {
 fn the_public_call_counts_a_file_and_names_a_missing_one() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("capture.bin");
-    let data = stream(&mut Rng(7), 400);
+    let data = stream(&mut Rng::new(7), 400);
     std::fs::write(&path, &data).unwrap();
     assert_eq!(
         count_items_split(&path, 2, lookup, tally).unwrap(),
