@@ -337,4 +337,12 @@ fn count_of_a_file_in_parts_matches_pymavlink() {
         }
         assert_eq!(counted(&args, &big), in_order, "--threads {threads:?}");
     }
+    // A file name that is a pipe is read in order (it cannot be read in parts).
+    let mut piped: Vec<&OsStr> = ["decode", "--count"].iter().map(OsStr::new).collect();
+    piped.extend(keyed.iter().map(OsStr::new));
+    piped.push(OsStr::new("/dev/stdin"));
+    let out = mavstack(&piped, Some(std::fs::read(&big).expect("the large file")));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let from_pipe: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(from_pipe, in_order, "/dev/stdin, a pipe");
 }
