@@ -142,11 +142,8 @@ pub(crate) fn decode(args: &DecodeArgs) -> Result<(), Failure> {
     // Counting a raw stream of a built-in dialect goes through the generated, typed code.
     let started = std::time::Instant::now();
     let source = match args.file.as_deref() {
-        // A regular file is read in parts at once; a pipe or a device only in order.
-        Some(path) if std::fs::metadata(path).is_ok_and(|m| m.is_file()) => {
-            crate::fast_count::Source::File(path, args.threads.map(usize::from))
-        }
-        _ => crate::fast_count::Source::Stream(&mut input),
+        Some(path) => crate::fast_count::Source::File(path, args.threads.map(usize::from)),
+        None => crate::fast_count::Source::Stream(&mut input),
     };
     if args.count
         && !is_tlog

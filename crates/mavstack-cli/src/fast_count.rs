@@ -43,7 +43,8 @@ impl CrcExtra for &DenseIndex {
 }
 
 /// Where `decode --count` reads: a stream in order, or a file parsed in parts on this many
-/// threads (`None`: one per processor; the counts are those of one parse in order).
+/// threads (`None`: one per processor; a pipe in order; the counts are those of one parse
+/// in order).
 pub(crate) enum Source<'a> {
     Stream(&'a mut dyn Read),
     File(&'a Path, Option<usize>),

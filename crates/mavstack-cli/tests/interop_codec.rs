@@ -296,12 +296,12 @@ fn encode_signed_all_reproduces_pymavlink_bytes() {
     c.check_encode(true);
 }
 
-/// The counts line of `mavstack decode --count ARGS FILE`.
-fn counted(args: &[&str], file: &Path) -> serde_json::Value {
+/// The counts line of `mavstack decode --count ARGS FILE`, with `stdin` fed to it.
+fn counted(args: &[&str], file: &Path, stdin: Option<Vec<u8>>) -> serde_json::Value {
     let mut all: Vec<&OsStr> = ["decode", "--count"].iter().map(OsStr::new).collect();
     all.extend(args.iter().map(OsStr::new));
     all.push(file.as_os_str());
-    let out = mavstack(&all, None);
+    let out = mavstack(&all, stdin);
     assert!(out.status.success(), "{}", text(&out.stderr));
     serde_json::from_slice(&out.stdout).expect("one JSON object")
 }
@@ -320,7 +320,7 @@ fn count_of_a_file_in_parts_matches_pymavlink() {
     let want = &summary["expected_decode_counts"];
     let times = |field: &str| want[field].as_u64().expect(field) * copies as u64;
     let keyed = ["--dialect", "ardupilotmega", "--key", KEY];
-    let in_order = counted(&[&keyed[..], &["--threads", "1"]].concat(), &big);
+    let in_order = counted(&[&keyed[..], &["--threads", "1"]].concat(), &big, None);
     for (field, got) in [
         ("frames", "frames"),
         ("bytes", "bytes"),
@@ -335,14 +335,14 @@ fn count_of_a_file_in_parts_matches_pymavlink() {
         if let Some(n) = threads {
             args.extend(["--threads", n]);
         }
-        assert_eq!(counted(&args, &big), in_order, "--threads {threads:?}");
+        assert_eq!(
+            counted(&args, &big, None),
+            in_order,
+            "--threads {threads:?}"
+        );
     }
     // A file name that is a pipe is read in order (it cannot be read in parts).
-    let mut piped: Vec<&OsStr> = ["decode", "--count"].iter().map(OsStr::new).collect();
-    piped.extend(keyed.iter().map(OsStr::new));
-    piped.push(OsStr::new("/dev/stdin"));
-    let out = mavstack(&piped, Some(std::fs::read(&big).expect("the large file")));
-    assert!(out.status.success(), "{}", text(&out.stderr));
-    let from_pipe: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let data = std::fs::read(&big).expect("the large file");
+    let from_pipe = counted(&keyed, Path::new("/dev/stdin"), Some(data));
     assert_eq!(from_pipe, in_order, "/dev/stdin, a pipe");
 }

@@ -100,6 +100,23 @@ impl core::ops::AddAssign for Stats {
     }
 }
 
+/// The counts between two points of the same stream: `self`, the counts at the later point,
+/// less `earlier`'s. Each count of `earlier` must be at most `self`'s.
+impl core::ops::Sub for Stats {
+    type Output = Self;
+
+    fn sub(self, earlier: Self) -> Self {
+        Self {
+            frames: self.frames - earlier.frames,
+            bytes: self.bytes - earlier.bytes,
+            bad_crc: self.bad_crc - earlier.bad_crc,
+            unknown_id: self.unknown_id - earlier.unknown_id,
+            bad_incompat: self.bad_incompat - earlier.bad_incompat,
+            skipped_bytes: self.skipped_bytes - earlier.skipped_bytes,
+        }
+    }
+}
+
 fn is_magic(b: u8) -> bool {
     b == STX_V2 || b == STX_V1
 }

@@ -42,17 +42,9 @@ impl Sub for Mark {
     type Output = Self;
 
     fn sub(self, from: Self) -> Self {
-        let (a, b) = (self.stats, from.stats);
         Self {
             at: self.at - from.at,
-            stats: Stats {
-                frames: a.frames - b.frames,
-                bytes: 0,
-                bad_crc: a.bad_crc - b.bad_crc,
-                unknown_id: a.unknown_id - b.unknown_id,
-                bad_incompat: a.bad_incompat - b.bad_incompat,
-                skipped_bytes: a.skipped_bytes - b.skipped_bytes,
-            },
+            stats: self.stats - from.stats,
             tally: self.tally - from.tally,
         }
     }
@@ -69,7 +61,8 @@ struct Part {
 }
 
 /// The raw MAVLink capture at `path` parsed on up to `threads` threads (fewer for a small
-/// file: each part has at least 4 MiB), checksums checked with `lookup`; `tally` is called for
+/// file: each part has at least 4 MiB; one for what is not a regular file, such as a pipe,
+/// which can only be read in order), checksums checked with `lookup`; `tally` is called for
 /// every item and its results are summed. Returns the counts and the sum that one parse of the
 /// whole file in order would give ([`super::read_items`]), though items are seen out of order
 /// and some bytes twice (`tally` must be a pure count).
@@ -86,7 +79,13 @@ where
     L: CrcExtra + Copy + Send,
     T: Fn(Item<'_>) -> u64 + Sync,
 {
-    let len = std::fs::metadata(path)?.len();
+    let meta = std::fs::metadata(path)?;
+    if !meta.is_file() {
+        let mut sum = 0;
+        let stats = super::read_items(File::open(path)?, lookup, |i| sum += tally(i), |_| {})?;
+        return Ok((stats, sum));
+    }
+    let len = meta.len();
     let parts = usize::try_from(len / MIN_PART)
         .unwrap_or(usize::MAX)
         .clamp(1, threads.max(1));
@@ -110,11 +109,14 @@ where
 {
     let parts = parts.max(1) as u64;
     let starts: Vec<u64> = (0..parts).map(|k| len * k / parts).collect();
-    // Part k hands its item ends to part k - 1.
-    let (senders, receivers): (Vec<_>, Vec<_>) = (1..parts).map(|_| mpsc::channel()).unzip();
-    let mut senders = senders.into_iter().map(Some).collect::<Vec<_>>();
-    senders.insert(0, None);
-    let mut receivers = receivers.into_iter().map(Some).collect::<Vec<_>>();
+    // Part k hands its item ends to part k - 1: the first part has nobody to tell, the last
+    // nobody to hear from.
+    let (mut senders, mut receivers) = (vec![None], Vec::new());
+    for _ in 1..parts {
+        let (tx, rx) = mpsc::channel();
+        senders.push(Some(tx));
+        receivers.push(Some(rx));
+    }
     receivers.push(None);
     let results: Vec<io::Result<Part>> = std::thread::scope(|scope| {
         let workers: Vec<_> = starts
